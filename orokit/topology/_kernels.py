@@ -1,0 +1,318 @@
+"""Numerical kernels of the exact orometry engine (numba).
+
+Everything here works on flat numpy arrays and scalars only. Cells (and peaks,
+saddles) are compared in a *strict total order*: ``a`` is above ``b`` when
+``z[a] > z[b]``, or when ``z[a] == z[b]`` and ``key[a] < key[b]``. ``key`` is the
+flat raster index for cells (so the first cell in raster order wins ties, which makes
+the first cell of a flat summit its representative) and the id for tree nodes.
+
+numba is used because the work is sequential by nature (chain following, union-find,
+Kruskal sweeps, hashing of basin pairs): numpy cannot express these without
+Python-level loops, and a single compiled pass over the neighbours keeps the raster
+engine at several million cells per second.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+_NEIGHBOURS_8 = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
+# each unordered neighbour pair once: E, SW, S, SE
+_FORWARD_4 = ((0, 1), (1, -1), (1, 0), (1, 1))
+
+
+@njit(cache=True, inline="always")
+def above(za, ka, zb, kb):
+    """True when (za, ka) is above (zb, kb) in the total order."""
+    return za > zb or (za == zb and ka < kb)
+
+
+@njit(cache=True)
+def steepest_ascent(z):
+    """Pointer of every cell to its highest 8-neighbour, and border flags.
+
+    Returns ``ptr`` (flat index of the highest neighbour if it is above the cell,
+    the cell itself for a local maximum of the total order, -1 for NaN cells) and
+    ``border`` (True for valid cells on the raster edge or next to a NaN cell).
+    """
+    H, W = z.shape
+    n = H * W
+    ptr = np.empty(n, np.int64)
+    border = np.zeros(n, np.bool_)
+    for r in range(H):
+        for c in range(W):
+            i = r * W + c
+            zi = z[r, c]
+            if zi != zi:
+                ptr[i] = -1
+                continue
+            best = i
+            bz = zi
+            isb = r == 0 or r == H - 1 or c == 0 or c == W - 1
+            for d in _NEIGHBOURS_8:
+                rr = r + d[0]
+                cc = c + d[1]
+                if rr < 0 or rr >= H or cc < 0 or cc >= W:
+                    continue
+                zn = z[rr, cc]
+                if zn != zn:
+                    isb = True
+                    continue
+                j = rr * W + cc
+                if zn > bz or (zn == bz and j < best):
+                    best = j
+                    bz = zn
+            ptr[i] = best
+            border[i] = isb
+    return ptr, border
+
+
+@njit(cache=True)
+def label_basins(ptr):
+    """Label every cell with the id of the maximum its ascent chain reaches.
+
+    Maxima (``ptr[i] == i``) get ids 0..n-1 in raster order. Returns ``label``
+    (-1 for NaN cells) and ``peak_cell`` (flat index of each maximum).
+    """
+    n = ptr.size
+    label = np.full(n, -1, np.int64)
+    npk = 0
+    for i in range(n):
+        if ptr[i] == i:
+            label[i] = npk
+            npk += 1
+    peak_cell = np.empty(npk, np.int64)
+    k = 0
+    for i in range(n):
+        if ptr[i] == i:
+            peak_cell[k] = i
+            k += 1
+    stack = np.empty(1024, np.int64)
+    for i in range(n):
+        if label[i] >= 0 or ptr[i] < 0:
+            continue
+        top = 0
+        j = i
+        while label[j] < 0:
+            if top == stack.size:
+                bigger = np.empty(stack.size * 2, np.int64)
+                bigger[:top] = stack[:top]
+                stack = bigger
+            stack[top] = j
+            top += 1
+            j = ptr[j]
+        lab = label[j]
+        for t in range(top):
+            label[stack[t]] = lab
+    return label, peak_cell
+
+
+@njit(cache=True)
+def basin_border_max(z, label, border, npk):
+    """Highest border-cell elevation of every basin (-inf when it has none)."""
+    out = np.full(npk, -np.inf)
+    zf = z.ravel()
+    for i in range(label.size):
+        if border[i]:
+            lab = label[i]
+            if zf[i] > out[lab]:
+                out[lab] = zf[i]
+    return out
+
+
+@njit(cache=True)
+def _hash_slot(key, mask):
+    h = np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)
+    return np.int64((h >> np.uint64(17)) & np.uint64(mask))
+
+
+@njit(cache=True)
+def _insert(keys, vals, key, cell, zf):
+    mask = keys.size - 1
+    s = _hash_slot(key, mask)
+    while True:
+        k = keys[s]
+        if k == -1:
+            keys[s] = key
+            vals[s] = cell
+            return 1
+        if k == key:
+            old = vals[s]
+            if above(zf[cell], cell, zf[old], old):
+                vals[s] = cell
+            return 0
+        s = (s + 1) & mask
+
+
+@njit(cache=True)
+def basin_passes(z, label, npk):
+    """Highest pass between every pair of adjacent basins.
+
+    For each pair of 8-adjacent valid cells in different basins the pass value is the
+    lower of the two cells (total order); the pass of a basin pair is the highest such
+    value. Returns arrays ``(basin_a, basin_b, pass_cell)`` with basin_a < basin_b.
+    """
+    H, W = z.shape
+    zf = z.ravel()
+    size = 1024
+    while size < 8 * npk:
+        size *= 2
+    keys = np.full(size, -1, np.int64)
+    vals = np.empty(size, np.int64)
+    count = 0
+    for r in range(H):
+        for c in range(W):
+            i = r * W + c
+            la = label[i]
+            if la < 0:
+                continue
+            for d in _FORWARD_4:
+                rr = r + d[0]
+                cc = c + d[1]
+                if rr >= H or cc < 0 or cc >= W:
+                    continue
+                j = rr * W + cc
+                lb = label[j]
+                if lb < 0 or lb == la:
+                    continue
+                p = j if above(zf[i], i, zf[j], j) else i
+                if la < lb:
+                    key = la * npk + lb
+                else:
+                    key = lb * npk + la
+                count += _insert(keys, vals, key, p, zf)
+                if 2 * count > keys.size:
+                    old_k = keys
+                    old_v = vals
+                    keys = np.full(old_k.size * 2, -1, np.int64)
+                    vals = np.empty(old_k.size * 2, np.int64)
+                    for s in range(old_k.size):
+                        if old_k[s] != -1:
+                            _insert(keys, vals, old_k[s], old_v[s], zf)
+    ea = np.empty(count, np.int64)
+    eb = np.empty(count, np.int64)
+    ec = np.empty(count, np.int64)
+    k = 0
+    for s in range(keys.size):
+        if keys[s] != -1:
+            ea[k] = keys[s] // npk
+            eb[k] = keys[s] % npk
+            ec[k] = vals[s]
+            k += 1
+    return ea, eb, ec
+
+
+@njit(cache=True)
+def _find(parent, x):
+    root = x
+    while parent[root] != root:
+        root = parent[root]
+    while parent[x] != root:
+        nxt = parent[x]
+        parent[x] = root
+        x = nxt
+    return root
+
+
+@njit(cache=True)
+def kruskal_sweep(node_z, node_key, ea, eb, ez, border_z):
+    """Maximum spanning forest and elder-rule prominence in one Kruskal sweep.
+
+    Edges must be sorted from the highest to the lowest saddle (total order). When an
+    edge joins two components, the component whose top (highest node) is lower dies
+    there: that edge is the key saddle of its top, and the other top is its parent.
+
+    Parameters
+    ----------
+    node_z, node_key : elevation and tie-break key of every node.
+    ea, eb : endpoints of each edge (sorted, see above); ez : saddle elevation.
+    border_z : highest "border" elevation of every node's basin (-inf if none). A
+        dying component whose border maximum is strictly above the saddle touched the
+        edge of the data above the key saddle: its prominence is only an upper bound.
+
+    Returns
+    -------
+    in_tree : bool per edge (False for edges closing a cycle).
+    key_edge : per node, index of its key-saddle edge (-1 for domain roots).
+    parent : per node, top of the component it merged into (-1 for roots).
+    touched : per node, border flag described above (roots: True if their domain has
+        any border cell).
+    """
+    n = node_z.size
+    uf = np.arange(n)
+    top = np.arange(n)
+    bmax = border_z.copy()
+    key_edge = np.full(n, -1, np.int64)
+    parent = np.full(n, -1, np.int64)
+    touched = np.zeros(n, np.bool_)
+    in_tree = np.zeros(ea.size, np.bool_)
+    for e in range(ea.size):
+        ra = _find(uf, ea[e])
+        rb = _find(uf, eb[e])
+        if ra == rb:
+            continue
+        in_tree[e] = True
+        ta = top[ra]
+        tb = top[rb]
+        if above(node_z[ta], node_key[ta], node_z[tb], node_key[tb]):
+            win, lose, rlose = ta, tb, rb
+        else:
+            win, lose, rlose = tb, ta, ra
+        key_edge[lose] = e
+        parent[lose] = win
+        touched[lose] = bmax[rlose] > ez[e]
+        # union: attach rb under ra
+        uf[rb] = ra
+        top[ra] = win
+        if bmax[rb] > bmax[ra]:
+            bmax[ra] = bmax[rb]
+    for i in range(n):
+        if key_edge[i] < 0:
+            touched[i] = bmax[_find(uf, i)] > -np.inf
+    return in_tree, key_edge, parent, touched
+
+
+@njit(cache=True)
+def prune_edges(n, ea, eb, keep):
+    """Divide Tree restricted to the kept nodes, preserving bottleneck saddles.
+
+    Edges must be the tree edges sorted from the highest to the lowest saddle. The
+    result is the maximum spanning forest of the kept nodes under bottleneck (max-min)
+    saddle heights, so every kept node keeps its prominence and key saddle when all
+    removed nodes have a lower prominence than all kept ones. A removed node is
+    absorbed into the neighbour across its highest saddle (star contraction), which
+    keeps ridges between geographic neighbours.
+
+    Returns ``(out_a, out_b, out_edge)``: kept endpoints and the index of the original
+    edge (its saddle) of each output ridge.
+    """
+    uf = np.arange(n)
+    haskept = keep.copy()
+    # anchor forest: a node points towards the kept node it is absorbed into
+    anchor = np.arange(n)
+    out_a = np.empty(ea.size, np.int64)
+    out_b = np.empty(ea.size, np.int64)
+    out_e = np.empty(ea.size, np.int64)
+    k = 0
+    for e in range(ea.size):
+        a = ea[e]
+        b = eb[e]
+        ra = _find(uf, a)
+        rb = _find(uf, b)
+        if ra == rb:
+            continue
+        if haskept[ra] and haskept[rb]:
+            out_a[k] = _find(anchor, a)
+            out_b[k] = _find(anchor, b)
+            out_e[k] = e
+            k += 1
+        elif haskept[rb]:
+            # component of a has no kept node: absorb all of it towards b
+            anchor[_find(anchor, ra)] = _find(anchor, b)
+        elif haskept[ra]:
+            anchor[_find(anchor, rb)] = _find(anchor, a)
+        else:
+            anchor[_find(anchor, rb)] = _find(anchor, ra)
+        uf[rb] = ra
+        haskept[ra] = haskept[ra] or haskept[rb]
+    return out_a[:k], out_b[:k], out_e[:k]
