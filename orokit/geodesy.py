@@ -1,0 +1,223 @@
+"""Distances and directions between raster cells or points, in metres and degrees.
+
+One helper for the whole toolkit, so that geographic grids (cells that are not square
+on the ground) and projected or local metric grids are measured the same way:
+
+- geographic CRS: geodesics on the WGS84 ellipsoid (:class:`pyproj.Geod`, Karney);
+- projected CRS: Euclidean distance in the CRS, converted to metres with the CRS's
+  linear unit (feet-based state planes work);
+- no CRS (local metric grid from :func:`orokit.io.dem.read_dem`): Euclidean, metres.
+
+Directions are degrees counter-clockwise from east in ``[0, 360)`` (east = 0,
+north = 90), the convention of the orometric features (DESIGN.md section 3). For
+geodesics the direction is the forward azimuth at the first point.
+"""
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from pyproj import CRS, Geod, Transformer
+from rasterio.transform import Affine
+
+from orokit.errors import CRSError
+
+if TYPE_CHECKING:  # pragma: no cover
+    import xarray as xr
+
+__all__ = ["CellMetric", "cell_distance", "point_distance", "WGS84"]
+
+#: The ellipsoid used for every geodesic computation in orokit.
+WGS84 = Geod(ellps="WGS84")
+_EPSG4326 = CRS.from_epsg(4326)
+
+
+@functools.lru_cache(maxsize=32)
+def _to_lonlat(crs_wkt: str) -> Transformer:
+    return Transformer.from_crs(CRS.from_wkt(crs_wkt), _EPSG4326, always_xy=True)
+
+
+def _as_crs(crs: Any) -> CRS | None:
+    if crs is None:
+        return None
+    try:
+        return CRS.from_user_input(crs)
+    except Exception as exc:  # pyproj raises CRSError subclasses of its own
+        raise CRSError(f"cannot interpret CRS {crs!r}: {exc}. Pass an EPSG code or WKT, e.g. 'EPSG:32633'.") from exc
+
+
+def _linear_unit_m(crs: CRS | None) -> float:
+    if crs is None or crs.is_geographic:
+        return 1.0
+    factors = {ax.unit_conversion_factor for ax in crs.axis_info[:2] if ax.unit_conversion_factor}
+    if not factors:
+        return 1.0
+    if len(factors) > 1:  # pragma: no cover - exotic
+        raise CRSError(f"CRS {crs.name!r} has different units on its two axes; reproject to a metric CRS first.")
+    return float(factors.pop())
+
+
+def _ccw_from_east(azimuth_cw_from_north: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.mod(90.0 - azimuth_cw_from_north, 360.0)
+
+
+@dataclass(frozen=True)
+class CellMetric:
+    """Measure distances (metres) and directions (degrees CCW from east) on a grid.
+
+    Parameters
+    ----------
+    transform
+        Affine transform of the grid (pixel corner -> CRS coordinates), as from
+        ``dem.rio.transform()``.
+    crs
+        CRS of the grid, or None for a local metric grid.
+
+    Notes
+    -----
+    Row/column indices are 0-based; a cell is represented by its centre. All methods
+    are vectorised: arguments broadcast like numpy arrays.
+
+    Examples
+    --------
+    >>> m = CellMetric(Affine(30, 0, 0, 0, -30, 300), "EPSG:32633")
+    >>> float(m.distance(0, 0, 3, 4)), float(m.direction(0, 0, 0, 1)), float(m.direction(1, 0, 0, 0))
+    (150.0, 0.0, 90.0)
+    """
+
+    transform: Affine
+    crs: CRS | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "crs", _as_crs(self.crs))
+        object.__setattr__(self, "transform", Affine(*tuple(self.transform)[:6]))
+
+    # -- construction -------------------------------------------------------------
+    @classmethod
+    def from_dem(cls, dem: xr.DataArray) -> CellMetric:
+        """Build the metric of a DEM read by :func:`orokit.io.dem.read_dem` (or any
+        rioxarray-georeferenced DataArray with dims ``("y", "x")``)."""
+        try:
+            transform = dem.rio.transform()
+            crs = dem.rio.crs
+        except Exception as exc:
+            raise CRSError(f"DEM has no usable transform: {exc}. Read it with orokit.io.read_dem.") from exc
+        return cls(transform, crs)
+
+    # -- properties ---------------------------------------------------------------
+    @property
+    def is_geographic(self) -> bool:
+        """True when coordinates are longitude/latitude degrees."""
+        return bool(self.crs is not None and self.crs.is_geographic)
+
+    @functools.cached_property
+    def _is_wgs84(self) -> bool:
+        return bool(self.crs is not None and self.crs.equals(_EPSG4326))
+
+    @property
+    def unit_m(self) -> float:
+        """Metres per CRS unit (1 for metric and local grids; not used for geographic)."""
+        return _linear_unit_m(self.crs)
+
+    # -- coordinates --------------------------------------------------------------
+    def xy(self, rows: ArrayLike, cols: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """CRS coordinates of cell centres."""
+        r = np.asarray(rows, dtype=np.float64) + 0.5
+        c = np.asarray(cols, dtype=np.float64) + 0.5
+        t = self.transform
+        return t.a * c + t.b * r + t.c, t.d * c + t.e * r + t.f
+
+    def lonlat(self, x: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Longitude/latitude (WGS84 degrees) of CRS points; NaN when there is no CRS."""
+        xa, ya = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
+        if self.crs is None:
+            nan = np.full(xa.shape, np.nan)
+            return nan, nan.copy()
+        if self._is_wgs84:
+            return xa.copy(), ya.copy()
+        lon, lat = _to_lonlat(self.crs.to_wkt()).transform(xa, ya)
+        return np.asarray(lon, dtype=np.float64), np.asarray(lat, dtype=np.float64)
+
+    def _geodetic(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        if self._is_wgs84:
+            return x, y
+        return self.lonlat(x, y)
+
+    # -- distances ----------------------------------------------------------------
+    def point_distance_direction(
+        self, x0: ArrayLike, y0: ArrayLike, x1: ArrayLike, y1: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Distance (m) and direction (degrees CCW from east) between CRS points."""
+        x0a, y0a, x1a, y1a = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (x0, y0, x1, y1)))
+        if self.is_geographic:
+            lon0, lat0 = self._geodetic(x0a, y0a)
+            lon1, lat1 = self._geodetic(x1a, y1a)
+            az, _, dist = WGS84.inv(lon0, lat0, lon1, lat1)
+            az = np.asarray(az, dtype=np.float64)
+            dist = np.asarray(dist, dtype=np.float64)
+            direction = _ccw_from_east(az)
+        else:
+            dx = (x1a - x0a) * self.unit_m
+            dy = (y1a - y0a) * self.unit_m
+            dist = np.hypot(dx, dy)
+            direction = np.mod(np.degrees(np.arctan2(dy, dx)), 360.0)
+        # identical points: distance 0, direction undefined
+        direction = np.where(dist > 0, direction, np.nan)
+        return dist, direction
+
+    def distance_direction(
+        self, row0: ArrayLike, col0: ArrayLike, row1: ArrayLike, col1: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Distance (m) and direction (degrees CCW from east) from cells 0 to cells 1.
+
+        The direction is NaN where both cells are the same.
+        """
+        x0, y0 = self.xy(row0, col0)
+        x1, y1 = self.xy(row1, col1)
+        return self.point_distance_direction(x0, y0, x1, y1)
+
+    def distance(self, row0: ArrayLike, col0: ArrayLike, row1: ArrayLike, col1: ArrayLike) -> NDArray[np.float64]:
+        """Distance in metres between cell centres."""
+        return self.distance_direction(row0, col0, row1, col1)[0]
+
+    def direction(self, row0: ArrayLike, col0: ArrayLike, row1: ArrayLike, col1: ArrayLike) -> NDArray[np.float64]:
+        """Direction from cell 0 to cell 1, degrees counter-clockwise from east."""
+        return self.distance_direction(row0, col0, row1, col1)[1]
+
+    def cell_size_m(self, rows: ArrayLike | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Ground size (m) of cells along x (east-west) and y (north-south).
+
+        For geographic grids the east-west size shrinks with latitude, so it is
+        given per row (``rows`` default: every row 0..n is not known here, so pass
+        the rows you need; default row 0). Projected/local grids return constants.
+        """
+        r = np.atleast_1d(np.asarray(0 if rows is None else rows, dtype=np.float64))
+        if self.is_geographic:
+            dx = self.distance(r, 0, r, 1)
+            dy = self.distance(r, 0, r + 1, 0)
+            return dx, dy
+        t = self.transform
+        u = self.unit_m
+        return np.full(r.shape, math.hypot(t.a, t.d) * u), np.full(r.shape, math.hypot(t.b, t.e) * u)
+
+
+def cell_distance(
+    dem: xr.DataArray, row0: ArrayLike, col0: ArrayLike, row1: ArrayLike, col1: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Distance (m) and direction (degrees CCW from east) between cells of ``dem``.
+
+    Shortcut for ``CellMetric.from_dem(dem).distance_direction(...)``; build the
+    :class:`CellMetric` once when calling this in a loop.
+    """
+    return CellMetric.from_dem(dem).distance_direction(row0, col0, row1, col1)
+
+
+def point_distance(
+    x0: ArrayLike, y0: ArrayLike, x1: ArrayLike, y1: ArrayLike, *, crs: Any = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Distance (m) and direction (degrees CCW from east) between points of ``crs``."""
+    return CellMetric(Affine.identity(), crs).point_distance_direction(x0, y0, x1, y1)

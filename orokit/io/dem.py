@@ -1,0 +1,457 @@
+"""Read any GDAL raster as an elevation ``xarray.DataArray`` in metres.
+
+:func:`read_dem` is the single entry point through which orokit reads elevation data:
+GeoTIFF/COG, SRTM ``.hgt`` (georeference from the file name, GDAL SRTMHGT driver),
+ESRI ASCII grids, VRT mosaics, 16-bit PNG, and anything else rasterio opens.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import os
+import threading
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rasterio
+import rasterio.errors
+import rioxarray  # noqa: F401  (registers the .rio accessor)
+import xarray as xr
+from numpy.typing import NDArray
+from pyproj import CRS
+from rasterio.enums import Resampling
+from rasterio.transform import Affine
+from rasterio.windows import Window
+
+from orokit._typing import PathLike
+from orokit.errors import CRSError, InputError, OrokitWarning, UnitsError
+from orokit.io._units import TO_METRES, is_known_units, normalize_units
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["read_dem"]
+
+ChunksLike = int | str | Sequence[int] | Mapping[str, int] | None
+CellSizeLike = float | tuple[float, float] | None
+
+# rasterio warns (NotGeoreferencedWarning) when it opens a raster without any
+# georeference. ``warnings.catch_warnings`` is not thread-safe, so opening such
+# files from dask worker threads is serialised by this lock.
+_OPEN_LOCK = threading.Lock()
+
+
+def _is_virtual(path: str) -> bool:
+    return path.startswith("/vsi") or "://" in path
+
+
+@contextlib.contextmanager
+def _open(path: str, *, what: str = "") -> Iterator[rasterio.io.DatasetReader]:
+    """Open ``path`` with rasterio, mapping GDAL failures to :class:`InputError`."""
+    try:
+        with _OPEN_LOCK, warnings.catch_warnings():
+            warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
+            src = rasterio.open(path)
+    except rasterio.errors.RasterioIOError as exc:
+        raise InputError(
+            f"cannot read raster {path}{what}: {exc}. Check that the file is complete and in a format GDAL "
+            "reads (GeoTIFF/COG, SRTM .hgt, ESRI ASCII .asc, VRT, PNG)."
+        ) from exc
+    with src:
+        yield src
+
+
+@dataclass(frozen=True)
+class _BandReader:
+    """Array-like view of one raster band converted to float32 metres with NaN nodata.
+
+    ``dask.array.from_array`` slices it chunk by chunk, so only the requested window
+    is ever read; it holds no open file handle and pickles for dask.distributed.
+    """
+
+    path: str
+    band: int
+    shape: tuple[int, int]
+    native_dtype: str
+    nodata: float | None
+    factor: float  # metres per input unit, times the band scale
+    offset_m: float  # band offset, in metres
+    dtype: np.dtype = np.dtype(np.float32)
+    ndim: int = 2
+
+    def _convert(self, raw: NDArray[Any]) -> NDArray[np.float32]:
+        valid = np.ones(raw.shape, dtype=bool)
+        if self.nodata is not None:
+            if np.isnan(self.nodata):
+                valid &= ~np.isnan(raw)
+            else:
+                valid &= raw != _native_sentinel(self.nodata, raw.dtype)
+        if raw.dtype.kind == "f":
+            valid &= np.isfinite(raw)
+        # integer inputs (uint16 PNGs, int16 SRTM with -32768 voids) go through
+        # float64: no overflow, exact for every 32-bit integer value.
+        z = raw.astype(np.float64)
+        if self.factor != 1.0:
+            z *= self.factor
+        if self.offset_m != 0.0:
+            z += self.offset_m
+        z[~valid] = np.nan
+        return z.astype(np.float32)
+
+    def read(self, window: Window | None = None, out_shape: tuple[int, int] | None = None) -> NDArray[np.float32]:
+        where = "" if window is None else f" (rows {window.row_off}:{window.row_off + window.height}, cols {window.col_off}:{window.col_off + window.width})"
+        with _open(self.path, what=where) as src:
+            try:
+                if out_shape is not None:
+                    raw = src.read(self.band, out_shape=out_shape, resampling=Resampling.nearest)
+                else:
+                    raw = src.read(self.band, window=window)
+            except rasterio.errors.RasterioError as exc:
+                raise InputError(
+                    f"cannot read the pixels of {self.path}{where}: {exc}. The file is probably truncated or "
+                    "corrupt; download it again (orokit data fetch) or re-export it."
+                ) from exc
+        return self._convert(raw)
+
+    def __getitem__(self, key: Any) -> NDArray[np.float32]:
+        if not isinstance(key, tuple):
+            key = (key,)
+        key = key + (slice(None),) * (2 - len(key))
+        rs, cs = (k.indices(n) if isinstance(k, slice) else None for k, n in zip(key, self.shape))
+        if rs is None or cs is None or rs[2] != 1 or cs[2] != 1:
+            # generic indexing (rare): read everything and let numpy index
+            return self.read()[key]
+        r0, r1, _ = rs
+        c0, c1, _ = cs
+        if r1 <= r0 or c1 <= c0:
+            return np.empty((max(r1 - r0, 0), max(c1 - c0, 0)), dtype=np.float32)
+        return self.read(Window(c0, r0, c1 - c0, r1 - r0))
+
+
+def _native_sentinel(nodata: float, dtype: np.dtype) -> Any:
+    """The nodata value expressed in the raster's own dtype (compared once, at read)."""
+    if dtype.kind in "iu":
+        info = np.iinfo(dtype)
+        if float(nodata).is_integer() and info.min <= nodata <= info.max:
+            return dtype.type(int(nodata))
+        return np.float64(nodata)  # cannot occur in this dtype: compare in float64 (never equal)
+    if dtype.kind == "f":
+        return dtype.type(nodata)
+    return nodata
+
+
+def _normalize_cell_size(cell_size: Any) -> tuple[float, float]:
+    try:
+        if np.ndim(cell_size) == 0:
+            dx = dy = float(cell_size)
+        else:
+            dx, dy = (float(v) for v in cell_size)
+    except (TypeError, ValueError) as exc:
+        raise InputError(
+            f"cell_size must be a positive number of metres or a pair (dx, dy), got {cell_size!r}."
+        ) from exc
+    if not (math.isfinite(dx) and math.isfinite(dy) and dx > 0 and dy > 0):
+        raise InputError(f"cell_size must be positive and finite (metres), got {cell_size!r}.")
+    return dx, dy
+
+
+def _normalize_chunks(chunks: ChunksLike, shape: tuple[int, int]) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    from dask.array.core import normalize_chunks
+
+    if isinstance(chunks, Mapping):
+        unknown = set(chunks) - {"y", "x"}
+        if unknown:
+            raise InputError(f"chunks keys must be 'y' and/or 'x', got {sorted(chunks)!r}.")
+        chunks = (chunks.get("y", -1), chunks.get("x", -1))
+    elif isinstance(chunks, bool):
+        chunks = "auto"
+    try:
+        return normalize_chunks(chunks, shape=shape, dtype=np.float32)  # type: ignore[no-any-return]
+    except (ValueError, TypeError) as exc:
+        raise InputError(f"invalid chunks={chunks!r} for a raster of shape {shape}: {exc}") from exc
+
+
+def _as_crs(crs: Any) -> CRS | None:
+    if crs is None:
+        return None
+    try:
+        return CRS.from_user_input(crs)
+    except Exception as exc:
+        raise CRSError(f"cannot interpret crs={crs!r}: {exc}. Pass an EPSG code or WKT, e.g. crs='EPSG:32633'.") from exc
+
+
+def read_dem(
+    source: PathLike,
+    *,
+    z_units: str | None = None,
+    cell_size: CellSizeLike = None,
+    band: int | None = None,
+    chunks: ChunksLike = None,
+    nodata: float | None = None,
+    crs: Any = None,
+) -> xr.DataArray:
+    """Read an elevation raster as float32 metres with NaN nodata, CRS and transform.
+
+    Parameters
+    ----------
+    source
+        Path of any raster GDAL reads (GeoTIFF/COG, SRTM ``.hgt``/``.hgt.zip`` named
+        like ``N32W098.hgt``, ESRI ASCII grid, VRT mosaic, 16-bit PNG...) or a GDAL
+        virtual path (``/vsizip/...``, ``/vsicurl/...``).
+    z_units
+        Elevation units of the file: ``"m"``, ``"ft"`` (x 0.3048 exactly) or
+        ``"us-ft"``. Default: the band's unit metadata if any, else metres for a
+        raster with a CRS. Required for rasters without CRS that declare no units
+        (the PNG DEMs).
+    cell_size
+        Cell size in metres (a number, or ``(dx, dy)``) for a raster without
+        georeference: it then gets a local metric grid with origin (0, 0) at the
+        north-west corner and y decreasing downwards. Refused for geographic CRS and
+        when it disagrees with the file's own transform.
+    band
+        1-based band number; required when the raster has several bands.
+    chunks
+        None reads the band into memory. Otherwise the result is a lazy dask array
+        with these chunks (int, ``(y, x)``, ``{"y": .., "x": ..}`` or ``"auto"``);
+        only windows of the file are read, when computed.
+    nodata
+        Nodata value overriding the file's own. It is compared with the raw values
+        in the file's dtype, before any conversion.
+    crs
+        CRS to assign to a raster that has none (EPSG code, WKT, pyproj CRS). A raster
+        with a CRS keeps it; a different ``crs`` is an error.
+
+    Returns
+    -------
+    xarray.DataArray
+        Dims ``("y", "x")`` with cell-centre coordinates, dtype float32, metres, NaN
+        where nodata; ``rio.crs`` / ``rio.transform()`` set (CRS None for a local
+        grid). ``attrs``: ``units`` ("m"), ``source``, ``z_units_in`` (units of the
+        file), ``z_units_assumed`` (True when metres were assumed), ``local_grid``
+        (True when the raster had no CRS and gets a local metric grid),
+        ``cell_size`` (x cell size in CRS units: metres, or degrees for geographic
+        CRS), ``res`` ((dx, dy) in CRS units), ``band``, ``nodata_in`` (the raw
+        sentinel or None).
+
+    Raises
+    ------
+    InputError
+        Missing, unreadable, truncated or corrupt file; empty or all-nodata raster;
+        several bands without ``band``; bad ``cell_size``/``chunks``; rotated grids.
+    UnitsError
+        Unknown units string, or no units known for an ungeoreferenced raster.
+    CRSError
+        No georeference and no ``cell_size``; ``cell_size`` with a geographic CRS or
+        conflicting with the file; ``crs`` conflicting with the file's CRS.
+
+    Notes
+    -----
+    1. The file is opened once to read its metadata (size, bands, dtype, CRS,
+       transform, nodata, units, scale/offset); VRT sources are checked to exist.
+    2. Nodata cells are found by comparing the raw values with the sentinel in the
+       native dtype (so -32768 in int16 and -3.4e38 in float32 both match exactly),
+       plus non-finite floats. Integer inputs are converted through float64, so
+       uint16/int16 never overflow. Feet are converted once, here (x 0.3048).
+    3. Rasters without CRS are labelled ``local_grid=True``: distances on them are
+       plain metres (see :mod:`orokit.geodesy`); no geographic feature is implied.
+    4. With ``chunks``, an all-nodata raster is detected from a decimated sample and,
+       only if that sample is empty, a streamed pass over the chunks.
+
+    Examples
+    --------
+    >>> import numpy as np, rasterio, tempfile, os
+    >>> from rasterio.transform import Affine
+    >>> path = os.path.join(tempfile.mkdtemp(), "dem.tif")
+    >>> with rasterio.open(path, "w", driver="GTiff", width=3, height=2, count=1, dtype="int16",
+    ...                    crs="EPSG:32633", transform=Affine(30, 0, 500000, 0, -30, 4000000), nodata=-32768) as dst:
+    ...     dst.write(np.array([[1, 2, 3], [4, -32768, 6]], dtype="int16"), 1)
+    >>> dem = read_dem(path)
+    >>> dem.dims, str(dem.dtype), dem.attrs["units"], int(dem.isnull().sum())
+    (('y', 'x'), 'float32', 'm', 1)
+    """
+    path = os.fspath(source)
+    if not _is_virtual(path):
+        p = Path(path)
+        if not p.exists():
+            raise InputError(f"DEM file not found: {path}. Check the path (or fetch it: orokit data fetch NAME).")
+        if p.is_dir():
+            raise InputError(f"{path} is a directory, not a raster file; pass the path of the DEM file itself.")
+        if p.stat().st_size == 0:
+            raise InputError(f"DEM file {path} is empty (0 bytes); download or export it again.")
+
+    with _open(path) as src:
+        width, height, count = src.width, src.height, src.count
+        file_crs = CRS.from_user_input(src.crs) if src.crs else None
+        file_transform = src.transform
+        has_gcps = bool(src.gcps[0])
+        dtypes = src.dtypes
+        nodatavals = src.nodatavals
+        band_units = src.units
+        scales, offsets = src.scales, src.offsets
+        files = list(src.files) if src.driver == "VRT" else []
+        driver = src.driver
+
+    if width == 0 or height == 0:
+        raise InputError(f"raster {path} is empty ({height} rows x {width} columns).")
+
+    # -- band ---------------------------------------------------------------------
+    if band is None:
+        if count != 1:
+            raise InputError(
+                f"raster {path} has {count} bands; choose the elevation band with band=1..{count} (CLI: --band)."
+            )
+        band = 1
+    if isinstance(band, bool) or not isinstance(band, (int, np.integer)) or not 1 <= int(band) <= count:
+        raise InputError(f"band={band!r} is not valid for {path}, which has {count} band(s) (1-based: 1..{count}).")
+    band = int(band)
+    native = np.dtype(dtypes[band - 1])
+    if native.kind not in "iuf":
+        raise InputError(f"band {band} of {path} has dtype {native}, which is not a real-valued elevation type.")
+
+    # -- VRT sources --------------------------------------------------------------
+    for f in files[1:]:
+        if not _is_virtual(f) and not Path(f).exists():
+            raise InputError(f"VRT mosaic {path} refers to a missing source file {f}; fix or rebuild the VRT.")
+
+    # -- units --------------------------------------------------------------------
+    file_units = (band_units[band - 1] or "").strip() if band_units else ""
+    z_assumed = False
+    if z_units is not None:
+        zu = normalize_units(z_units)
+        if file_units and is_known_units(file_units) and normalize_units(file_units) != zu:
+            warnings.warn(
+                f"{path} declares elevation units {file_units!r} but z_units={z_units!r} was given; using {zu!r}.",
+                OrokitWarning,
+                stacklevel=2,
+            )
+    elif file_units:
+        if not is_known_units(file_units):
+            raise UnitsError(
+                f"{path} declares elevation units {file_units!r}, which orokit does not know; pass z_units='m' or "
+                "'ft' (CLI: --z-units) to say what they are."
+            )
+        zu = normalize_units(file_units)
+    elif file_crs is not None:
+        zu, z_assumed = "m", True
+        logger.info("%s declares no elevation units; assuming metres (pass z_units to override)", path)
+    else:
+        raise UnitsError(
+            f"{path} has no CRS and no elevation units, so its units are unknown; pass z_units='ft' or 'm' "
+            "(CLI: --z-units). The orokit PNG datasets are in feet: orokit.data.open_dataset_dem(name) knows it."
+        )
+
+    # -- georeference -------------------------------------------------------------
+    user_crs = _as_crs(crs)
+    if file_crs is not None and user_crs is not None and not file_crs.equals(user_crs):
+        raise CRSError(
+            f"{path} already has CRS {file_crs.to_string()!r}; crs={user_crs.to_string()!r} conflicts with it. "
+            "A raster with a CRS keeps it: drop crs=, or reproject the file (gdalwarp) first."
+        )
+    eff_crs = file_crs or user_crs
+    has_transform = file_transform != Affine.identity()
+    if has_gcps and not has_transform:
+        raise CRSError(f"{path} is georeferenced by ground control points only; warp it first (gdalwarp).")
+    if file_transform.b != 0 or file_transform.d != 0:
+        raise InputError(f"{path} has a rotated grid (transform {tuple(file_transform)[:6]}); warp it first (gdalwarp).")
+
+    if cell_size is not None:
+        dx, dy = _normalize_cell_size(cell_size)
+        if eff_crs is not None and eff_crs.is_geographic:
+            raise CRSError(
+                f"cell_size={cell_size!r} (metres) conflicts with the geographic CRS {eff_crs.to_string()!r} of "
+                f"{path}: cells of a geographic grid are not square in metres. Drop cell_size; distances are "
+                "computed geodesically (orokit.geodesy)."
+            )
+        if has_transform:
+            fdx, fdy = abs(file_transform.a), abs(file_transform.e)
+            if not (math.isclose(fdx, dx, rel_tol=1e-6) and math.isclose(fdy, dy, rel_tol=1e-6)):
+                raise CRSError(
+                    f"cell_size={cell_size!r} conflicts with the cells of {path} ({fdx:g} x {fdy:g} CRS units); "
+                    "drop cell_size, the file's own georeference is used."
+                )
+            transform = file_transform
+        else:
+            transform = Affine(dx, 0.0, 0.0, 0.0, -dy, 0.0)
+    elif has_transform:
+        transform = file_transform
+        if eff_crs is None:
+            logger.info("%s has a transform but no CRS; treating it as a local metric grid", path)
+    else:
+        raise CRSError(
+            f"{path} has no georeference (no CRS, no transform), so its cell size is unknown; pass "
+            "cell_size=<metres> (CLI: --cell-size) to read it on a local metric grid."
+        )
+    if eff_crs is not None and eff_crs.is_geographic and not has_transform:
+        raise CRSError(f"cannot place the ungeoreferenced raster {path} in the geographic CRS {eff_crs.to_string()!r}.")
+
+    # -- nodata / scaling ---------------------------------------------------------
+    nd = nodata if nodata is not None else nodatavals[band - 1]
+    nd = None if nd is None else float(nd)
+    scale = 1.0 if scales[band - 1] is None else float(scales[band - 1])
+    offset = 0.0 if offsets[band - 1] is None else float(offsets[band - 1])
+    to_m = TO_METRES[zu]
+    reader = _BandReader(
+        path=path,
+        band=band,
+        shape=(height, width),
+        native_dtype=native.str,
+        nodata=nd,
+        factor=to_m * scale,
+        offset_m=to_m * offset,
+    )
+
+    # -- pixels -------------------------------------------------------------------
+    if chunks is None:
+        data: Any = reader.read()
+        if not np.isfinite(data).any():
+            raise InputError(_all_nodata_message(path, nd))
+    else:
+        import dask.array as dsa
+        from dask.base import tokenize
+
+        norm = _normalize_chunks(chunks, (height, width))
+        stamp = None if _is_virtual(path) else (os.stat(path).st_mtime_ns, os.stat(path).st_size)
+        name = "read_dem-" + tokenize(path, stamp, band, nd, reader.factor, reader.offset_m, norm)
+        data = dsa.from_array(reader, chunks=norm, name=name, lock=False, asarray=False, meta=np.empty((0, 0), np.float32))
+        sample = reader.read(out_shape=(min(height, 256), min(width, 256)))
+        if not np.isfinite(sample).any() and not bool(dsa.isfinite(data).any().compute()):
+            raise InputError(_all_nodata_message(path, nd))
+
+    t = transform
+    x = t.c + t.a * (np.arange(width) + 0.5)
+    y = t.f + t.e * (np.arange(height) + 0.5)
+    attrs = {
+        "units": "m",
+        "source": path,
+        "driver": driver,
+        "z_units_in": zu,
+        "z_units_assumed": z_assumed,
+        "local_grid": eff_crs is None,
+        "cell_size": float(abs(t.a)),
+        "res": (float(abs(t.a)), float(abs(t.e))),
+        "band": band,
+        "nodata_in": nd,
+        "long_name": "elevation",
+    }
+    dem = xr.DataArray(data, dims=("y", "x"), coords={"y": y, "x": x}, name="elevation", attrs=attrs)
+    if eff_crs is not None:
+        dem = dem.rio.write_crs(eff_crs)
+    dem = dem.rio.write_transform(transform)
+    dem = dem.rio.write_nodata(np.nan, encoded=False)
+    logger.info(
+        "read %s: %d x %d cells, %s, units %s -> m%s",
+        path, height, width, eff_crs.to_string() if eff_crs is not None else "local metric grid", zu,
+        "" if chunks is None else f", chunks {tuple(len(c) for c in dem.chunks or ())} blocks",
+    )
+    return dem
+
+
+def _all_nodata_message(path: str, nd: float | None) -> str:
+    return (
+        f"raster {path} has no valid cells: every cell is nodata (nodata={nd}) or not finite. "
+        "Check the nodata value (nodata=...) or the file."
+    )
