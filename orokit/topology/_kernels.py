@@ -316,3 +316,15 @@ def prune_edges(n, ea, eb, keep):
         uf[rb] = ra
         haskept[ra] = haskept[ra] or haskept[rb]
     return out_a[:k], out_b[:k], out_e[:k]
+
+
+@njit(cache=True)
+def basin_min(z, label, npk):
+    """Lowest elevation of every basin."""
+    out = np.full(npk, np.inf)
+    zf = z.ravel()
+    for i in range(label.size):
+        lab = label[i]
+        if lab >= 0 and zf[i] < out[lab]:
+            out[lab] = zf[i]
+    return out

@@ -1,0 +1,226 @@
+"""``orokit.analyze``: exact orometry of one elevation raster.
+
+From a DEM to the peaks table (prominence, key saddle, parent, dominance, isolation,
+exactness flags), the saddles table and the Divide Tree pruned at a prominence
+threshold. The in-memory engine is in :mod:`orokit.topology.engine`; this module
+holds the public function, the result object and its files.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+
+from orokit import __version__
+from orokit.errors import InputError
+from orokit.topology.divide_tree import DivideTree
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["analyze", "AnalysisResult", "read_analysis", "PEAK_COLUMNS"]
+
+#: Columns of the peaks table, in order (metres; row/col 0-based, row 0 at the top).
+PEAK_COLUMNS = [
+    "row", "col", "x", "y", "lon", "lat", "elevation", "prominence",
+    "saddle_row", "saddle_col", "saddle_x", "saddle_y", "saddle_elevation",
+    "parent", "parent_row", "parent_col", "dominance",
+    "isolation", "isolation_row", "isolation_col", "isolation_x", "isolation_y",
+    "prominence_exact", "isolation_exact",
+]
+
+
+@dataclass
+class AnalysisResult:
+    """Output of :func:`analyze`.
+
+    Attributes
+    ----------
+    peaks : GeoDataFrame indexed by ``peak_id`` with :data:`PEAK_COLUMNS`.
+    saddles : GeoDataFrame indexed by ``saddle_id`` (row, col, x, y, elevation,
+        peak_a, peak_b, key_of: the peak whose key saddle it is).
+    divide_tree : the Divide Tree pruned at ``min_prominence`` (same ids).
+    crs : CRS of x/y (None for a local metric grid without CRS).
+    attrs : metadata (threshold, outside convention, units, source, timings...).
+    """
+
+    peaks: Any
+    saddles: Any
+    divide_tree: DivideTree
+    crs: Any = None
+    attrs: dict = field(default_factory=dict)
+
+    def write(self, outdir, *, overwrite: bool = True) -> Path:
+        """Write peaks.csv, peaks.parquet, saddles.parquet, dividetree.gpkg, analysis.json."""
+        from orokit.io.analysis_io import write_analysis
+
+        return write_analysis(self, outdir, overwrite=overwrite)
+
+    def __repr__(self) -> str:  # pragma: no cover - cosmetic
+        return (
+            f"AnalysisResult({len(self.peaks)} peaks >= {self.attrs.get('min_prominence')} m, "
+            f"{len(self.saddles)} saddles, crs={self.crs})"
+        )
+
+
+def read_analysis(outdir) -> AnalysisResult:
+    """Read a folder written by :meth:`AnalysisResult.write` / ``orokit analyze``."""
+    from orokit.io.analysis_io import read_analysis as _read
+
+    return _read(outdir)
+
+
+def analyze(
+    dem,
+    *,
+    min_prominence: float = 30.0,
+    outside: Literal["unknown", "sea"] = "unknown",
+    isolation: bool = True,
+    progress: bool = False,
+    z_units: str | None = None,
+    cell_size: float | None = None,
+) -> AnalysisResult:
+    """Peaks, key saddles, prominence, dominance, isolation and the Divide Tree.
+
+    Parameters
+    ----------
+    dem : DataArray from :func:`orokit.io.dem.read_dem` (dims y, x; metres; NaN =
+        nodata; CRS and transform through rioxarray) or a path to read with it.
+    min_prominence : keep peaks with prominence >= this many metres (0 = every peak).
+    outside : what lies beyond the data (raster edge and NaN cells). ``"unknown"``
+        (default): prominences whose key saddle is below a path to the edge are upper
+        bounds and flagged ``prominence_exact=False``. ``"sea"``: the outside is sea,
+        every prominence is exact.
+    isolation : compute isolation (nearest strictly higher cell).
+    progress : show a progress bar over the stages.
+    z_units, cell_size : forwarded to ``read_dem`` when ``dem`` is a path.
+
+    Returns
+    -------
+    AnalysisResult
+
+    Notes
+    -----
+    Conventions (those of Kirmse's prominence program where it has one):
+
+    1. 8-neighbourhood for peaks and saddles. Cells are ordered by elevation, ties by
+       raster order (the first cell in raster order counts as higher). A flat summit
+       is one peak, reported at its first cell in raster order; among equal-height
+       peaks the one whose cell comes first in raster order counts as higher.
+    2. NaN (nodata) cells count as lower than everything and never carry a path.
+       Input values are never altered.
+    3. The highest peak of each 8-connected domain of valid cells has no key saddle;
+       its prominence is its elevation (the paper's convention) and it is flagged not
+       exact unless ``outside="sea"``. A domain that is entirely flat has no peak.
+    4. Pruning at ``min_prominence`` keeps every surviving peak's exact prominence.
+    """
+    from orokit.topology import engine
+
+    t0 = time.perf_counter()
+    if outside not in ("unknown", "sea"):
+        raise InputError(f"outside must be 'unknown' or 'sea', got {outside!r}")
+    if not np.isfinite(min_prominence) or min_prominence < 0:
+        raise InputError(f"min_prominence must be a finite number >= 0 (metres), got {min_prominence!r}")
+    if not hasattr(dem, "dims"):
+        from orokit.io.dem import read_dem
+
+        dem = read_dem(dem, z_units=z_units, cell_size=cell_size)
+    if dem.ndim != 2:
+        raise InputError(f"the DEM must be 2-D (y, x); got dims {dem.dims}")
+    units = dem.attrs.get("units", "m")
+    if units not in ("m", "metre", "metres", "meter", "meters"):
+        from orokit.errors import UnitsError
+
+        raise UnitsError(f"DEM elevations must be in metres (read it with read_dem(z_units=...)); attrs units={units!r}")
+    transform, crs = _georef(dem)
+    z = np.asarray(dem.values)
+    if not np.issubdtype(z.dtype, np.floating):
+        z = z.astype(np.float64)
+    z = np.ascontiguousarray(z)
+
+    stages = ["peaks, saddles and Divide Tree", "isolation", "tables"]
+    bar = _progress(progress, stages)
+    core = engine.orometry(z, min_prominence=min_prominence, outside=outside)
+    t_core = time.perf_counter()
+    _advance(bar)
+    iso = None
+    if isolation and core.n_kept:
+        from orokit.metrics.isolation import isolation as _isolation
+
+        iso = _isolation(z, core.peak_row, core.peak_col, transform=transform, crs=crs)
+    t_iso = time.perf_counter()
+    _advance(bar)
+    result = engine.build_result(core, z, transform=transform, crs=crs, isolation=iso)
+    t_end = time.perf_counter()
+    _advance(bar)
+    if bar is not None:
+        bar.close()
+    result.attrs.update(
+        {
+            "orokit_version": __version__,
+            "min_prominence": float(min_prominence),
+            "outside": outside,
+            "units": "m",
+            "connectivity": 8,
+            "local_grid": bool(dem.attrs.get("local_grid", crs is None)),
+            "source": str(dem.attrs.get("source", "")),
+            "shape": list(z.shape),
+            "n_local_maxima": int(core.n_maxima),
+            "timings_s": {
+                "tree_and_prominence": round(t_core - t0, 4),
+                "isolation": round(t_iso - t_core, 4),
+                "tables": round(t_end - t_iso, 4),
+            },
+        }
+    )
+    logger.info(
+        "%d peaks with prominence >= %g m (of %d maxima) in %.2f s",
+        len(result.peaks), min_prominence, core.n_maxima, t_end - t0,
+    )
+    return result
+
+
+def _georef(dem):
+    """Affine transform and CRS of a DataArray (local grid when it has none)."""
+    from affine import Affine
+
+    crs = None
+    transform = None
+    try:
+        crs = dem.rio.crs
+        transform = dem.rio.transform()
+    except Exception:  # noqa: BLE001 - no rioxarray metadata at all
+        pass
+    if transform is None or transform == Affine.identity() and "x" not in dem.coords:
+        cell = float(dem.attrs.get("cell_size", 1.0))
+        transform = Affine(cell, 0.0, 0.0, 0.0, -cell, 0.0)
+    if dem.attrs.get("local_grid"):
+        crs = None
+    return transform, crs
+
+
+def _progress(enabled: bool, stages: list[str]):
+    if not enabled:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=len(stages), desc="analyze", unit="stage")
+
+
+def _advance(bar) -> None:
+    if bar is not None:
+        bar.update(1)
+
+
+def analysis_json(result: AnalysisResult) -> str:
+    """Metadata of a result as JSON text (written next to the tables)."""
+    meta = dict(result.attrs)
+    meta["crs"] = None if result.crs is None else result.crs.to_wkt()
+    meta["n_peaks"] = int(len(result.peaks))
+    meta["n_saddles"] = int(len(result.saddles))
+    return json.dumps(meta, indent=2, default=str)

@@ -1,0 +1,203 @@
+"""Numba kernels for isolation (nearest strictly higher cell).
+
+A pyramid of block maxima (each level halves the raster) prunes a best-first search:
+blocks are visited by increasing lower bound of their distance to the peak and a block
+whose maximum is not above the peak's elevation is skipped. The first single cell
+popped from the queue is the nearest higher cell. numba is needed because the search
+is a priority-queue traversal that numpy cannot vectorise.
+
+Two metrics: Euclidean on a grid of ``dx`` x ``dy`` metres (projected or local CRS),
+and great-circle distance on a sphere for geographic grids. For geographic grids the
+kernel returns every candidate within ``slack`` (relative) of the spherical optimum,
+so the caller can pick the exact ellipsoidal (WGS84) geodesic minimum among them.
+"""
+from __future__ import annotations
+
+import heapq
+import math
+
+import numpy as np
+from numba import njit
+
+EARTH_RADIUS_M = 6371008.8
+
+
+@njit(cache=True)
+def build_pyramid(level0):
+    """Block-maximum pyramid stored flat. Returns (values, offsets, heights, widths)."""
+    H, W = level0.shape
+    heights = [H]
+    widths = [W]
+    while heights[-1] > 1 or widths[-1] > 1:
+        heights.append((heights[-1] + 1) // 2)
+        widths.append((widths[-1] + 1) // 2)
+    nlev = len(heights)
+    hs = np.empty(nlev, np.int64)
+    ws = np.empty(nlev, np.int64)
+    offs = np.empty(nlev + 1, np.int64)
+    offs[0] = 0
+    for k in range(nlev):
+        hs[k] = heights[k]
+        ws[k] = widths[k]
+        offs[k + 1] = offs[k] + hs[k] * ws[k]
+    vals = np.empty(offs[nlev], level0.dtype)
+    for r in range(H):
+        for c in range(W):
+            vals[r * W + c] = level0[r, c]
+    for k in range(1, nlev):
+        ph, pw, po = hs[k - 1], ws[k - 1], offs[k - 1]
+        h, w, o = hs[k], ws[k], offs[k]
+        for r in range(h):
+            for c in range(w):
+                m = vals[po + (2 * r) * pw + 2 * c]
+                for dr in range(2):
+                    for dc in range(2):
+                        rr = 2 * r + dr
+                        cc = 2 * c + dc
+                        if rr < ph and cc < pw:
+                            v = vals[po + rr * pw + cc]
+                            if v > m:
+                                m = v
+                vals[o + r * w + c] = m
+    return vals, offs, hs, ws
+
+
+@njit(cache=True)
+def _gap(p, lo, hi):
+    if p < lo:
+        return lo - p
+    if p > hi:
+        return p - hi
+    return 0
+
+
+@njit(cache=True)
+def _lower_bound(pr, pc, r0, r1, c0, c1, geo, dx, dy, lat0, dlat, dlon):
+    """Lower bound of the distance from cell (pr, pc) to any cell of the block."""
+    gr = _gap(pr, r0, r1)
+    gc = _gap(pc, c0, c1)
+    if not geo:
+        return math.hypot(gr * dy, gc * dx)
+    # sphere: hav(d) >= hav(dphi) + cos^2(phi_max) hav(dlambda)
+    dphi = gr * abs(dlat)
+    dlam = gc * abs(dlon)
+    la = abs(lat0 + (pr + 0.5) * dlat)
+    lb = abs(lat0 + (r0 + 0.5) * dlat)
+    lc = abs(lat0 + (r1 + 0.5) * dlat)
+    phimax = max(la, max(lb, lc))
+    cm = math.cos(min(phimax, math.pi / 2))
+    s = math.sin(dphi / 2) ** 2 + cm * cm * math.sin(dlam / 2) ** 2
+    return 2 * EARTH_RADIUS_M * math.asin(min(1.0, math.sqrt(s)))
+
+
+@njit(cache=True)
+def _cell_distance(pr, pc, r, c, geo, dx, dy, lat0, dlat, dlon):
+    if not geo:
+        return math.hypot((r - pr) * dy, (c - pc) * dx)
+    p1 = lat0 + (pr + 0.5) * dlat
+    p2 = lat0 + (r + 0.5) * dlat
+    dl = (c - pc) * dlon
+    s = math.sin((p2 - p1) / 2) ** 2 + math.cos(p1) * math.cos(p2) * math.sin(dl / 2) ** 2
+    return 2 * EARTH_RADIUS_M * math.asin(min(1.0, math.sqrt(s)))
+
+
+@njit(cache=True)
+def _nearest(vals, offs, hs, ws, pr, pc, thresh, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, cand, ncand_max):
+    """Best-first search of the nearest cell with value > thresh, up to ``cutoff``.
+
+    Fills ``cand`` with (flat cell) candidates within ``slack`` of the optimum and
+    returns (best distance or inf, number of candidates).
+    """
+    nlev = hs.size
+    top = nlev - 1
+    heap = [(0.0, np.int64(0), np.int64(0), np.int64(0))]
+    heap.pop()
+    W0 = ws[0]
+    H0 = hs[0]
+    for r in range(hs[top]):
+        for c in range(ws[top]):
+            size = 1 << top
+            lb = _lower_bound(pr, pc, r * size, min((r + 1) * size, H0) - 1, c * size,
+                              min((c + 1) * size, W0) - 1, geo, dx, dy, lat0, dlat, dlon)
+            heapq.heappush(heap, (lb, np.int64(top), np.int64(r), np.int64(c)))
+    best = np.inf
+    n = 0
+    while len(heap) > 0:
+        lb, k, r, c = heapq.heappop(heap)
+        if lb > cutoff or lb > best * (1.0 + slack):
+            break
+        if vals[offs[k] + r * ws[k] + c] <= thresh:
+            continue
+        if k == 0:
+            d = lb
+            if d < best:
+                best = d
+            if n < ncand_max:
+                cand[n] = r * W0 + c
+                n += 1
+            continue
+        size = 1 << (k - 1)
+        for dr in range(2):
+            for dc in range(2):
+                rr = 2 * r + dr
+                cc = 2 * c + dc
+                if rr < hs[k - 1] and cc < ws[k - 1]:
+                    if k - 1 == 0:
+                        lbc = _cell_distance(pr, pc, rr, cc, geo, dx, dy, lat0, dlat, dlon)
+                    else:
+                        lbc = _lower_bound(pr, pc, rr * size, min((rr + 1) * size, H0) - 1, cc * size,
+                                           min((cc + 1) * size, W0) - 1, geo, dx, dy, lat0, dlat, dlon)
+                    heapq.heappush(heap, (lbc, np.int64(k - 1), rr, cc))
+    # keep only candidates within slack of the best
+    m = 0
+    for i in range(n):
+        rr = cand[i] // W0
+        cc = cand[i] % W0
+        if _cell_distance(pr, pc, rr, cc, geo, dx, dy, lat0, dlat, dlon) <= best * (1.0 + slack):
+            cand[m] = cand[i]
+            m += 1
+    return best, m
+
+
+@njit(cache=True)
+def isolation_search(z, prow, pcol, geo, dx, dy, lat0, dlat, dlon, slack, ncand_max):
+    """Nearest strictly higher cell and nearest "unknown" (outside/NaN) for each peak.
+
+    Returns ``best`` (metric distance to the nearest higher cell, inf if none),
+    ``cand`` (n_peaks x ncand_max flat indices, -1 padded: candidates for the exact
+    ellipsoidal check), ``edge`` (distance to the nearest cell outside the raster or
+    NaN, capped at ``best``).
+    """
+    H, W = z.shape
+    zz = np.where(np.isnan(z), -np.inf, z)
+    vals, offs, hs, ws = build_pyramid(zz)
+    nanmask = np.where(np.isnan(z), 1.0, 0.0)
+    nvals, noffs, nhs, nws = build_pyramid(nanmask)
+    has_nan = nvals[noffs[nhs.size - 1]] > 0.5
+    npk = prow.size
+    best = np.full(npk, np.inf)
+    edge = np.full(npk, np.inf)
+    cand = np.full((npk, ncand_max), -1, np.int64)
+    buf = np.empty(ncand_max, np.int64)
+    for i in range(npk):
+        pr = prow[i]
+        pc = pcol[i]
+        h = z[pr, pc]
+        b, m = _nearest(vals, offs, hs, ws, pr, pc, h, np.inf, geo, dx, dy, lat0, dlat, dlon, slack, buf, ncand_max)
+        best[i] = b
+        for j in range(m):
+            cand[i, j] = buf[j]
+        # distance to the nearest cell outside the raster
+        e = min(
+            _cell_distance(pr, pc, -1, pc, geo, dx, dy, lat0, dlat, dlon),
+            _cell_distance(pr, pc, H, pc, geo, dx, dy, lat0, dlat, dlon),
+            _cell_distance(pr, pc, pr, -1, geo, dx, dy, lat0, dlat, dlon),
+            _cell_distance(pr, pc, pr, W, geo, dx, dy, lat0, dlat, dlon),
+        )
+        if has_nan:
+            dn, _ = _nearest(nvals, noffs, nhs, nws, pr, pc, 0.5, min(e, b), geo, dx, dy, lat0, dlat, dlon,
+                             0.0, buf, 1)
+            if dn < e:
+                e = dn
+        edge[i] = e
+    return best, cand, edge

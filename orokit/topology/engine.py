@@ -1,0 +1,225 @@
+"""In-memory exact orometry engine (one raster held in memory).
+
+Steps (DESIGN.md §2):
+
+1. Steepest ascent: every cell points to its highest 8-neighbour in the total order
+   (elevation, then raster order); chains end at the maxima of that order.
+2. Basins: every cell is labelled with the maximum its chain reaches.
+3. Passes: for each pair of adjacent basins the highest pass is the highest of the
+   lower cells of their adjacent cell pairs (hash-reduced in one sweep).
+4. One Kruskal sweep over the passes from high to low gives the maximum spanning tree
+   of the basin graph (the full Divide Tree) and, by the elder rule, every maximum's
+   key saddle, parent and prominence, plus the "touched the unknown outside" flag.
+5. Maxima of prominence 0 are flat shelves or duplicate cells of a plateau: dropped;
+   the tree is pruned at the threshold by bottleneck-preserving star contraction.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from orokit.errors import InputError
+from orokit.topology import _kernels
+from orokit.topology.divide_tree import DivideTree
+
+
+@dataclass
+class Orometry:
+    """Raw engine output on cell indices (before tables and isolation)."""
+
+    shape: tuple[int, int]
+    n_maxima: int
+    peak_cell: np.ndarray        # flat cell of each kept peak (raster order)
+    prominence: np.ndarray
+    key_saddle_cell: np.ndarray  # -1 for roots
+    parent: np.ndarray           # index into kept peaks, -1 for roots
+    prominence_exact: np.ndarray
+    ridge_a: np.ndarray          # kept-peak indices of each ridge
+    ridge_b: np.ndarray
+    ridge_saddle_cell: np.ndarray
+
+    @property
+    def n_kept(self) -> int:
+        return int(self.peak_cell.size)
+
+    @property
+    def peak_row(self) -> np.ndarray:
+        return self.peak_cell // self.shape[1]
+
+    @property
+    def peak_col(self) -> np.ndarray:
+        return self.peak_cell % self.shape[1]
+
+
+def orometry(z: np.ndarray, *, min_prominence: float, outside: str = "unknown") -> Orometry:
+    """Exact peaks, prominences and pruned Divide Tree of a 2-D array (NaN = nodata)."""
+    if z.ndim != 2 or z.size == 0:
+        raise InputError(f"the DEM must be a non-empty 2-D array; got shape {z.shape}")
+    if np.isinf(z).any():
+        raise InputError("the DEM contains infinite values; mark nodata as NaN")
+    zf = z.ravel()
+    ptr, border = _kernels.steepest_ascent(z)
+    label, max_cell = _kernels.label_basins(ptr)
+    n_max = int(max_cell.size)
+    if n_max == 0:
+        raise InputError("the DEM has no valid cells (all nodata)")
+    border_z = _kernels.basin_border_max(z, label, border, n_max)
+    if outside == "sea":
+        border_z[:] = -np.inf
+    ea, eb, ec = _kernels.basin_passes(z, label, n_max)
+    order = np.lexsort((ec, -zf[ec].astype(np.float64)))
+    ea, eb, ec = ea[order], eb[order], ec[order]
+    node_z = zf[max_cell].astype(np.float64)
+    in_tree, key_edge, parent, touched = _kernels.kruskal_sweep(
+        node_z, max_cell, ea, eb, zf[ec].astype(np.float64), border_z
+    )
+    is_root = key_edge < 0
+    prom = node_z.copy()
+    prom[~is_root] = node_z[~is_root] - zf[ec[key_edge[~is_root]]]
+    # a root alone in its (single-basin) domain whose cells are all equal: flat domain
+    degree = np.bincount(np.concatenate([ea[in_tree], eb[in_tree]]), minlength=n_max)
+    flat_root = is_root & (degree == 0)
+    if flat_root.any():
+        bmin = _kernels.basin_min(z, label, n_max)
+        flat_root &= bmin >= node_z
+    keep = np.where(is_root, (min_prominence <= 0) | (node_z >= min_prominence), prom >= min_prominence)
+    keep &= is_root | (prom > 0)
+    keep &= ~flat_root
+    ta, tb, tc = ea[in_tree], eb[in_tree], ec[in_tree]
+    oa, ob, oe = _kernels.prune_edges(n_max, ta, tb, keep)
+    new_id = np.full(n_max, -1, np.int64)
+    new_id[keep] = np.arange(int(keep.sum()))
+    kept = np.flatnonzero(keep)
+    ks = np.where(is_root[kept], -1, ec[np.maximum(key_edge[kept], 0)])
+    par = np.where(is_root[kept], -1, new_id[np.maximum(parent[kept], 0)])
+    exact = ~touched[kept] & ~is_root[kept] if outside == "unknown" else np.ones(kept.size, bool)
+    return Orometry(
+        shape=z.shape,
+        n_maxima=n_max,
+        peak_cell=max_cell[kept],
+        prominence=prom[kept],
+        key_saddle_cell=ks,
+        parent=par,
+        prominence_exact=exact,
+        ridge_a=new_id[oa],
+        ridge_b=new_id[ob],
+        ridge_saddle_cell=tc[oe],
+    )
+
+
+def build_result(core: Orometry, z: np.ndarray, *, transform, crs, isolation: pd.DataFrame | None):
+    """Peaks/saddles GeoDataFrames and the DivideTree from the raw engine output."""
+    import geopandas as gpd
+
+    from orokit.analysis import PEAK_COLUMNS, AnalysisResult
+
+    H, W = core.shape
+    zf = z.ravel()
+
+    def xy(rows, cols):
+        x = transform.c + (cols + 0.5) * transform.a + (rows + 0.5) * transform.b
+        y = transform.f + (cols + 0.5) * transform.d + (rows + 0.5) * transform.e
+        return x, y
+
+    n = core.n_kept
+    rows, cols = core.peak_row, core.peak_col
+    x, y = xy(rows, cols)
+    elev = zf[core.peak_cell].astype(np.float64)
+    has_saddle = core.key_saddle_cell >= 0
+    ks = np.where(has_saddle, core.key_saddle_cell, 0)
+    s_rows = np.where(has_saddle, ks // W, -1)
+    s_cols = np.where(has_saddle, ks % W, -1)
+    sx, sy = xy(s_rows, s_cols)
+    s_elev = np.where(has_saddle, zf[ks], np.nan)
+    has_parent = core.parent >= 0
+    pidx = np.maximum(core.parent, 0)
+    peaks = pd.DataFrame(
+        {
+            "row": rows,
+            "col": cols,
+            "x": x,
+            "y": y,
+            "lon": np.nan,
+            "lat": np.nan,
+            "elevation": elev,
+            "prominence": core.prominence,
+            "saddle_row": s_rows,
+            "saddle_col": s_cols,
+            "saddle_x": np.where(has_saddle, sx, np.nan),
+            "saddle_y": np.where(has_saddle, sy, np.nan),
+            "saddle_elevation": s_elev,
+            "parent": core.parent,
+            "parent_row": np.where(has_parent, rows[pidx] if n else 0, -1),
+            "parent_col": np.where(has_parent, cols[pidx] if n else 0, -1),
+            "dominance": np.where(elev > 0, core.prominence / np.where(elev > 0, elev, 1.0), np.nan),
+            "isolation": np.nan,
+            "isolation_row": -1,
+            "isolation_col": -1,
+            "isolation_x": np.nan,
+            "isolation_y": np.nan,
+            "prominence_exact": core.prominence_exact.astype(bool),
+            "isolation_exact": False,
+        }
+    )
+    if isolation is not None and n:
+        peaks["isolation"] = isolation["isolation"].to_numpy()
+        ir = isolation["isolation_row"].to_numpy()
+        ic = isolation["isolation_col"].to_numpy()
+        peaks["isolation_row"] = ir
+        peaks["isolation_col"] = ic
+        ix, iy = xy(ir, ic)
+        found = ir >= 0
+        peaks["isolation_x"] = np.where(found, ix, np.nan)
+        peaks["isolation_y"] = np.where(found, iy, np.nan)
+        peaks["isolation_exact"] = isolation["isolation_exact"].to_numpy(bool)
+    if crs is not None and n:
+        from pyproj import Transformer
+
+        tr = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
+        lon, lat = tr.transform(x, y)
+        peaks["lon"], peaks["lat"] = lon, lat
+    peaks.index.name = "peak_id"
+    peaks = peaks[PEAK_COLUMNS]
+
+    # saddles of the pruned tree, in raster order
+    sc = core.ridge_saddle_cell
+    order = np.argsort(sc, kind="stable")
+    sc_sorted = sc[order]
+    sid = np.empty(sc.size, np.int64)
+    sid[order] = np.arange(sc.size)
+    key_of = np.full(sc.size, -1, np.int64)
+    pos = {int(c): i for i, c in enumerate(sc_sorted)}
+    for p in np.flatnonzero(has_saddle):
+        key_of[pos[int(core.key_saddle_cell[p])]] = p
+    s_r, s_c = sc_sorted // W, sc_sorted % W
+    s_x, s_y = xy(s_r, s_c)
+    ra = np.empty(sc.size, np.int64)
+    rb = np.empty(sc.size, np.int64)
+    ra[sid] = core.ridge_a
+    rb[sid] = core.ridge_b
+    saddles = pd.DataFrame(
+        {
+            "row": s_r,
+            "col": s_c,
+            "x": s_x,
+            "y": s_y,
+            "elevation": zf[sc_sorted].astype(np.float64),
+            "peak_a": ra,
+            "peak_b": rb,
+            "key_of": key_of,
+        }
+    )
+    saddles.index.name = "saddle_id"
+    edges = pd.DataFrame({"peak_a": ra, "peak_b": rb, "saddle": np.arange(sc.size)})
+    tree = DivideTree(
+        peaks[["row", "col", "x", "y", "elevation"]].reset_index(drop=True),
+        saddles[["row", "col", "x", "y", "elevation"]].reset_index(drop=True),
+        edges,
+        crs,
+        {"units": "m"},
+    )
+    peaks_gdf = gpd.GeoDataFrame(peaks, geometry=gpd.points_from_xy(x, y), crs=crs)
+    saddles_gdf = gpd.GeoDataFrame(saddles, geometry=gpd.points_from_xy(s_x, s_y), crs=crs)
+    return AnalysisResult(peaks_gdf, saddles_gdf, tree, crs, {})
