@@ -1,0 +1,23 @@
+"""Real datasets: the manifest, fetching into a cache (or from a mirror), verification.
+
+See ``datasets_manifest/datasets.yaml`` and :mod:`orokit.data.fetch`.
+"""
+from __future__ import annotations
+
+from orokit.data.fetch import (
+    FileStatus,
+    data_dir,
+    dataset_path,
+    fetch,
+    fetch_file,
+    mirror_dir,
+    open_dataset_dem,
+    sha256_file,
+    verify,
+)
+from orokit.data.manifest import DataFile, Dataset, Manifest, default_manifest_path, load_manifest
+
+__all__ = [
+    "DataFile", "Dataset", "Manifest", "FileStatus", "load_manifest", "default_manifest_path", "data_dir",
+    "mirror_dir", "sha256_file", "fetch_file", "fetch", "verify", "dataset_path", "open_dataset_dem",
+]
