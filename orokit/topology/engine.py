@@ -92,8 +92,11 @@ def orometry(z: np.ndarray, *, min_prominence: float, outside: str = "unknown") 
     new_id = np.full(n_max, -1, np.int64)
     new_id[keep] = np.arange(int(keep.sum()))
     kept = np.flatnonzero(keep)
-    ks = np.where(is_root[kept], -1, ec[np.maximum(key_edge[kept], 0)])
-    par = np.where(is_root[kept], -1, new_id[np.maximum(parent[kept], 0)])
+    nonroot = ~is_root[kept]
+    ks = np.full(kept.size, -1, np.int64)
+    ks[nonroot] = ec[key_edge[kept][nonroot]]
+    par = np.full(kept.size, -1, np.int64)
+    par[nonroot] = new_id[parent[kept][nonroot]]
     exact = ~touched[kept] & ~is_root[kept] if outside == "unknown" else np.ones(kept.size, bool)
     return Orometry(
         shape=z.shape,

@@ -1,0 +1,47 @@
+"""``orokit analyze``: peaks, prominence, isolation and the Divide Tree of one DEM."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import click
+
+
+@click.command()
+@click.argument("dem", type=click.Path(exists=True, dir_okay=True, path_type=Path))
+@click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Output folder: peaks.csv, peaks.parquet, saddles.parquet, dividetree.gpkg, analysis.json.")
+@click.option("--min-prominence", default=30.0, show_default=True, type=float,
+              help="Keep peaks with prominence >= this many METRES (0 keeps every peak).")
+@click.option("--z-units", type=click.Choice(["m", "ft"]), default=None,
+              help="Elevation units of the input when the file does not say (required for PNG DEMs).")
+@click.option("--cell-size", type=float, default=None,
+              help="Cell size in metres for rasters without georeference (PNG); gives a local metric grid.")
+@click.option("--outside", type=click.Choice(["unknown", "sea"]), default="unknown", show_default=True,
+              help="What lies beyond the data edge and nodata: unknown (edge prominences flagged as upper "
+                   "bounds) or sea (all exact).")
+@click.option("--no-isolation", is_flag=True, help="Skip the isolation search.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing analysis in OUTPUT.")
+@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
+def analyze(dem: Path, outdir: Path, min_prominence: float, z_units: str | None, cell_size: float | None,
+            outside: str, no_isolation: bool, overwrite: bool, progress: bool) -> None:
+    """Analyse DEM (any GDAL raster; PNG needs --z-units and --cell-size) into OUTPUT.
+
+    Row/col are 0-based on the input grid with row 0 at the top; all elevations,
+    prominences and distances are in metres.
+    """
+    from orokit.analysis import analyze as run
+    from orokit.io.dem import read_dem
+
+    if (outdir / "analysis.json").exists() and not overwrite:
+        raise click.UsageError(f"{outdir} already holds an analysis; pass --overwrite to replace it")
+    t0 = time.perf_counter()
+    da = read_dem(dem, z_units=z_units, cell_size=cell_size)
+    result = run(da, min_prominence=min_prominence, outside=outside, isolation=not no_isolation,
+                 progress=progress)
+    result.write(outdir, overwrite=True)
+    n = len(result.peaks)
+    click.echo(
+        f"{n} peaks with prominence >= {min_prominence:g} m, {len(result.saddles)} saddles, "
+        f"{da.shape[0]}x{da.shape[1]} cells in {time.perf_counter() - t0:.2f} s -> {outdir}"
+    )

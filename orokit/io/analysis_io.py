@@ -1,0 +1,86 @@
+"""Files of an analysis: peaks.csv, peaks.parquet, saddles.parquet, dividetree.gpkg, analysis.json.
+
+All files are written atomically (temp file + rename); ``analysis.json`` is written
+last, so a folder with it is complete and a rerun after an interruption redoes the
+whole set.
+"""
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from orokit._typing import PathLike
+from orokit.errors import InputError, SchemaError
+from orokit.io.atomic import atomic_path, write_text_atomic
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["write_analysis", "read_analysis", "read_peaks", "ANALYSIS_FILES"]
+
+ANALYSIS_FILES = ("peaks.csv", "peaks.parquet", "saddles.parquet", "dividetree.gpkg", "analysis.json")
+
+
+def write_analysis(result, outdir: PathLike, *, overwrite: bool = True) -> Path:
+    """Write an :class:`~orokit.analysis.AnalysisResult` into ``outdir``."""
+    from orokit.analysis import analysis_json
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+
+    out = Path(outdir)
+    if (out / "analysis.json").exists() and not overwrite:
+        raise InputError(f"{out} already holds an analysis; pass overwrite=True (CLI: --overwrite)")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "analysis.json").unlink(missing_ok=True)
+    peaks = result.peaks
+    with atomic_path(out / "peaks.csv") as tmp:
+        pd.DataFrame(peaks.drop(columns="geometry")).to_csv(tmp, float_format="%.10g")
+    with atomic_path(out / "peaks.parquet") as tmp:
+        peaks.to_parquet(tmp)
+    with atomic_path(out / "saddles.parquet") as tmp:
+        result.saddles.to_parquet(tmp)
+    tree = result.divide_tree
+    write_divide_tree_gpkg(tree, out / "dividetree.gpkg")
+    write_text_atomic(out / "analysis.json", analysis_json(result))
+    logger.info("wrote %s", out)
+    return out
+
+
+def read_analysis(outdir: PathLike):
+    """Read a folder written by :func:`write_analysis`."""
+    import geopandas as gpd
+
+    from orokit.analysis import PEAK_COLUMNS, AnalysisResult
+    from orokit.io.divide_tree_io import read_divide_tree_gpkg
+
+    out = Path(outdir)
+    meta_path = out / "analysis.json"
+    if not meta_path.exists():
+        raise InputError(f"{out} is not a complete orokit analysis folder (no analysis.json); rerun `orokit analyze`")
+    meta = json.loads(meta_path.read_text())
+    peaks = gpd.read_parquet(out / "peaks.parquet")
+    missing = set(PEAK_COLUMNS) - set(peaks.columns)
+    if missing:
+        raise SchemaError(f"{out / 'peaks.parquet'} lacks columns {sorted(missing)}")
+    saddles = gpd.read_parquet(out / "saddles.parquet")
+    tree = read_divide_tree_gpkg(out / "dividetree.gpkg")
+    crs = peaks.crs
+    meta.pop("crs", None)
+    return AnalysisResult(peaks, saddles, tree, crs, meta)
+
+
+def read_peaks(source: PathLike):
+    """Peaks table of an analysis folder, a peaks.parquet or a peaks.csv file."""
+    import geopandas as gpd
+
+    p = Path(source)
+    if p.is_dir():
+        p = p / "peaks.parquet"
+    if not p.exists():
+        raise InputError(f"no peaks table at {p}")
+    if p.suffix == ".parquet":
+        return gpd.read_parquet(p)
+    frame = pd.read_csv(p, index_col="peak_id")
+    return gpd.GeoDataFrame(frame, geometry=gpd.points_from_xy(frame["x"], frame["y"]))
