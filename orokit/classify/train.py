@@ -1,0 +1,313 @@
+"""Training and evaluation protocol of the orometric region classifier.
+
+Paper protocol (Argudo et al. 2019, section 4.2): Random Forest with 100 trees; per
+region at most 80 training and 20 validation disks drawn at random (80:20) afresh on
+every run; accuracy averaged over the runs (mean and median), per-class accuracy,
+confusion matrix and the accuracy of each feature group alone (Table 2).
+
+Neighbouring disks overlap (centres can be 0.5 R apart) and share peaks, so a random
+split puts near-copies of validation disks in the training set. The *spatial* split
+reported beside it holds out a strip of each region: a random direction per run and
+per input, the last ``val_fraction`` of the disks along it are validation disks, and
+only disks whose centres are farther than ``buffer_m`` (default 2 R: no shared peak)
+from every validation centre are used for training.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Sequence
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from orokit._typing import SeedLike
+from orokit.errors import InputError, OrokitWarning, SchemaError
+from orokit.sampling.histograms import HistogramSpec
+
+logger = logging.getLogger(__name__)
+
+SplitKind = Literal["random", "spatial"]
+
+
+def make_classifier(*, n_estimators: int = 100, n_jobs: int = 1, random_state: int | None = None) -> Any:
+    """The paper's classifier: a scikit-learn Pipeline with a RandomForest (100 trees)."""
+    from sklearn.ensemble import RandomForestClassifier
+    from sklearn.pipeline import Pipeline
+
+    return Pipeline([("rf", RandomForestClassifier(n_estimators=n_estimators, n_jobs=n_jobs,
+                                                   random_state=random_state))])
+
+
+def check_classes(labels: Sequence[Any], *, min_disks: int = 2, small_classes: Literal["error", "drop"] = "error"
+                  ) -> NDArray[np.bool_]:
+    """Check every class has ``min_disks`` disks; returns a keep-mask.
+
+    ``small_classes="error"`` raises :class:`~orokit.errors.InputError` listing the
+    regions and their counts; ``"drop"`` drops them with a warning (documented fallback).
+    """
+    lab = pd.Series(np.asarray(labels, dtype=object))
+    counts = lab.value_counts()
+    small = counts[counts < min_disks]
+    keep = ~lab.isin(small.index).to_numpy()
+    if len(small):
+        listing = ", ".join(f"{k}: {v}" for k, v in small.items())
+        if small_classes == "error":
+            raise InputError(f"regions with fewer than {min_disks} usable disks cannot be split into training and "
+                             f"validation sets ({listing}); use more data, a smaller radius or --min-peaks, or drop "
+                             f"them (small_classes='drop', CLI --drop-small-classes)")
+        import warnings
+
+        warnings.warn(f"dropping regions with fewer than {min_disks} disks: {listing}", OrokitWarning, stacklevel=2)
+    if keep.sum() and len(counts[counts >= min_disks]) < 2:
+        raise InputError(f"need at least 2 regions with >= {min_disks} disks to train a classifier; got "
+                         f"{dict(counts)}")
+    return keep
+
+
+def random_split(labels: Sequence[Any], *, max_train: int = 80, max_val: int = 20, val_fraction: float = 0.2,
+                 rng: SeedLike = None) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Per-class random split: ``round(n * val_fraction)`` (>= 1, <= max_val) validation disks,
+    up to ``max_train`` of the others for training. Returns disjoint positional indices."""
+    rng = np.random.default_rng(rng)
+    lab = np.asarray(labels, dtype=object)
+    tr, va = [], []
+    for c in pd.unique(lab):
+        idx = rng.permutation(np.flatnonzero(lab == c))
+        n = len(idx)
+        if n < 2:
+            tr.append(idx)
+            continue
+        n_val = int(min(max_val, max(1, round(n * val_fraction))))
+        va.append(idx[:n_val])
+        tr.append(idx[n_val:][:max_train])
+    return _cat(tr), _cat(va)
+
+
+def _cat(parts: list[NDArray]) -> NDArray[np.int64]:
+    return np.sort(np.concatenate(parts).astype(np.int64)) if parts else np.zeros(0, dtype=np.int64)
+
+
+def spatial_split(labels: Sequence[Any], x: NDArray, y: NDArray, *, groups: Sequence[Any] | None = None,
+                  buffer_m: float = 0.0, max_train: int = 80, max_val: int = 20, val_fraction: float = 0.2,
+                  rng: SeedLike = None) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Per-class spatially held-out split.
+
+    For each group (input file / region; default: the label) a random direction is
+    drawn; the last ``val_fraction`` of its disks along that direction (>= 1) are
+    validation disks; training disks are those whose centre is farther than
+    ``buffer_m`` from every validation centre of the same group. Caps of
+    ``max_val``/``max_train`` per class are applied by random subsets. ``x, y`` must be
+    metric coordinates (or any coordinates when ``buffer_m == 0``).
+    """
+    rng = np.random.default_rng(rng)
+    lab = np.asarray(labels, dtype=object)
+    grp = np.asarray(groups if groups is not None else labels, dtype=object)
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    tr, va = [], []
+    for c in pd.unique(lab):
+        ctr, cva = [], []
+        for g in pd.unique(grp[lab == c]):
+            idx = np.flatnonzero((lab == c) & (grp == g))
+            if len(idx) < 2:
+                ctr.append(idx)
+                continue
+            theta = rng.uniform(0, 2 * np.pi)
+            proj = x[idx] * np.cos(theta) + y[idx] * np.sin(theta) + rng.random(len(idx)) * 1e-9
+            order = idx[np.argsort(proj)]
+            n_val = max(1, int(round(len(idx) * val_fraction)))
+            val, rest = order[-n_val:], order[:-n_val]
+            if buffer_m > 0 and len(rest):
+                d = np.hypot(x[rest, None] - x[None, val], y[rest, None] - y[None, val]).min(axis=1)
+                rest = rest[d > buffer_m]
+            cva.append(val)
+            ctr.append(rest)
+        cva_i, ctr_i = _cat(cva), _cat(ctr)
+        if len(cva_i) > max_val:
+            cva_i = np.sort(rng.choice(cva_i, max_val, replace=False))
+        if len(ctr_i) > max_train:
+            ctr_i = np.sort(rng.choice(ctr_i, max_train, replace=False))
+        tr.append(ctr_i)
+        va.append(cva_i)
+    return _cat(tr), _cat(va)
+
+
+@dataclasses.dataclass
+class Evaluation:
+    """Result of repeated train/validation runs (one split kind)."""
+
+    split: str
+    classes: list[str]
+    accuracies: NDArray[np.float64]
+    confusion: NDArray[np.int64]  # summed over runs; rows = true class, columns = predicted
+    per_class: dict[str, float]
+    per_feature: dict[str, float]
+    per_feature_runs: int
+    mean_train: dict[str, float]
+    mean_val: dict[str, float]
+    params: dict[str, Any]
+
+    @property
+    def mean_accuracy(self) -> float:
+        return float(np.mean(self.accuracies)) if len(self.accuracies) else float("nan")
+
+    @property
+    def median_accuracy(self) -> float:
+        return float(np.median(self.accuracies)) if len(self.accuracies) else float("nan")
+
+    def confusion_normalized(self) -> NDArray[np.float64]:
+        c = self.confusion.astype(float)
+        s = c.sum(axis=1, keepdims=True)
+        return np.divide(c, s, out=np.zeros_like(c), where=s > 0)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "split": self.split, "runs": int(len(self.accuracies)),
+            "mean_accuracy": self.mean_accuracy, "median_accuracy": self.median_accuracy,
+            "std_accuracy": float(np.std(self.accuracies)) if len(self.accuracies) else float("nan"),
+            "per_class": self.per_class, "per_feature": self.per_feature,
+            "per_feature_runs": self.per_feature_runs, "classes": self.classes,
+            "confusion": self.confusion.tolist(), "mean_train_disks": self.mean_train,
+            "mean_validation_disks": self.mean_val, "params": self.params,
+        }
+
+
+def _fit_score(X: NDArray, y: NDArray, tr: NDArray, va: NDArray, cols: NDArray | None, seed: int,
+               n_estimators: int, classes: list[str]) -> tuple[float, NDArray[np.int64]]:
+    from sklearn.ensemble import RandomForestClassifier
+    from sklearn.metrics import confusion_matrix
+
+    Xs = X if cols is None else X[:, cols]
+    rf = RandomForestClassifier(n_estimators=n_estimators, n_jobs=1, random_state=seed)
+    rf.fit(Xs[tr], y[tr])
+    pred = rf.predict(Xs[va])
+    acc = float(np.mean(pred == y[va])) if len(va) else float("nan")
+    return acc, confusion_matrix(y[va], pred, labels=classes)
+
+
+def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "random",
+             feature_groups: bool = True, feature_runs: int | None = None, n_estimators: int = 100,
+             max_train: int = 80, max_val: int = 20, val_fraction: float = 0.2, buffer_m: float | None = None,
+             min_disks: int = 2, small_classes: Literal["error", "drop"] = "error", n_jobs: int = 2,
+             progress: bool = False, rng: SeedLike = None) -> Evaluation:
+    """Repeated-split evaluation of the Random Forest on a feature table.
+
+    Parameters
+    ----------
+    features : DataFrame
+        Feature table (:func:`orokit.classify.features.feature_table`).
+    runs : int
+        Number of runs with fresh splits (paper: 100).
+    split : {"random", "spatial"}
+        Random 80:20 per region (paper) or spatially held-out strips (see module doc).
+    feature_groups : bool
+        Also score each feature group alone (Table 2 rows).
+    feature_runs : int, optional
+        Runs for each feature group (default: ``runs``).
+    buffer_m : float, optional
+        Spatial split only: minimum distance of training centres from validation
+        centres (default 2 R, so training and validation disks share no peak).
+    min_disks, small_classes
+        See :func:`check_classes`: a region with fewer disks is an error, or dropped.
+    n_jobs : int
+        Parallel fits (threads).
+    rng : Generator, int or None
+        Seed of the splits and forests.
+
+    Returns
+    -------
+    Evaluation
+    """
+    from joblib import Parallel, delayed
+
+    if runs < 1:
+        raise InputError(f"runs must be >= 1, got {runs}")
+    if split not in ("random", "spatial"):
+        raise InputError(f"split must be 'random' or 'spatial', got {split!r}")
+    spec = HistogramSpec.from_dict(features.attrs["spec"]) if "spec" in features.attrs else None
+    cols = spec.columns if spec else [c for c in features.columns if c[-1].isdigit() and "_" in c]
+    missing = [c for c in cols if c not in features]
+    if missing:
+        raise SchemaError(f"feature table lacks columns {missing[:5]}")
+    keep = check_classes(features["label"].astype(str).to_numpy(), min_disks=min_disks, small_classes=small_classes)
+    f = features.loc[keep].reset_index(drop=True)
+    X = f[cols].to_numpy(dtype=float)
+    y = f["label"].astype(str).to_numpy()
+    classes = sorted(pd.unique(y).tolist())
+    radius = float(np.nanmax(f["radius_m"])) if len(f) else float("nan")
+    if buffer_m is None:
+        buffer_m = 2.0 * radius
+    groups = (f["label"].astype(str) + "|" + f["source"].astype(str)).to_numpy()
+    rng = np.random.default_rng(rng)
+    seeds = rng.integers(0, 2**31 - 1, size=runs)
+    splits = []
+    for s in seeds:
+        if split == "random":
+            splits.append(random_split(y, max_train=max_train, max_val=max_val, val_fraction=val_fraction, rng=s))
+        else:
+            splits.append(spatial_split(y, f["x"].to_numpy(float), f["y"].to_numpy(float), groups=groups,
+                                        buffer_m=buffer_m, max_train=max_train, max_val=max_val,
+                                        val_fraction=val_fraction, rng=s))
+    tasks = [(None, None, i) for i in range(runs)]
+    groups_cols: dict[str, NDArray] = {}
+    if feature_groups and spec is not None:
+        fr = runs if feature_runs is None else min(feature_runs, runs)
+        for name, gcols in spec.groups().items():
+            groups_cols[name] = np.array([cols.index(c) for c in gcols])
+            tasks += [(name, groups_cols[name], i) for i in range(fr)]
+    else:
+        fr = 0
+    it = (delayed(_fit_score)(X, y, splits[i][0], splits[i][1], gc, int(seeds[i]), n_estimators, classes)
+          for _, gc, i in tasks)
+    if progress:
+        from tqdm.auto import tqdm
+
+        it = tqdm(it, total=len(tasks), desc=f"training ({split} split)", unit="fit")
+    results = Parallel(n_jobs=n_jobs, prefer="threads")(it)
+    accs = np.array([r[0] for (name, _, _), r in zip(tasks, results) if name is None])
+    conf = sum((r[1] for (name, _, _), r in zip(tasks, results) if name is None),
+               np.zeros((len(classes), len(classes)), dtype=np.int64))
+    per_feature = {name: float(np.nanmean([r[0] for (n, _, _), r in zip(tasks, results) if n == name]))
+                   for name in groups_cols}
+    recalls = {c: [] for c in classes}
+    for (name, _, _), r in zip(tasks, results):
+        if name is None:
+            cm = r[1]
+            for k, c in enumerate(classes):
+                if cm[k].sum():
+                    recalls[c].append(cm[k, k] / cm[k].sum())
+    per_class = {c: float(np.mean(v)) if v else float("nan") for c, v in recalls.items()}
+    mean_train = {c: float(np.mean([np.sum(y[s[0]] == c) for s in splits])) for c in classes}
+    mean_val = {c: float(np.mean([np.sum(y[s[1]] == c) for s in splits])) for c in classes}
+    params = {"runs": runs, "split": split, "n_estimators": n_estimators, "max_train": max_train,
+              "max_val": max_val, "val_fraction": val_fraction, "radius_m": radius,
+              "buffer_m": float(buffer_m) if split == "spatial" else None, "n_disks": int(len(f)),
+              "dropped_classes": sorted(set(features["label"].astype(str)[~keep]))}
+    ev = Evaluation(split, classes, accs, conf, per_class, per_feature, fr, mean_train, mean_val, params)
+    logger.info("%s split, %d runs: mean accuracy %.3f, median %.3f", split, runs, ev.mean_accuracy,
+                ev.median_accuracy)
+    return ev
+
+
+def train_classifier(features: pd.DataFrame, *, n_estimators: int = 100, min_disks: int = 2,
+                     small_classes: Literal["error", "drop"] = "error", max_per_class: int | None = None,
+                     n_jobs: int = 2, rng: SeedLike = None) -> Any:
+    """Fit the final Random Forest Pipeline on all disks of a feature table.
+
+    ``max_per_class`` caps the disks per region (random subset) to balance classes.
+    """
+    spec = HistogramSpec.from_dict(features.attrs["spec"])
+    keep = check_classes(features["label"].astype(str).to_numpy(), min_disks=min_disks, small_classes=small_classes)
+    f = features.loc[keep].reset_index(drop=True)
+    rng = np.random.default_rng(rng)
+    if max_per_class:
+        idx = np.concatenate([rng.permutation(np.flatnonzero(f["label"].astype(str) == c))[:max_per_class]
+                              for c in sorted(f["label"].astype(str).unique())])
+        f = f.iloc[np.sort(idx)]
+    model = make_classifier(n_estimators=n_estimators, n_jobs=n_jobs,
+                            random_state=int(rng.integers(0, 2**31 - 1)))
+    model.fit(f[spec.columns].to_numpy(dtype=float), f["label"].astype(str).to_numpy())
+    return model
