@@ -215,17 +215,22 @@ def _find(parent, x):
 
 
 @njit(cache=True)
-def kruskal_sweep(node_z, node_key, ea, eb, ez, border_z):
+def kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, border_z):
     """Maximum spanning forest and elder-rule prominence in one Kruskal sweep.
 
-    Edges must be sorted from the highest to the lowest saddle (total order). When an
-    edge joins two components, the component whose top (highest node) is lower dies
-    there: that edge is the key saddle of its top, and the other top is its parent.
+    Edges must be sorted from the highest to the lowest saddle in the total order
+    (elevation descending, then ``ekey`` ascending). Consecutive edges with the same
+    ``ekey`` share one saddle cell (a "monkey saddle" joining several basins): they
+    are merged as one event, so the result does not depend on how a graph lists them.
+    At each event every component whose top (highest node) is not the highest top of
+    the merged group dies: the event is its key saddle and the group's highest top is
+    its parent (its island parent: the highest peak it joins at that level).
 
     Parameters
     ----------
     node_z, node_key : elevation and tie-break key of every node.
-    ea, eb : endpoints of each edge (sorted, see above); ez : saddle elevation.
+    ea, eb : endpoints of each edge (sorted, see above); ez, ekey : saddle elevation
+        and saddle key of each edge.
     border_z : highest "border" elevation of every node's basin (-inf if none). A
         dying component whose border maximum is strictly above the saddle touched the
         edge of the data above the key saddle: its prominence is only an upper bound.
@@ -234,38 +239,67 @@ def kruskal_sweep(node_z, node_key, ea, eb, ez, border_z):
     -------
     in_tree : bool per edge (False for edges closing a cycle).
     key_edge : per node, index of its key-saddle edge (-1 for domain roots).
-    parent : per node, top of the component it merged into (-1 for roots).
+    parent : per node, top of the group it merged into (-1 for roots).
     touched : per node, border flag described above (roots: True if their domain has
         any border cell).
     """
     n = node_z.size
+    m = ea.size
     uf = np.arange(n)
     top = np.arange(n)
     bmax = border_z.copy()
     key_edge = np.full(n, -1, np.int64)
     parent = np.full(n, -1, np.int64)
     touched = np.zeros(n, np.bool_)
-    in_tree = np.zeros(ea.size, np.bool_)
-    for e in range(ea.size):
-        ra = _find(uf, ea[e])
-        rb = _find(uf, eb[e])
-        if ra == rb:
-            continue
-        in_tree[e] = True
-        ta = top[ra]
-        tb = top[rb]
-        if above(node_z[ta], node_key[ta], node_z[tb], node_key[tb]):
-            win, lose, rlose = ta, tb, rb
-        else:
-            win, lose, rlose = tb, ta, ra
-        key_edge[lose] = e
-        parent[lose] = win
-        touched[lose] = bmax[rlose] > ez[e]
-        # union: attach rb under ra
-        uf[rb] = ra
-        top[ra] = win
-        if bmax[rb] > bmax[ra]:
-            bmax[ra] = bmax[rb]
+    in_tree = np.zeros(m, np.bool_)
+    roots = np.empty(16, np.int64)
+    tops = np.empty(16, np.int64)
+    bms = np.empty(16, np.float64)
+    e = 0
+    while e < m:
+        f = e + 1
+        while f < m and ekey[f] == ekey[e]:
+            f += 1
+        # distinct components touched by the event, before merging
+        k = 0
+        for g in range(e, f):
+            for x in (ea[g], eb[g]):
+                r = _find(uf, x)
+                seen = False
+                for t in range(k):
+                    if roots[t] == r:
+                        seen = True
+                        break
+                if not seen:
+                    if k == roots.size:
+                        roots = np.concatenate((roots, np.empty(k, np.int64)))
+                        tops = np.concatenate((tops, np.empty(k, np.int64)))
+                        bms = np.concatenate((bms, np.empty(k, np.float64)))
+                    roots[k] = r
+                    tops[k] = top[r]
+                    bms[k] = bmax[r]
+                    k += 1
+        for g in range(e, f):
+            ra = _find(uf, ea[g])
+            rb = _find(uf, eb[g])
+            if ra == rb:
+                continue
+            in_tree[g] = True
+            uf[rb] = ra
+            ta = top[ra]
+            tb = top[rb]
+            if not above(node_z[ta], node_key[ta], node_z[tb], node_key[tb]):
+                top[ra] = tb
+            if bmax[rb] > bmax[ra]:
+                bmax[ra] = bmax[rb]
+        for t in range(k):
+            w = top[_find(uf, roots[t])]
+            if tops[t] != w:
+                lose = tops[t]
+                key_edge[lose] = e
+                parent[lose] = w
+                touched[lose] = bms[t] > ez[e]
+        e = f
     for i in range(n):
         if key_edge[i] < 0:
             touched[i] = bmax[_find(uf, i)] > -np.inf

@@ -115,7 +115,7 @@ class DivideTree:
         sz = self.saddles["elevation"].to_numpy(float)
         keys = np.arange(self.n_peaks, dtype=np.int64)
         _, key_edge, parent, _ = _kernels.kruskal_sweep(
-            pz, keys, a[order], b[order], sz[s[order]], np.full(self.n_peaks, -np.inf)
+            pz, keys, a[order], b[order], sz[s[order]], s[order], np.full(self.n_peaks, -np.inf)
         )
         has = key_edge >= 0
         key_saddle = np.full(self.n_peaks, -1, np.int64)
@@ -157,7 +157,7 @@ class DivideTree:
         new_id = np.full(self.n_peaks, -1, np.int64)
         new_id[keep] = np.arange(int(keep.sum()))
         saddle_ids = s[order][oe]
-        saddle_sorted = np.sort(saddle_ids)
+        saddle_sorted = np.unique(saddle_ids)
         new_saddle = np.full(self.n_saddles, -1, np.int64)
         new_saddle[saddle_sorted] = np.arange(saddle_sorted.size)
         edges = pd.DataFrame(
@@ -175,9 +175,9 @@ class DivideTree:
     def validate(self, *, check_elevations: bool = True) -> None:
         """Raise :class:`DivideTreeError` unless the tree is well formed.
 
-        Checks ids in range, one saddle per ridge (no saddle used twice), no ridge
-        from a peak to itself, no cycle, and (``check_elevations``) every saddle at
-        or below both peaks it joins.
+        Checks ids in range, no ridge from a peak to itself, no cycle, and
+        (``check_elevations``) every saddle at or below both peaks it joins. A saddle
+        may serve several ridges (a monkey saddle where three or more basins meet).
         """
         a, b, s = self._edge_arrays()
         n, m = self.n_peaks, self.n_saddles
@@ -187,8 +187,6 @@ class DivideTree:
             raise DivideTreeError(f"ridge saddle ids must lie in [0, {m}); got {s.min()}..{s.max()}")
         if np.any(a == b):
             raise DivideTreeError(f"ridge {int(np.flatnonzero(a == b)[0])} joins a peak to itself")
-        if np.unique(s).size != s.size:
-            raise DivideTreeError("a saddle is used by more than one ridge")
         if a.size >= max(n, 1):
             raise DivideTreeError(f"{a.size} ridges for {n} peaks: a tree has at most n - 1")
         parent = np.arange(n)

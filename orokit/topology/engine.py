@@ -73,7 +73,7 @@ def orometry(z: np.ndarray, *, min_prominence: float, outside: str = "unknown") 
     ea, eb, ec = ea[order], eb[order], ec[order]
     node_z = zf[max_cell].astype(np.float64)
     in_tree, key_edge, parent, touched = _kernels.kruskal_sweep(
-        node_z, max_cell, ea, eb, zf[ec].astype(np.float64), border_z
+        node_z, max_cell, ea, eb, zf[ec].astype(np.float64), ec, border_z
     )
     is_root = key_edge < 0
     prom = node_z.copy()
@@ -186,22 +186,14 @@ def build_result(core: Orometry, z: np.ndarray, *, transform, crs, isolation: pd
     peaks.index.name = "peak_id"
     peaks = peaks[PEAK_COLUMNS]
 
-    # saddles of the pruned tree, in raster order
-    sc = core.ridge_saddle_cell
-    order = np.argsort(sc, kind="stable")
-    sc_sorted = sc[order]
-    sid = np.empty(sc.size, np.int64)
-    sid[order] = np.arange(sc.size)
-    key_of = np.full(sc.size, -1, np.int64)
-    pos = {int(c): i for i, c in enumerate(sc_sorted)}
-    for p in np.flatnonzero(has_saddle):
-        key_of[pos[int(core.key_saddle_cell[p])]] = p
+    # saddles of the pruned tree, in raster order (a monkey saddle serves several ridges)
+    sc_sorted = np.unique(core.ridge_saddle_cell)
+    ridge_sid = np.searchsorted(sc_sorted, core.ridge_saddle_cell)
+    key_of = np.full(sc_sorted.size, -1, np.int64)
+    kp = np.flatnonzero(has_saddle)
+    key_of[np.searchsorted(sc_sorted, core.key_saddle_cell[kp])] = kp
     s_r, s_c = sc_sorted // W, sc_sorted % W
     s_x, s_y = xy(s_r, s_c)
-    ra = np.empty(sc.size, np.int64)
-    rb = np.empty(sc.size, np.int64)
-    ra[sid] = core.ridge_a
-    rb[sid] = core.ridge_b
     saddles = pd.DataFrame(
         {
             "row": s_r,
@@ -209,13 +201,11 @@ def build_result(core: Orometry, z: np.ndarray, *, transform, crs, isolation: pd
             "x": s_x,
             "y": s_y,
             "elevation": zf[sc_sorted].astype(np.float64),
-            "peak_a": ra,
-            "peak_b": rb,
             "key_of": key_of,
         }
     )
     saddles.index.name = "saddle_id"
-    edges = pd.DataFrame({"peak_a": ra, "peak_b": rb, "saddle": np.arange(sc.size)})
+    edges = pd.DataFrame({"peak_a": core.ridge_a, "peak_b": core.ridge_b, "saddle": ridge_sid})
     tree = DivideTree(
         peaks[["row", "col", "x", "y", "elevation"]].reset_index(drop=True),
         saddles[["row", "col", "x", "y", "elevation"]].reset_index(drop=True),
