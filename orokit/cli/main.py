@@ -16,7 +16,13 @@ from orokit import __version__
 #: command name -> "module:attribute" of a click.Command
 COMMANDS: dict[str, str] = {
     "data": "orokit.cli.data:data",
+    "report-dataset": "orokit.cli.report_dataset:report_dataset",
+    "report-index": "orokit.cli.report_index:report_index",
     "analyze": "orokit.cli.analyze:analyze",
+    "features": "orokit.cli.features:features",
+    "train": "orokit.cli.train:train",
+    "classify": "orokit.cli.classify:classify",
+    "report": "orokit.cli.report:report",
 }
 
 
