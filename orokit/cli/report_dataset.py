@@ -1,0 +1,25 @@
+"""``orokit report-dataset NAME -o DIR``: summary page + hillshade of one manifest DEM."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command("report-dataset")
+@click.argument("name")
+@click.option("-o", "--outdir", required=True, type=click.Path(file_okay=False), help="Output directory.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing summary.")
+def report_dataset(name: str, outdir: str, overwrite: bool) -> None:
+    """Fetch the manifest DEM NAME, read it, and write DIR/summary.md, summary.json, hillshade.png."""
+    from orokit.data import load_manifest, open_dataset_dem
+    from orokit.reports.dem_summary import write_dem_summary
+
+    out = Path(outdir)
+    if (out / "summary.md").exists() and not overwrite:
+        raise click.ClickException(f"{out / 'summary.md'} exists; pass --overwrite to replace it.")
+    manifest = load_manifest()
+    ds = manifest[name]
+    dem = open_dataset_dem(name, manifest=manifest)
+    paths = write_dem_summary(dem, out, dataset=ds)
+    click.echo(f"{name}: wrote {paths['md']}")

@@ -1,0 +1,22 @@
+"""``orokit report-index SUMMARY_JSON... -o INDEX.md``: index page of dataset summaries."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command("report-index")
+@click.argument("summaries", nargs=-1, required=True, type=click.Path(dir_okay=False, exists=True))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Markdown file to write.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing index.")
+def report_index(summaries: tuple[str, ...], output: str, overwrite: bool) -> None:
+    """Write a markdown index linking the summary.json files SUMMARIES (made by report-dataset)."""
+    from orokit.io.atomic import write_text_atomic
+    from orokit.reports.dem_summary import render_index
+
+    out = Path(output)
+    if out.exists() and not overwrite:
+        raise click.ClickException(f"{out} exists; pass --overwrite to replace it.")
+    write_text_atomic(out, render_index(list(summaries), out))
+    click.echo(f"wrote {out} ({len(summaries)} datasets)")
