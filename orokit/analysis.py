@@ -155,7 +155,7 @@ def analyze(
         iso = _isolation(z, core.peak_row, core.peak_col, transform=transform, crs=crs)
     t_iso = time.perf_counter()
     _advance(bar)
-    result = engine.build_result(core, z, transform=transform, crs=crs, isolation=iso)
+    result = engine.build_result(core, transform=transform, crs=crs, isolation=iso)
     t_end = time.perf_counter()
     _advance(bar)
     if bar is not None:

@@ -307,7 +307,7 @@ def kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, border_z):
 
 
 @njit(cache=True)
-def prune_edges(n, ea, eb, keep):
+def prune_edges(n, ea, eb, ez, keep, bmax, nmin):
     """Divide Tree restricted to the kept nodes, preserving bottleneck saddles.
 
     Edges must be the tree edges sorted from the highest to the lowest saddle. The
@@ -317,11 +317,21 @@ def prune_edges(n, ea, eb, keep):
     absorbed into the neighbour across its highest saddle (star contraction), which
     keeps ridges between geographic neighbours.
 
-    Returns ``(out_a, out_b, out_edge)``: kept endpoints and the index of the original
-    edge (its saddle) of each output ridge.
+    ``bmax`` (highest border elevation reachable in a node's basin) and ``nmin``
+    (lowest elevation of the basin) are carried to the node a removed node is
+    absorbed into; the border value through the absorbing saddle ``w`` is
+    ``min(bmax, w)``, which keeps the "touched the unknown outside" flags exact.
+
+    Returns ``(out_a, out_b, out_edge, bmax_new, nmin_new)``: kept endpoints and the
+    index of the original edge (its saddle) of each output ridge, and the carried
+    per-node values (meaningful at kept nodes).
     """
     uf = np.arange(n)
     haskept = keep.copy()
+    comp_b = bmax.copy()
+    comp_m = nmin.copy()
+    nb = bmax.copy()
+    nm = nmin.copy()
     # anchor forest: a node points towards the kept node it is absorbed into
     anchor = np.arange(n)
     out_a = np.empty(ea.size, np.int64)
@@ -340,16 +350,22 @@ def prune_edges(n, ea, eb, keep):
             out_b[k] = _find(anchor, b)
             out_e[k] = e
             k += 1
-        elif haskept[rb]:
-            # component of a has no kept node: absorb all of it towards b
-            anchor[_find(anchor, ra)] = _find(anchor, b)
-        elif haskept[ra]:
-            anchor[_find(anchor, rb)] = _find(anchor, a)
+        elif haskept[rb] or haskept[ra]:
+            # the component without a kept node is absorbed across this saddle
+            if haskept[rb]:
+                src, dst = ra, _find(anchor, b)
+            else:
+                src, dst = rb, _find(anchor, a)
+            nb[dst] = max(nb[dst], min(comp_b[src], ez[e]))
+            nm[dst] = min(nm[dst], comp_m[src])
+            anchor[_find(anchor, src)] = dst
         else:
             anchor[_find(anchor, rb)] = _find(anchor, ra)
+            comp_b[ra] = max(comp_b[ra], comp_b[rb])
+            comp_m[ra] = min(comp_m[ra], comp_m[rb])
         uf[rb] = ra
         haskept[ra] = haskept[ra] or haskept[rb]
-    return out_a[:k], out_b[:k], out_e[:k]
+    return out_a[:k], out_b[:k], out_e[:k], nb, nm
 
 
 @njit(cache=True)

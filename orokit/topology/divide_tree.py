@@ -153,7 +153,9 @@ class DivideTree:
         keep = np.asarray(keep, dtype=bool)
         a, b, s = self._edge_arrays()
         order = self._sorted_edges()
-        oa, ob, oe = _kernels.prune_edges(self.n_peaks, a[order], b[order], keep)
+        sz = self.saddles["elevation"].to_numpy(float)[s[order]]
+        inf = np.full(self.n_peaks, np.inf)
+        oa, ob, oe, _, _ = _kernels.prune_edges(self.n_peaks, a[order], b[order], sz, keep, -inf, inf)
         new_id = np.full(self.n_peaks, -1, np.int64)
         new_id[keep] = np.arange(int(keep.sum()))
         saddle_ids = s[order][oe]

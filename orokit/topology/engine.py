@@ -32,13 +32,16 @@ class Orometry:
     shape: tuple[int, int]
     n_maxima: int
     peak_cell: np.ndarray        # flat cell of each kept peak (raster order)
+    peak_z: np.ndarray
     prominence: np.ndarray
     key_saddle_cell: np.ndarray  # -1 for roots
+    key_saddle_z: np.ndarray     # NaN for roots
     parent: np.ndarray           # index into kept peaks, -1 for roots
     prominence_exact: np.ndarray
     ridge_a: np.ndarray          # kept-peak indices of each ridge
     ridge_b: np.ndarray
     ridge_saddle_cell: np.ndarray
+    ridge_saddle_z: np.ndarray
 
     @property
     def n_kept(self) -> int:
@@ -62,65 +65,116 @@ def orometry(z: np.ndarray, *, min_prominence: float, outside: str = "unknown") 
     zf = z.ravel()
     ptr, border = _kernels.steepest_ascent(z)
     label, max_cell = _kernels.label_basins(ptr)
+    del ptr
     n_max = int(max_cell.size)
     if n_max == 0:
         raise InputError("the DEM has no valid cells (all nodata)")
     border_z = _kernels.basin_border_max(z, label, border, n_max)
-    if outside == "sea":
-        border_z[:] = -np.inf
+    del border
+    nmin = _kernels.basin_min(z, label, n_max)
     ea, eb, ec = _kernels.basin_passes(z, label, n_max)
-    order = np.lexsort((ec, -zf[ec].astype(np.float64)))
-    ea, eb, ec = ea[order], eb[order], ec[order]
-    node_z = zf[max_cell].astype(np.float64)
-    in_tree, key_edge, parent, touched = _kernels.kruskal_sweep(
-        node_z, max_cell, ea, eb, zf[ec].astype(np.float64), ec, border_z
-    )
-    is_root = key_edge < 0
-    prom = node_z.copy()
-    prom[~is_root] = node_z[~is_root] - zf[ec[key_edge[~is_root]]]
-    # a root alone in its (single-basin) domain whose cells are all equal: flat domain
-    degree = np.bincount(np.concatenate([ea[in_tree], eb[in_tree]]), minlength=n_max)
-    flat_root = is_root & (degree == 0)
-    if flat_root.any():
-        bmin = _kernels.basin_min(z, label, n_max)
-        flat_root &= bmin >= node_z
-    keep = np.where(is_root, (min_prominence <= 0) | (node_z >= min_prominence), prom >= min_prominence)
-    keep &= is_root | (prom > 0)
-    keep &= ~flat_root
-    ta, tb, tc = ea[in_tree], eb[in_tree], ec[in_tree]
-    oa, ob, oe = _kernels.prune_edges(n_max, ta, tb, keep)
-    new_id = np.full(n_max, -1, np.int64)
-    new_id[keep] = np.arange(int(keep.sum()))
-    kept = np.flatnonzero(keep)
-    nonroot = ~is_root[kept]
-    ks = np.full(kept.size, -1, np.int64)
-    ks[nonroot] = ec[key_edge[kept][nonroot]]
-    par = np.full(kept.size, -1, np.int64)
-    par[nonroot] = new_id[parent[kept][nonroot]]
-    exact = ~touched[kept] & ~is_root[kept] if outside == "unknown" else np.ones(kept.size, bool)
-    return Orometry(
+    del label
+    return finalize_graph(
+        node_key=max_cell,
+        node_z=zf[max_cell].astype(np.float64),
+        node_bmax=border_z,
+        node_nmin=nmin,
+        node_ismax=np.ones(n_max, bool),
+        ea=ea,
+        eb=eb,
+        ez=zf[ec].astype(np.float64),
+        ekey=ec,
+        min_prominence=min_prominence,
+        outside=outside,
         shape=z.shape,
         n_maxima=n_max,
-        peak_cell=max_cell[kept],
+    )
+
+
+def finalize_graph(
+    *,
+    node_key: np.ndarray,
+    node_z: np.ndarray,
+    node_bmax: np.ndarray,
+    node_nmin: np.ndarray,
+    node_ismax: np.ndarray,
+    ea: np.ndarray,
+    eb: np.ndarray,
+    ez: np.ndarray,
+    ekey: np.ndarray,
+    min_prominence: float,
+    outside: str,
+    shape: tuple[int, int],
+    n_maxima: int,
+) -> Orometry:
+    """Peaks and pruned Divide Tree from a saddle graph whose bottlenecks are exact.
+
+    Nodes are candidate maxima (``node_ismax``) and possibly other cells; edges carry
+    the saddle cell (``ekey``, flat index) and its elevation. Used by the in-memory
+    engine (nodes = basins) and by the tiled engine (nodes = merged tile summaries).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = node_key.size
+    order = np.lexsort((ekey, -ez))
+    ea, eb, ez, ekey = ea[order], eb[order], ez[order], ekey[order]
+    bmax = np.full(n, -np.inf) if outside == "sea" else node_bmax
+    in_tree, key_edge, parent, touched = _kernels.kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, bmax)
+    is_root = key_edge < 0
+    prom = node_z.copy()
+    prom[~is_root] = node_z[~is_root] - ez[key_edge[~is_root]]
+    # a domain whose cells all have the root's elevation is flat: no peak
+    ta, tb = ea[in_tree], eb[in_tree]
+    graph = coo_matrix((np.ones(ta.size), (ta, tb)), shape=(n, n))
+    _, dom = connected_components(graph, directed=False)
+    dmin = np.full(dom.max() + 1 if n else 0, np.inf)
+    np.minimum.at(dmin, dom, node_nmin)
+    flat_root = is_root & (dmin[dom] >= node_z)
+    keep = np.where(is_root, (min_prominence <= 0) | (node_z >= min_prominence), prom >= min_prominence)
+    keep &= is_root | (prom > 0)
+    keep &= ~flat_root & node_ismax
+    oa, ob, oe, _, _ = _kernels.prune_edges(n, ta, tb, ez[in_tree], keep, bmax, node_nmin)
+    tkey, tz = ekey[in_tree], ez[in_tree]
+    new_id = np.full(n, -1, np.int64)
+    kept = np.flatnonzero(keep)
+    new_id[kept] = np.arange(kept.size)
+    # kept peaks in raster order
+    rank = np.argsort(node_key[kept], kind="stable")
+    kept = kept[rank]
+    new_id[kept] = np.arange(kept.size)
+    nonroot = ~is_root[kept]
+    ks = np.full(kept.size, -1, np.int64)
+    ksz = np.full(kept.size, np.nan)
+    ks[nonroot] = ekey[key_edge[kept][nonroot]]
+    ksz[nonroot] = ez[key_edge[kept][nonroot]]
+    par = np.full(kept.size, -1, np.int64)
+    par[nonroot] = new_id[parent[kept][nonroot]]
+    exact = ~touched[kept] & nonroot if outside == "unknown" else np.ones(kept.size, bool)
+    return Orometry(
+        shape=tuple(shape),
+        n_maxima=int(n_maxima),
+        peak_cell=node_key[kept],
+        peak_z=node_z[kept],
         prominence=prom[kept],
         key_saddle_cell=ks,
+        key_saddle_z=ksz,
         parent=par,
         prominence_exact=exact,
         ridge_a=new_id[oa],
         ridge_b=new_id[ob],
-        ridge_saddle_cell=tc[oe],
+        ridge_saddle_cell=tkey[oe],
+        ridge_saddle_z=tz[oe],
     )
 
 
-def build_result(core: Orometry, z: np.ndarray, *, transform, crs, isolation: pd.DataFrame | None):
+def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | None):
     """Peaks/saddles GeoDataFrames and the DivideTree from the raw engine output."""
     import geopandas as gpd
 
     from orokit.analysis import PEAK_COLUMNS, AnalysisResult
 
     H, W = core.shape
-    zf = z.ravel()
-
     def xy(rows, cols):
         x = transform.c + (cols + 0.5) * transform.a + (rows + 0.5) * transform.b
         y = transform.f + (cols + 0.5) * transform.d + (rows + 0.5) * transform.e
@@ -129,13 +183,13 @@ def build_result(core: Orometry, z: np.ndarray, *, transform, crs, isolation: pd
     n = core.n_kept
     rows, cols = core.peak_row, core.peak_col
     x, y = xy(rows, cols)
-    elev = zf[core.peak_cell].astype(np.float64)
+    elev = core.peak_z.astype(np.float64)
     has_saddle = core.key_saddle_cell >= 0
     ks = np.where(has_saddle, core.key_saddle_cell, 0)
     s_rows = np.where(has_saddle, ks // W, -1)
     s_cols = np.where(has_saddle, ks % W, -1)
     sx, sy = xy(s_rows, s_cols)
-    s_elev = np.where(has_saddle, zf[ks], np.nan)
+    s_elev = core.key_saddle_z
     has_parent = core.parent >= 0
     pidx = np.maximum(core.parent, 0)
     peaks = pd.DataFrame(
@@ -187,7 +241,8 @@ def build_result(core: Orometry, z: np.ndarray, *, transform, crs, isolation: pd
     peaks = peaks[PEAK_COLUMNS]
 
     # saddles of the pruned tree, in raster order (a monkey saddle serves several ridges)
-    sc_sorted = np.unique(core.ridge_saddle_cell)
+    sc_sorted, first = np.unique(core.ridge_saddle_cell, return_index=True)
+    sad_z = core.ridge_saddle_z[first].astype(np.float64)
     ridge_sid = np.searchsorted(sc_sorted, core.ridge_saddle_cell)
     key_of = np.full(sc_sorted.size, -1, np.int64)
     kp = np.flatnonzero(has_saddle)
@@ -200,7 +255,7 @@ def build_result(core: Orometry, z: np.ndarray, *, transform, crs, isolation: pd
             "col": s_c,
             "x": s_x,
             "y": s_y,
-            "elevation": zf[sc_sorted].astype(np.float64),
+            "elevation": sad_z,
             "key_of": key_of,
         }
     )
