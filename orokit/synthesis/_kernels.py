@@ -1,0 +1,193 @@
+"""Numerical kernels of Divide Tree synthesis (arrays and scalars only).
+
+The dart-throwing loop is sequential by nature (each accepted peak changes the
+isolation of every later candidate), so it is compiled with numba instead of being
+vectorised with numpy; placed peaks are kept in a uniform grid hash so the nearest
+higher peak of a candidate is found in O(1) expected time.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _cell_of(x, y, gx0, gy0, gcell, gnx, gny):
+    ci = int((x - gx0) / gcell)
+    cj = int((y - gy0) / gcell)
+    if ci < 0:
+        ci = 0
+    if ci >= gnx:
+        ci = gnx - 1
+    if cj < 0:
+        cj = 0
+    if cj >= gny:
+        cj = gny - 1
+    return ci, cj
+
+
+@njit(cache=True)
+def _scan_cell(ii, jj, gnx, gny, head, nxt, px, py, qx, qy, best, bi):
+    if ii < 0 or jj < 0 or ii >= gnx or jj >= gny:
+        return best, bi
+    k = head[jj * gnx + ii]
+    while k >= 0:
+        d2 = (px[k] - qx) ** 2 + (py[k] - qy) ** 2
+        if d2 < best:
+            best = d2
+            bi = k
+        k = nxt[k]
+    return best, bi
+
+
+@njit(cache=True)
+def nearest_placed(qx, qy, px, py, n_placed, head, nxt, gx0, gy0, gcell, gnx, gny):
+    """Nearest placed peak to (qx, qy): (index, distance); (-1, inf) when none."""
+    best = np.inf
+    bi = -1
+    if n_placed == 0:
+        return bi, best
+    if n_placed < 48:
+        for k in range(n_placed):
+            d2 = (px[k] - qx) ** 2 + (py[k] - qy) ** 2
+            if d2 < best:
+                best = d2
+                bi = k
+        return bi, math.sqrt(best)
+    ci, cj = _cell_of(qx, qy, gx0, gy0, gcell, gnx, gny)
+    rmax = max(gnx, gny)
+    r = 0
+    while r <= rmax:
+        if r == 0:
+            best, bi = _scan_cell(ci, cj, gnx, gny, head, nxt, px, py, qx, qy, best, bi)
+        else:
+            for ii in range(ci - r, ci + r + 1):
+                best, bi = _scan_cell(ii, cj - r, gnx, gny, head, nxt, px, py, qx, qy, best, bi)
+                best, bi = _scan_cell(ii, cj + r, gnx, gny, head, nxt, px, py, qx, qy, best, bi)
+            for jj in range(cj - r + 1, cj + r):
+                best, bi = _scan_cell(ci - r, jj, gnx, gny, head, nxt, px, py, qx, qy, best, bi)
+                best, bi = _scan_cell(ci + r, jj, gnx, gny, head, nxt, px, py, qx, qy, best, bi)
+        if bi >= 0 and r * gcell >= math.sqrt(best):
+            break
+        r += 1
+    return bi, math.sqrt(best)
+
+
+@njit(cache=True)
+def _bin(v, edges, open_last):
+    nb = edges.size - 1
+    if not (v >= edges[0]):
+        return -1
+    if v >= edges[nb]:
+        if open_last or v == edges[nb]:
+            return nb - 1
+        return -1
+    lo = 0
+    hi = nb
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if edges[mid] <= v:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True)
+def throw_darts(
+    px, py, n_start, n_end,
+    fixed, fx, fy,
+    cand_x, cand_y, cand_w,
+    ptype, u,
+    dist_edges, dist_ne, dist_open, dist_target, dist_have,
+    dir_edges, dir_ne, dir_target, dir_have,
+    head, nxt, gx0, gy0, gcell, gnx, gny,
+    floor_w,
+):
+    """Place peaks ``n_start..n_end-1`` (sorted by decreasing elevation) by dart throwing.
+
+    Every peak chooses one of its ``M`` candidate positions (drawn from the density
+    map ``C_P`` beforehand) with probability proportional to ``cand_w`` (the ``C_H``
+    Gaussian term) times the *remaining demand* of its isolation-distance bin and of
+    its isolation-direction bin (target count minus peaks already placed in the bin,
+    plus ``floor_w`` times the target). All already placed peaks are higher, so the
+    nearest placed peak is the isolation target. ``dist_have``/``dir_have`` and the
+    grid hash (``head``/``nxt``) are updated in place. Fixed peaks go to ``fx, fy``.
+    Returns per placed peak the isolation distance (NaN for the first).
+    """
+    m = cand_x.shape[1]
+    iso = np.full(n_end - n_start, np.nan)
+    w = np.empty(m)
+    for k in range(n_start, n_end):
+        r = k - n_start
+        t = ptype[k]
+        if fixed[k]:
+            qx = fx[k]
+            qy = fy[k]
+            nb, d = nearest_placed(qx, qy, px, py, k, head, nxt, gx0, gy0, gcell, gnx, gny)
+            choice_d = d
+            choice_nb = nb
+        else:
+            total = 0.0
+            best_base = -1.0
+            best_c = 0
+            for c in range(m):
+                qx = cand_x[r, c]
+                qy = cand_y[r, c]
+                nb, d = nearest_placed(qx, qy, px, py, k, head, nxt, gx0, gy0, gcell, gnx, gny)
+                wc = cand_w[r, c]
+                if wc > best_base:
+                    best_base = wc
+                    best_c = c
+                if nb >= 0:
+                    b1 = _bin(d, dist_edges[t, : dist_ne[t]], dist_open[t])
+                    ang = math.degrees(math.atan2(py[nb] - qy, px[nb] - qx))
+                    if ang < 0:
+                        ang += 360.0
+                    b2 = _bin(ang, dir_edges[t, : dir_ne[t]], False)
+                    if b1 >= 0:
+                        f1 = max(dist_target[t, b1] - dist_have[t, b1], 0.0) + floor_w * dist_target[t, b1]
+                    else:
+                        f1 = floor_w * 0.1
+                    f2 = 1.0
+                    if b2 >= 0:
+                        f2 = max(dir_target[t, b2] - dir_have[t, b2], 0.0) + floor_w * dir_target[t, b2]
+                    wc = wc * f1 * f2
+                w[c] = wc
+                total += wc
+            if total > 0:
+                thr = u[k] * total
+                acc = 0.0
+                pick = m - 1
+                for c in range(m):
+                    acc += w[c]
+                    if acc >= thr and w[c] > 0:
+                        pick = c
+                        break
+            else:
+                pick = best_c
+            qx = cand_x[r, pick]
+            qy = cand_y[r, pick]
+            nb, d = nearest_placed(qx, qy, px, py, k, head, nxt, gx0, gy0, gcell, gnx, gny)
+            choice_d = d
+            choice_nb = nb
+        px[k] = qx
+        py[k] = qy
+        if choice_nb >= 0:
+            iso[r] = choice_d
+            b1 = _bin(choice_d, dist_edges[t, : dist_ne[t]], dist_open[t])
+            if b1 >= 0:
+                dist_have[t, b1] += 1.0
+            ang = math.degrees(math.atan2(py[choice_nb] - qy, px[choice_nb] - qx))
+            if ang < 0:
+                ang += 360.0
+            b2 = _bin(ang, dir_edges[t, : dir_ne[t]], False)
+            if b2 >= 0:
+                dir_have[t, b2] += 1.0
+        ci, cj = _cell_of(qx, qy, gx0, gy0, gcell, gnx, gny)
+        cell = cj * gnx + ci
+        nxt[k] = head[cell]
+        head[cell] = k
+    return iso

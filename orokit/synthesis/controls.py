@@ -1,0 +1,271 @@
+"""Synthesis domain and user control maps (C_H elevation, C_P density, C_T type map).
+
+Control maps are rasters in any CRS; they are resampled onto a coarse synthesis grid
+covering the output domain (rioxarray / rasterio ``reproject``). Rasters without a
+CRS, and plain numpy arrays, are stretched over the domain (row 0 = north).
+"""
+from __future__ import annotations
+
+import logging
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from orokit.errors import CRSError, InputError, OrokitWarning
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["Domain", "make_domain", "ControlMaps", "load_control", "build_controls"]
+
+
+@dataclass(frozen=True)
+class Domain:
+    """Rectangular output domain ``[x0, x0 + width] x [y0, y0 + height]`` in metres of ``crs``.
+
+    ``crs`` is a projected :class:`pyproj.CRS`, or None for a local metric frame.
+    The synthesis grid has ``shape`` cells (rows from north to south).
+    """
+
+    x0: float
+    y0: float
+    width: float
+    height: float
+    crs: Any = None
+    shape: tuple[int, int] = (256, 256)
+
+    @property
+    def cell(self) -> tuple[float, float]:
+        return self.width / self.shape[1], self.height / self.shape[0]
+
+    @property
+    def area_km2(self) -> float:
+        return self.width * self.height / 1e6
+
+    def transform(self):
+        from affine import Affine
+
+        cx, cy = self.cell
+        return Affine(cx, 0.0, self.x0, 0.0, -cy, self.y0 + self.height)
+
+    def cell_index(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Row, col of the grid cell holding each point (clipped to the grid)."""
+        cx, cy = self.cell
+        col = np.clip(((np.asarray(x) - self.x0) / cx).astype(np.int64), 0, self.shape[1] - 1)
+        row = np.clip(((self.y0 + self.height - np.asarray(y)) / cy).astype(np.int64), 0, self.shape[0] - 1)
+        return row, col
+
+    def contains(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        x, y = np.asarray(x, float), np.asarray(y, float)
+        return (x >= self.x0) & (x <= self.x0 + self.width) & (y >= self.y0) & (y <= self.y0 + self.height)
+
+
+def _parse_size(size_m: Any) -> tuple[float, float]:
+    if np.isscalar(size_m):
+        w = h = float(size_m)
+    else:
+        w, h = (float(v) for v in size_m)
+    if not (np.isfinite(w) and np.isfinite(h) and w > 0 and h > 0):
+        raise InputError(f"domain size must be positive metres, got {size_m!r}")
+    return w, h
+
+
+def make_domain(
+    size_m: Any,
+    *,
+    crs: Any = None,
+    center: tuple[float, float] | None = None,
+    center_crs: Any = "EPSG:4326",
+    grid_cells: int = 256,
+) -> Domain:
+    """Output domain of ``size_m`` (metres, scalar or (width, height)).
+
+    Parameters
+    ----------
+    crs : output CRS (EPSG code, "EPSG:xxxx", WKT, pyproj CRS). Must be projected
+        (metres). None with ``center`` -> a local azimuthal equidistant projection
+        centred on ``center`` (lon, lat); None without ``center`` -> a local frame
+        with the domain's south-west corner at (0, 0).
+    center : domain centre, in ``center_crs`` (default lon/lat degrees).
+    grid_cells : cells along the longer side of the control grid.
+    """
+    from pyproj import CRS, Transformer
+
+    w, h = _parse_size(size_m)
+    n_long = int(grid_cells)
+    if n_long < 8:
+        raise InputError(f"grid_cells must be >= 8, got {grid_cells}")
+    shape = (max(8, round(n_long * h / max(w, h))), max(8, round(n_long * w / max(w, h))))
+    if crs is None and center is None:
+        return Domain(0.0, 0.0, w, h, None, shape)
+    if crs is None:
+        lon, lat = (float(v) for v in center)
+        if center_crs is not None and CRS.from_user_input(center_crs) != CRS.from_epsg(4326):
+            lon, lat = Transformer.from_crs(center_crs, "EPSG:4326", always_xy=True).transform(lon, lat)
+        if not (-180 <= lon <= 180 and -90 <= lat <= 90):
+            raise InputError(f"center must be lon, lat in degrees; got {center!r}")
+        out = CRS.from_proj4(f"+proj=aeqd +lat_0={lat} +lon_0={lon} +x_0=0 +y_0=0 +datum=WGS84 +units=m +no_defs")
+        return Domain(-w / 2, -h / 2, w, h, out, shape)
+    try:
+        out = CRS.from_user_input(crs)
+    except Exception as exc:  # noqa: BLE001 - pyproj raises CRSError subclasses of various kinds
+        raise CRSError(f"cannot understand the output CRS {crs!r} ({exc}); pass e.g. 'EPSG:32633' or WKT") from exc
+    if not out.is_projected:
+        raise CRSError(
+            f"the output CRS {out.name!r} is not projected: synthesis works in metres. Use a projected CRS "
+            "(e.g. UTM) or give only a centre lon/lat for a local projection"
+        )
+    if center is None:
+        return Domain(0.0, 0.0, w, h, out, shape)
+    cx, cy = Transformer.from_crs(center_crs, out, always_xy=True).transform(*center)
+    return Domain(cx - w / 2, cy - h / 2, w, h, out, shape)
+
+
+@dataclass(frozen=True)
+class ControlMaps:
+    """Control maps on the domain grid (row 0 = north).
+
+    density : C_P >= 0 (0 = no peaks: sea, lakes); elevation : C_H in metres or None;
+    type_index : int per cell (index into the list of terrain types).
+    """
+
+    density: np.ndarray
+    elevation: np.ndarray | None
+    type_index: np.ndarray
+
+
+def _as_dataarray(src: Any):
+    import rioxarray  # noqa: F401
+    import xarray as xr
+
+    if isinstance(src, xr.DataArray):
+        return src
+    if isinstance(src, np.ndarray):
+        return None
+    try:
+        da = rioxarray.open_rasterio(src, masked=True)
+    except Exception as exc:  # noqa: BLE001 - rasterio errors vary
+        raise InputError(f"cannot read control raster {src!r}: {exc}") from exc
+    if "band" in da.dims:
+        if da.sizes["band"] != 1:
+            raise InputError(f"control raster {src!r} has {da.sizes['band']} bands; give a single-band raster")
+        da = da.squeeze("band", drop=True)
+    return da
+
+
+def load_control(src: Any, domain: Domain, *, kind: str = "density") -> np.ndarray:
+    """Resample one control map onto the domain grid.
+
+    Parameters
+    ----------
+    src : path, DataArray or 2-D numpy array.
+    kind : "density" / "elevation" (bilinear) or "type" (nearest).
+
+    Returns
+    -------
+    float array of ``domain.shape``; NaN where the source has no data.
+
+    Raises
+    ------
+    InputError
+        Unreadable file, not 2-D, or no overlap with the domain.
+    """
+    from rasterio.enums import Resampling
+
+    name = src if isinstance(src, str) else type(src).__name__
+    resampling = Resampling.nearest if kind == "type" else Resampling.bilinear
+    da = _as_dataarray(src)
+    crs = None
+    if da is not None:
+        try:
+            crs = da.rio.crs
+        except Exception:  # noqa: BLE001
+            crs = None
+    if da is not None and crs is not None and domain.crs is not None:
+        try:
+            out = da.astype("float64").rio.reproject(
+                domain.crs, shape=domain.shape, transform=domain.transform(), resampling=resampling,
+                nodata=np.nan,
+            )
+        except Exception as exc:  # noqa: BLE001
+            raise InputError(f"cannot resample control raster {name!r} onto the domain: {exc}") from exc
+        arr = np.asarray(out.values, float)
+    else:
+        if da is not None and crs is not None and domain.crs is None:
+            warnings.warn(
+                f"control raster {name!r} has a CRS but the output has none: it is stretched over the domain. "
+                "Pass --crs (or a centre) to place it geographically",
+                OrokitWarning, stacklevel=3,
+            )
+        arr = np.asarray(src if da is None else da.values, float)
+        if arr.ndim != 2 or min(arr.shape) < 1:
+            raise InputError(f"control map {name!r} must be a 2-D raster, got shape {arr.shape}")
+        arr = _stretch(arr, domain.shape, order=0 if kind == "type" else 1)
+    if not np.isfinite(arr).any():
+        raise InputError(
+            f"control raster {name!r} does not overlap the output domain "
+            f"(x {domain.x0:.0f}..{domain.x0 + domain.width:.0f}, y {domain.y0:.0f}..{domain.y0 + domain.height:.0f}"
+            f" in {domain.crs.name if domain.crs is not None else 'a local frame'}); check its CRS and the domain centre"
+        )
+    return arr
+
+
+def _stretch(arr: np.ndarray, shape: tuple[int, int], *, order: int) -> np.ndarray:
+    """Resample a grid to ``shape`` covering the same extent (cell-centre aligned)."""
+    from scipy.ndimage import map_coordinates
+
+    h, w = arr.shape
+    rows = (np.arange(shape[0]) + 0.5) * h / shape[0] - 0.5
+    cols = (np.arange(shape[1]) + 0.5) * w / shape[1] - 0.5
+    rr, cc = np.meshgrid(np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1), indexing="ij")
+    if order == 0:
+        return arr[np.rint(rr).astype(int), np.rint(cc).astype(int)]
+    filled = np.where(np.isfinite(arr), arr, 0.0)
+    weight = map_coordinates(np.isfinite(arr).astype(float), [rr, cc], order=1, mode="nearest")
+    val = map_coordinates(filled, [rr, cc], order=1, mode="nearest")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(weight > 0.5, val / np.maximum(weight, 1e-12), np.nan)
+
+
+def build_controls(
+    domain: Domain,
+    *,
+    control_density: Any = None,
+    control_elevation: Any = None,
+    type_map: Any = None,
+    n_types: int = 1,
+) -> ControlMaps:
+    """Load and check the control maps (defaults: uniform density, no C_H, type 0)."""
+    shape = domain.shape
+    if control_density is None:
+        dens = np.ones(shape)
+    else:
+        dens = load_control(control_density, domain, kind="density")
+        miss = ~np.isfinite(dens)
+        if miss.any():
+            warnings.warn(f"density control covers {100 * (1 - miss.mean()):.1f}% of the domain; "
+                          "no peaks are placed outside it", OrokitWarning, stacklevel=2)
+        dens = np.where(miss, 0.0, dens)
+        if (dens < 0).any():
+            raise InputError(f"density control has negative values (min {dens.min():g}); use values >= 0")
+    elev = None
+    if control_elevation is not None:
+        elev = load_control(control_elevation, domain, kind="elevation")
+    if type_map is None:
+        types = np.zeros(shape, np.int64)
+    else:
+        raw = load_control(type_map, domain, kind="type")
+        bad = ~np.isfinite(raw)
+        if bad.any():
+            warnings.warn(f"type map covers {100 * (1 - bad.mean()):.1f}% of the domain; "
+                          "cells outside it get type 0", OrokitWarning, stacklevel=2)
+        types = np.where(bad, 0, np.rint(np.where(bad, 0, raw))).astype(np.int64)
+        if types.min() < 0 or types.max() >= n_types:
+            raise InputError(
+                f"type map values must be indices 0..{n_types - 1} into the list of terrain types; "
+                f"found {types.min()}..{types.max()}"
+            )
+    if not (dens > 0).any():
+        raise InputError("the density control is 0 everywhere in the domain: there is no room for peaks")
+    return ControlMaps(dens.astype(float), None if elev is None else elev.astype(float), types)

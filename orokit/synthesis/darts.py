@@ -1,0 +1,194 @@
+"""Multi-pass dart throwing of peaks (Argudo et al. 2019, sections 5.1 and 5.3).
+
+Peaks are sorted by decreasing elevation and placed highest first. The ranks are
+split into passes, each holding twice as many peaks as the previous one; earlier
+peaks stay fixed, and the ridges of the tree built after each pass are diffused into
+the density map so the next, lower peaks land near them.
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from orokit._typing import SeedLike
+from orokit.synthesis import _kernels
+from orokit.synthesis.controls import ControlMaps, Domain
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["pass_bounds", "draw_candidates", "ridge_density", "place_peaks"]
+
+
+def pass_bounds(n: int, n_passes: int) -> list[tuple[int, int]]:
+    """Rank ranges of the passes: sizes ``n0, 2 n0, 4 n0, ...`` summing to ``n``."""
+    n_passes = max(1, min(int(n_passes), max(1, n)))
+    n0 = n / (2**n_passes - 1)
+    ends = [int(round(n0 * (2 ** (k + 1) - 1))) for k in range(n_passes)]
+    ends[-1] = n
+    out, start = [], 0
+    for e in ends:
+        e = max(e, start)
+        if e > start:
+            out.append((start, e))
+        start = e
+    return out
+
+
+def draw_candidates(
+    weights: np.ndarray, domain: Domain, count: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``count`` points drawn with density proportional to the grid ``weights``.
+
+    Returns x, y and the grid row/col of every point (uniform inside cells).
+    """
+    flat = weights.ravel()
+    cdf = np.cumsum(flat)
+    cell = np.searchsorted(cdf, rng.random(count) * cdf[-1], side="right")
+    cell = np.minimum(cell, flat.size - 1)
+    row, col = np.divmod(cell, weights.shape[1])
+    cx, cy = domain.cell
+    x = domain.x0 + (col + rng.random(count)) * cx
+    y = domain.y0 + domain.height - (row + rng.random(count)) * cy
+    return x, y, row, col
+
+
+def ridge_density(x: np.ndarray, y: np.ndarray, a: np.ndarray, b: np.ndarray, domain: Domain,
+                  sigma_m: float) -> np.ndarray:
+    """Ridges rasterised on the domain grid and blurred (Gaussian of ``sigma_m``), max 1."""
+    grid = np.zeros(domain.shape)
+    if a.size:
+        cx, cy = domain.cell
+        step = 0.5 * min(cx, cy)
+        length = np.hypot(x[b] - x[a], y[b] - y[a])
+        k = np.maximum(2, np.ceil(length / step).astype(np.int64) + 1)
+        e = np.repeat(np.arange(a.size), k)
+        t = np.concatenate([np.linspace(0, 1, kk) for kk in k]) if a.size < 64 else _ramp(k)
+        sx = x[a][e] + t * (x[b] - x[a])[e]
+        sy = y[a][e] + t * (y[b] - y[a])[e]
+        row, col = domain.cell_index(sx, sy)
+        np.add.at(grid, (row, col), 1.0)
+        grid = gaussian_filter(grid, sigma=max(sigma_m / min(cx, cy), 0.5))
+    m = grid.max()
+    return grid / m if m > 0 else grid
+
+
+def _ramp(k: np.ndarray) -> np.ndarray:
+    """Concatenation of ``linspace(0, 1, k_i)`` for every k_i (vectorised)."""
+    start = np.repeat(np.cumsum(k) - k, k)
+    idx = np.arange(k.sum()) - start
+    return idx / np.repeat(k - 1, k)
+
+
+def place_peaks(
+    z: np.ndarray,
+    ptype: np.ndarray,
+    fixed: np.ndarray,
+    fxy: np.ndarray,
+    controls: ControlMaps,
+    domain: Domain,
+    iso_dist: list,
+    iso_dir: list,
+    rho: np.ndarray,
+    *,
+    n_passes: int = 4,
+    n_candidates: int = 48,
+    ridge_floor: float = 0.15,
+    floor_w: float = 0.05,
+    forced: tuple[np.ndarray, np.ndarray] | None = None,
+    rng: SeedLike = None,
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Positions of peaks sorted by decreasing elevation ``z``.
+
+    Parameters
+    ----------
+    z : elevations, sorted in decreasing order; ptype : terrain-type index per peak.
+    fixed, fxy : peaks with a user-given position and that (n, 2) position.
+    controls, domain : control maps and their grid.
+    iso_dist, iso_dir : per type, isolation distance/direction histograms.
+    rho : per-peak ridge exponent (for the ridges diffused between passes).
+
+    Returns
+    -------
+    x, y, info (``passes``: rank ranges).
+    """
+    from orokit.synthesis.ridges import delaunay_mst
+
+    rng = np.random.default_rng(rng)
+    n = z.size
+    n_types = len(iso_dist)
+    px = np.zeros(n)
+    py = np.zeros(n)
+    fx = np.ascontiguousarray(fxy[:, 0], dtype=float)
+    fy = np.ascontiguousarray(fxy[:, 1], dtype=float)
+    # C_H acceptance: N(C_H(p) - h; sigma), sigma = 1/20 of the C_H range
+    ch = controls.elevation
+    if ch is not None:
+        rng_ch = float(np.nanmax(ch) - np.nanmin(ch))
+        sigma = rng_ch / 20.0 if rng_ch > 0 else max(float(np.ptp(z)) / 20.0, 1.0)
+    # isolation targets per type: expected count per bin over the type's peaks
+    counts_t = np.bincount(ptype, minlength=n_types).astype(float)
+    ne_d = np.array([len(h.edges) for h in iso_dist], np.int64)
+    ne_a = np.array([len(h.edges) for h in iso_dir], np.int64)
+    de = np.full((n_types, ne_d.max()), np.inf)
+    ae = np.full((n_types, ne_a.max()), np.inf)
+    dt = np.zeros((n_types, ne_d.max() - 1))
+    at = np.zeros((n_types, ne_a.max() - 1))
+    dopen = np.zeros(n_types, np.bool_)
+    for t in range(n_types):
+        de[t, : ne_d[t]] = iso_dist[t].edges
+        ae[t, : ne_a[t]] = iso_dir[t].edges
+        dt[t, : ne_d[t] - 1] = iso_dist[t].probabilities() * max(counts_t[t] - 1, 0)
+        at[t, : ne_a[t] - 1] = iso_dir[t].probabilities() * max(counts_t[t] - 1, 0)
+        dopen[t] = iso_dist[t].open_last
+    dh = np.zeros_like(dt)
+    ah = np.zeros_like(at)
+    # grid hash of placed peaks: cells about the final mean spacing
+    spacing = np.sqrt(domain.width * domain.height / max(n, 1))
+    gcell = max(spacing, 1e-6)
+    gnx = int(np.ceil(domain.width / gcell)) + 1
+    gny = int(np.ceil(domain.height / gcell)) + 1
+    head = np.full(gnx * gny, -1, np.int64)
+    nxt = np.full(n, -1, np.int64)
+    u = rng.random(n)
+    density = controls.density.copy()
+    type_masks = [controls.type_index == t for t in range(n_types)]
+    passes = pass_bounds(n, n_passes)
+    for p_i, (s, e) in enumerate(passes):
+        cand_x = np.zeros((e - s, n_candidates))
+        cand_y = np.zeros((e - s, n_candidates))
+        cand_w = np.ones((e - s, n_candidates))
+        for t in range(n_types):
+            rows = np.flatnonzero((ptype[s:e] == t) & ~fixed[s:e])
+            if rows.size == 0:
+                continue
+            wgrid = density * type_masks[t]
+            if not (wgrid > 0).any():
+                from orokit.errors import InputError
+
+                raise InputError(f"terrain type {t} has no cell with density > 0 in the type map: no room for its peaks")
+            x, y, r, c = draw_candidates(wgrid, domain, rows.size * n_candidates, rng)
+            cand_x[rows] = x.reshape(rows.size, n_candidates)
+            cand_y[rows] = y.reshape(rows.size, n_candidates)
+            if ch is not None:
+                chv = ch[r, c].reshape(rows.size, n_candidates)
+                g = np.exp(-0.5 * ((chv - z[s:e][rows][:, None]) / sigma) ** 2)
+                cand_w[rows] = np.where(np.isfinite(g), g, 1.0)
+        _kernels.throw_darts(
+            px, py, s, e, fixed, fx, fy, cand_x, cand_y, cand_w, ptype.astype(np.int64), u,
+            de, ne_d, dopen, dt, dh, ae, ne_a, at, ah, head, nxt,
+            domain.x0, domain.y0, gcell, gnx, gny, floor_w,
+        )
+        if p_i + 1 < len(passes):
+            fa = fb = None
+            if forced is not None:
+                keep = (forced[0] < e) & (forced[1] < e)
+                fa, fb = forced[0][keep], forced[1][keep]
+            a, b = delaunay_mst(px[:e], py[:e], z[:e], rho=rho[:e],
+                                forced=None if fa is None else (fa, fb))
+            sigma_m = 0.5 * np.sqrt(domain.width * domain.height / e)
+            dens_r = ridge_density(px[:e], py[:e], a, b, domain, sigma_m)
+            density = controls.density * (ridge_floor + (1 - ridge_floor) * dens_r)
+        logger.debug("pass %d: placed peaks %d..%d", p_i, s, e)
+    return px, py, {"passes": passes}

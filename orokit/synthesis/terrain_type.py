@@ -1,0 +1,546 @@
+"""Terrain types: the orometric statistics of a region, as synthesis targets.
+
+A :class:`TerrainType` holds, for one region, fine histograms of peak elevation,
+prominence, dominance, isolation distance and direction, key-saddle distance and
+direction, the peak density (peaks with prominence >= ``min_prominence_m`` per
+km2) and the preferred ridge exponent ``rho`` of the paper's minimum spanning tree
+weight (Argudo et al. 2019, section 5, doi:10.1145/3355089.3356535). It is saved
+as a small versioned JSON file and can be edited (scale prominence, shift
+elevations, replace a histogram) into a new valid type.
+"""
+from __future__ import annotations
+
+import dataclasses
+import datetime as _dt
+import json
+import logging
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from orokit._typing import PathLike, SeedLike
+from orokit.errors import InputError, SchemaError
+
+logger = logging.getLogger(__name__)
+
+__all__ = [
+    "FEATURES",
+    "FeatureHistogram",
+    "TerrainType",
+    "TYPE_FORMAT",
+    "TYPE_VERSION",
+    "load_terrain_type",
+]
+
+TYPE_FORMAT = "orokit.terrain_type"
+TYPE_VERSION = 1
+
+#: feature -> (unit, kind); kind "linear" (magnitudes) or "circular" (directions, degrees)
+FEATURES: dict[str, tuple[str, str]] = {
+    "elevation": ("m", "linear"),
+    "prominence": ("m", "linear"),
+    "dominance": ("1", "linear"),
+    "isolation_distance": ("m", "linear"),
+    "isolation_direction": ("deg", "circular"),
+    "saddle_distance": ("m", "linear"),
+    "saddle_direction": ("deg", "circular"),
+}
+
+#: number of bins of the fine synthesis histograms
+N_LINEAR_BINS = 40
+N_DIRECTION_BINS = 24
+
+
+@dataclasses.dataclass(frozen=True)
+class FeatureHistogram:
+    """Histogram of one feature: bin ``edges`` and non-negative ``counts``.
+
+    ``open_last`` means values above the last edge were counted in the last bin
+    (heavy tails: prominence, distances); sampling draws them inside the last bin.
+    """
+
+    edges: tuple[float, ...]
+    counts: tuple[float, ...]
+    open_last: bool = False
+
+    def __post_init__(self) -> None:
+        e = np.asarray(self.edges, float)
+        c = np.asarray(self.counts, float)
+        if e.ndim != 1 or e.size < 2 or not np.all(np.isfinite(e)) or not np.all(np.diff(e) > 0):
+            raise SchemaError(
+                f"histogram edges must be >= 2 finite, strictly increasing numbers; got {list(self.edges)[:8]}"
+            )
+        if c.shape != (e.size - 1,):
+            raise SchemaError(f"a histogram with {e.size} edges needs {e.size - 1} counts, got {c.size}")
+        if not np.all(np.isfinite(c)) or np.any(c < 0):
+            raise SchemaError("histogram counts must be finite and >= 0")
+        if c.sum() <= 0:
+            raise SchemaError("histogram is empty (all counts are 0): nothing to sample targets from")
+
+    @property
+    def n_bins(self) -> int:
+        return len(self.counts)
+
+    def probabilities(self) -> np.ndarray:
+        """Counts normalised to sum 1."""
+        c = np.asarray(self.counts, float)
+        return c / c.sum()
+
+    def bin_index(self, values: np.ndarray) -> np.ndarray:
+        """Bin of each value (-1 outside; above the last edge -> last bin if open)."""
+        e = np.asarray(self.edges, float)
+        v = np.asarray(values, float)
+        idx = np.searchsorted(e, v, side="right") - 1
+        idx = np.where(v == e[-1], e.size - 2, idx)
+        if self.open_last:
+            idx = np.where(v > e[-1], e.size - 2, idx)
+        return np.where((idx < 0) | (idx > e.size - 2) | ~np.isfinite(v), -1, idx)
+
+    def histogram(self, values: np.ndarray) -> np.ndarray:
+        """Normalised histogram of ``values`` on these bins (values outside ignored)."""
+        idx = self.bin_index(values)
+        idx = idx[idx >= 0]
+        h = np.bincount(idx, minlength=self.n_bins).astype(float)
+        return h / h.sum() if h.sum() > 0 else h
+
+    def sample(self, n: int, rng: SeedLike = None, *, stratified: bool = True) -> np.ndarray:
+        """Draw ``n`` values (uniform inside bins).
+
+        With ``stratified`` the quantile levels are ``(k + u_k) / n`` (one per
+        stratum) so the sample histogram matches the target up to one count per bin.
+        """
+        rng = np.random.default_rng(rng)
+        n = int(n)
+        if n <= 0:
+            return np.empty(0)
+        p = self.probabilities()
+        cdf = np.concatenate([[0.0], np.cumsum(p)])
+        cdf[-1] = 1.0
+        if stratified:
+            u = (np.arange(n) + rng.random(n)) / n
+            rng.shuffle(u)
+        else:
+            u = rng.random(n)
+        b = np.clip(np.searchsorted(cdf, u, side="right") - 1, 0, p.size - 1)
+        width = np.where(p[b] > 0, p[b], 1.0)
+        frac = np.clip((u - cdf[b]) / width, 0.0, 1.0)
+        e = np.asarray(self.edges, float)
+        return e[b] + frac * (e[b + 1] - e[b])
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"edges": [float(v) for v in self.edges], "counts": [float(v) for v in self.counts],
+                "open_last": bool(self.open_last)}
+
+    @classmethod
+    def from_values(cls, values: np.ndarray, edges: np.ndarray, *, open_last: bool = False) -> "FeatureHistogram":
+        """Histogram of ``values`` on ``edges``."""
+        tmp = cls(tuple(float(v) for v in edges), tuple([1.0] * (len(edges) - 1)), open_last)
+        idx = tmp.bin_index(values)
+        counts = np.bincount(idx[idx >= 0], minlength=len(edges) - 1).astype(float)
+        return cls(tmp.edges, tuple(float(c) for c in counts), open_last)
+
+
+def _nice_step(span: float, n: int) -> float:
+    raw = max(span, 1e-9) / n
+    mag = 10 ** math.floor(math.log10(raw))
+    for m in (1, 2, 2.5, 5, 10):
+        if m * mag >= raw:
+            return m * mag
+    return 10 * mag  # pragma: no cover
+
+
+def _linear_edges(values: np.ndarray, *, lo: float | None, q_hi: float, n: int) -> tuple[np.ndarray, bool]:
+    v = values[np.isfinite(values)]
+    lo_v = float(v.min()) if lo is None else lo
+    hi_v = float(np.quantile(v, q_hi)) if q_hi < 1 else float(v.max())
+    open_last = q_hi < 1 and hi_v < float(v.max())
+    if hi_v <= lo_v:
+        hi_v = lo_v + max(abs(lo_v) * 0.01, 1.0)
+    step = _nice_step(hi_v - lo_v, n)
+    start = math.floor(lo_v / step) * step if lo is None else lo
+    k = max(1, math.ceil((hi_v - start) / step - 1e-9))
+    return start + step * np.arange(k + 1), open_last
+
+
+def _direction_edges(n: int = N_DIRECTION_BINS) -> np.ndarray:
+    return np.linspace(0.0, 360.0, n + 1)
+
+
+@dataclasses.dataclass(frozen=True)
+class TerrainType:
+    """Orometric statistics of a region, used as the target of Divide Tree synthesis.
+
+    Attributes
+    ----------
+    name : str
+    histograms : mapping feature -> :class:`FeatureHistogram` for every name in
+        :data:`FEATURES` (elevation, prominence in metres; dominance; isolation and
+        key-saddle distance in metres and direction in degrees counter-clockwise from
+        east).
+    peak_density_per_km2 : float
+        Peaks with prominence >= ``min_prominence_m`` per km2.
+    rho : float
+        Exponent of the ridge weight ``|Pi - Pj| / min(h_i, h_j) ** rho``.
+    min_prominence_m : float
+        The prominence threshold ``eps`` the statistics were computed with.
+    isolation_basis : "peaks" (distance to the nearest higher peak of the tree, what a
+        synthesized Divide Tree can measure) or "terrain" (nearest higher cell).
+    provenance : free metadata (source, area, counts, edits).
+    """
+
+    name: str
+    histograms: Mapping[str, FeatureHistogram]
+    peak_density_per_km2: float
+    rho: float = 1.0
+    min_prominence_m: float = 30.0
+    isolation_basis: str = "peaks"
+    provenance: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        missing = set(FEATURES) - set(self.histograms)
+        if missing:
+            raise SchemaError(f"terrain type {self.name!r} lacks histograms {sorted(missing)}; "
+                              f"a type needs all of {list(FEATURES)}")
+        if not (np.isfinite(self.peak_density_per_km2) and self.peak_density_per_km2 > 0):
+            raise SchemaError(f"peak density must be > 0 peaks/km2, got {self.peak_density_per_km2!r}")
+        if not (np.isfinite(self.rho) and 0 <= self.rho <= 4):
+            raise SchemaError(f"rho must be in [0, 4] (the paper uses 0, 1 or 2), got {self.rho!r}")
+        if not (np.isfinite(self.min_prominence_m) and self.min_prominence_m >= 0):
+            raise SchemaError(f"min_prominence_m must be >= 0, got {self.min_prominence_m!r}")
+        if self.isolation_basis not in ("peaks", "terrain"):
+            raise SchemaError(f"isolation_basis must be 'peaks' or 'terrain', got {self.isolation_basis!r}")
+        e = self.histograms["elevation"]
+        if e.edges[-1] <= 0:
+            raise SchemaError("the elevation histogram lies entirely at or below 0 m: peaks need positive elevations")
+
+    # ------------------------------------------------------------ construction
+    @classmethod
+    def from_peaks(
+        cls,
+        peaks: pd.DataFrame,
+        *,
+        area_km2: float,
+        min_prominence_m: float = 30.0,
+        divide_tree: Any = None,
+        isolation_basis: str = "peaks",
+        rho: float | None = None,
+        name: str = "type",
+        provenance: Mapping[str, Any] | None = None,
+    ) -> "TerrainType":
+        """Type from a peak table (``orokit analyze`` columns).
+
+        Parameters
+        ----------
+        peaks : needs ``x``, ``y`` (metres), ``elevation``, ``prominence``, ``saddle_x``,
+            ``saddle_y`` (NaN for roots); with ``isolation_basis="terrain"`` also
+            ``isolation``, ``isolation_x``, ``isolation_y``.
+        area_km2 : area the peaks were found in (for the density).
+        min_prominence_m : only peaks with prominence >= this count.
+        divide_tree : optional :class:`DivideTree` of the same peaks, used to pick rho.
+        isolation_basis : "peaks" (default, nearest higher peak among the counted peaks,
+            comparable with synthesized trees) or "terrain" (the table's isolation).
+        rho : ridge exponent; estimated from ``divide_tree`` when None (default 1).
+
+        Raises
+        ------
+        InputError
+            Missing columns, non-positive area or fewer than 3 peaks above the threshold.
+        """
+        from orokit.synthesis.orometry import direction_deg, nearest_higher_peak
+
+        need = {"x", "y", "elevation", "prominence", "saddle_x", "saddle_y"}
+        if isolation_basis == "terrain":
+            need |= {"isolation", "isolation_x", "isolation_y"}
+        miss = need - set(peaks.columns)
+        if miss:
+            raise InputError(f"peak table lacks columns {sorted(miss)} needed for a terrain type; "
+                             "use the peaks.parquet written by `orokit analyze`")
+        if not (np.isfinite(area_km2) and area_km2 > 0):
+            raise InputError(f"area_km2 must be > 0, got {area_km2!r}")
+        p = peaks[peaks["prominence"].to_numpy(float) >= min_prominence_m]
+        if len(p) < 3:
+            raise InputError(
+                f"only {len(p)} peaks have prominence >= {min_prominence_m} m: too few for a terrain type; "
+                "use a larger region or a lower min_prominence_m"
+            )
+        x, y = p["x"].to_numpy(float), p["y"].to_numpy(float)
+        z = p["elevation"].to_numpy(float)
+        prom = p["prominence"].to_numpy(float)
+        sx, sy = p["saddle_x"].to_numpy(float), p["saddle_y"].to_numpy(float)
+        keyed = np.isfinite(sx) & np.isfinite(sy)
+        if isolation_basis == "terrain":
+            ix, iy = p["isolation_x"].to_numpy(float), p["isolation_y"].to_numpy(float)
+            iso = p["isolation"].to_numpy(float)
+        else:
+            near = nearest_higher_peak(x, y, z)
+            ok = near >= 0
+            ix = np.where(ok, x[np.maximum(near, 0)], np.nan)
+            iy = np.where(ok, y[np.maximum(near, 0)], np.nan)
+            iso = np.hypot(ix - x, iy - y)
+        has_iso = np.isfinite(iso)
+        values = {
+            "elevation": z,
+            "prominence": prom[keyed],
+            "dominance": np.clip(prom[keyed] / np.where(z[keyed] > 0, z[keyed], np.nan), 0, 1),
+            "isolation_distance": iso[has_iso],
+            "isolation_direction": direction_deg(ix - x, iy - y)[has_iso],
+            "saddle_distance": np.hypot(sx - x, sy - y)[keyed],
+            "saddle_direction": direction_deg(sx - x, sy - y)[keyed],
+        }
+        for k, v in values.items():
+            if np.isfinite(v).sum() < 2:
+                raise InputError(f"fewer than 2 finite {k} values among {len(p)} peaks: cannot build a type")
+        hists = {}
+        n = N_LINEAR_BINS
+        e, _ = _linear_edges(values["elevation"], lo=None, q_hi=1.0, n=n)
+        hists["elevation"] = FeatureHistogram.from_values(values["elevation"], e)
+        e, op = _linear_edges(values["prominence"], lo=float(min_prominence_m), q_hi=0.99, n=n)
+        hists["prominence"] = FeatureHistogram.from_values(values["prominence"], e, open_last=op)
+        hists["dominance"] = FeatureHistogram.from_values(values["dominance"], np.linspace(0, 1, n + 1))
+        for k in ("isolation_distance", "saddle_distance"):
+            e, op = _linear_edges(values[k], lo=0.0, q_hi=0.99, n=n)
+            hists[k] = FeatureHistogram.from_values(values[k], e, open_last=op)
+        for k in ("isolation_direction", "saddle_direction"):
+            hists[k] = FeatureHistogram.from_values(values[k], _direction_edges())
+        if rho is None:
+            rho = estimate_rho(divide_tree, min_prominence_m) if divide_tree is not None else 1.0
+        prov = {
+            "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "area_km2": float(area_km2),
+            "n_peaks": int(len(p)),
+            "n_keyed": int(keyed.sum()),
+            "edits": [],
+        }
+        prov.update(dict(provenance or {}))
+        return cls(name, hists, len(p) / float(area_km2), float(rho), float(min_prominence_m),
+                   isolation_basis, prov)
+
+    @classmethod
+    def from_divide_tree(cls, tree: Any, *, area_km2: float, min_prominence_m: float = 30.0,
+                         name: str = "type", rho: float | None = None,
+                         provenance: Mapping[str, Any] | None = None) -> "TerrainType":
+        """Type from a :class:`DivideTree` (e.g. a reference TXT tree), pruned at ``eps``."""
+        from orokit.synthesis.orometry import tree_orometry
+
+        pruned = tree.prune(min_prominence_m)
+        table = tree_orometry(pruned)
+        frame = pd.concat([pruned.peaks[["x", "y", "elevation"]].reset_index(drop=True),
+                           table[["prominence", "saddle_x", "saddle_y"]].reset_index(drop=True)], axis=1)
+        return cls.from_peaks(frame, area_km2=area_km2, min_prominence_m=min_prominence_m,
+                              divide_tree=pruned, name=name, rho=rho, provenance=provenance)
+
+    @classmethod
+    def from_analysis(cls, result: Any, *, min_prominence_m: float | None = None, name: str | None = None,
+                      isolation_basis: str = "peaks", rho: float | None = None) -> "TerrainType":
+        """Type from an :class:`orokit.analysis.AnalysisResult` or an ``orokit analyze`` folder.
+
+        The area is the number of DEM cells (``attrs["shape"]``) times the cell area,
+        the cell size being recovered from the peaks' ``row/col`` and ``x/y`` columns.
+        """
+        src = None
+        if not hasattr(result, "peaks"):
+            from orokit.analysis import read_analysis
+
+            src = str(result)
+            result = read_analysis(result)
+        attrs = dict(getattr(result, "attrs", {}) or {})
+        eps = float(attrs.get("min_prominence", 30.0) if min_prominence_m is None else min_prominence_m)
+        peaks = pd.DataFrame(result.peaks.drop(columns="geometry", errors="ignore"))
+        area = _analysis_area_km2(peaks, attrs)
+        name = name or Path(str(attrs.get("source") or src or "type")).stem
+        return cls.from_peaks(peaks, area_km2=area, min_prominence_m=eps,
+                              divide_tree=getattr(result, "divide_tree", None), isolation_basis=isolation_basis,
+                              rho=rho, name=name, provenance={"source": attrs.get("source") or src})
+
+    # --------------------------------------------------------------- editing
+    def _edited(self, note: str, **changes: Any) -> "TerrainType":
+        prov = dict(self.provenance)
+        prov["edits"] = [*prov.get("edits", []), note]
+        return dataclasses.replace(self, provenance=prov, **changes)
+
+    def with_histogram(self, feature: str, edges: Any, counts: Any, *, open_last: bool | None = None) -> "TerrainType":
+        """New type with one histogram replaced (validated)."""
+        _check_feature(feature)
+        old = self.histograms[feature]
+        h = FeatureHistogram(tuple(float(v) for v in edges), tuple(float(v) for v in counts),
+                             old.open_last if open_last is None else open_last)
+        _check_range(feature, h)
+        hists = dict(self.histograms)
+        hists[feature] = h
+        return self._edited(f"set {feature} histogram", histograms=hists)
+
+    def with_counts(self, feature: str, counts: Any) -> "TerrainType":
+        """New type with the counts of one histogram replaced (hand-edited bins)."""
+        _check_feature(feature)
+        return self.with_histogram(feature, self.histograms[feature].edges, counts)
+
+    def scaled(self, feature: str, factor: float) -> "TerrainType":
+        """New type with a linear feature's values multiplied by ``factor`` (> 0).
+
+        Scaling prominence also scales the key-saddle depth, so the dominance
+        histogram is rebuilt consistently is *not* attempted: edit it separately.
+        """
+        _check_feature(feature)
+        if FEATURES[feature][1] != "linear":
+            raise InputError(f"cannot scale the circular feature {feature!r}; use with_counts to edit it")
+        if not (np.isfinite(factor) and factor > 0):
+            raise InputError(f"scale factor must be a finite number > 0, got {factor!r}")
+        h = self.histograms[feature]
+        edges = np.asarray(h.edges) * factor
+        if feature == "dominance" and edges[-1] > 1:
+            keep = edges[:-1] < 1
+            edges = np.minimum(edges, 1.0)
+            counts = np.asarray(h.counts)[keep]
+            counts[-1] += np.asarray(h.counts)[~keep].sum()
+            edges = np.append(edges[:-1][keep], 1.0)
+            return self._edited(f"scale {feature} x{factor:g}", histograms={
+                **self.histograms, feature: FeatureHistogram(tuple(edges), tuple(counts), h.open_last)})
+        new = FeatureHistogram(tuple(float(v) for v in edges), h.counts, h.open_last)
+        _check_range(feature, new)
+        return self._edited(f"scale {feature} x{factor:g}", histograms={**self.histograms, feature: new})
+
+    def shifted(self, feature: str, offset: float) -> "TerrainType":
+        """New type with a linear feature's values shifted by ``offset`` (elevation: metres)."""
+        _check_feature(feature)
+        if FEATURES[feature][1] != "linear":
+            raise InputError(f"cannot shift the circular feature {feature!r}; use with_counts to edit it")
+        h = self.histograms[feature]
+        new = FeatureHistogram(tuple(float(v) + float(offset) for v in h.edges), h.counts, h.open_last)
+        _check_range(feature, new)
+        return self._edited(f"shift {feature} {offset:+g}", histograms={**self.histograms, feature: new})
+
+    def with_density(self, peak_density_per_km2: float) -> "TerrainType":
+        return self._edited(f"density {peak_density_per_km2:g}", peak_density_per_km2=float(peak_density_per_km2))
+
+    def with_rho(self, rho: float) -> "TerrainType":
+        return self._edited(f"rho {rho:g}", rho=float(rho))
+
+    # ------------------------------------------------------------------- I/O
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "format": TYPE_FORMAT,
+            "version": TYPE_VERSION,
+            "name": self.name,
+            "units": {k: u for k, (u, _) in FEATURES.items()},
+            "peak_density_per_km2": float(self.peak_density_per_km2),
+            "rho": float(self.rho),
+            "min_prominence_m": float(self.min_prominence_m),
+            "isolation_basis": self.isolation_basis,
+            "histograms": {k: self.histograms[k].to_dict() for k in FEATURES},
+            "provenance": dict(self.provenance),
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], *, source: str = "terrain type") -> "TerrainType":
+        if not isinstance(data, Mapping) or data.get("format") != TYPE_FORMAT:
+            raise SchemaError(f"{source} is not an orokit terrain type (format {data.get('format') if isinstance(data, Mapping) else None!r}, "
+                              f"expected {TYPE_FORMAT!r}); create one with `orokit type`")
+        ver = data.get("version")
+        if ver != TYPE_VERSION:
+            raise SchemaError(f"{source} has terrain-type version {ver!r}; this orokit reads version {TYPE_VERSION}. "
+                              "Re-create it with `orokit type` from the same analysis")
+        try:
+            hists = {k: FeatureHistogram(tuple(v["edges"]), tuple(v["counts"]), bool(v.get("open_last", False)))
+                     for k, v in data["histograms"].items() if k in FEATURES}
+            return cls(str(data["name"]), hists, float(data["peak_density_per_km2"]), float(data["rho"]),
+                       float(data["min_prominence_m"]), str(data.get("isolation_basis", "peaks")),
+                       dict(data.get("provenance", {})))
+        except (KeyError, TypeError, ValueError) as exc:
+            if isinstance(exc, SchemaError):
+                raise
+            raise SchemaError(f"{source}: malformed terrain type ({type(exc).__name__}: {exc})") from exc
+
+    def save(self, path: PathLike) -> Path:
+        """Write the type as JSON (atomically)."""
+        from orokit.io.atomic import write_text_atomic
+
+        return write_text_atomic(path, json.dumps(self.to_dict(), indent=1))
+
+    @classmethod
+    def load(cls, path: PathLike) -> "TerrainType":
+        return load_terrain_type(path)
+
+
+def load_terrain_type(path: PathLike) -> TerrainType:
+    """Read a type JSON written by :meth:`TerrainType.save`.
+
+    Raises
+    ------
+    SchemaError
+        Not a type file, another format version, or malformed histograms.
+    """
+    p = Path(path)
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"terrain type file {p} does not exist") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise SchemaError(f"{p} is not valid JSON ({exc}); is it a terrain type written by `orokit type`?") from exc
+    return TerrainType.from_dict(data, source=str(p))
+
+
+def _check_feature(feature: str) -> None:
+    if feature not in FEATURES:
+        raise InputError(f"unknown feature {feature!r}; choose one of {list(FEATURES)}")
+
+
+def _check_range(feature: str, h: FeatureHistogram) -> None:
+    e = np.asarray(h.edges)
+    if feature == "dominance" and (e[0] < 0 or e[-1] > 1):
+        raise SchemaError(f"dominance histogram must lie in [0, 1], got edges {e[0]:g}..{e[-1]:g}")
+    if feature == "elevation" and e[-1] <= 0:
+        raise SchemaError(f"elevation histogram must reach above 0 m, got edges {e[0]:g}..{e[-1]:g}")
+    if feature in ("prominence", "isolation_distance", "saddle_distance") and e[0] < 0:
+        raise SchemaError(f"{feature} histogram must not go below 0, got first edge {e[0]:g}")
+    if FEATURES[feature][1] == "circular" and (e[0] < 0 or e[-1] > 360):
+        raise SchemaError(f"{feature} histogram must lie in [0, 360] degrees")
+
+
+def _analysis_area_km2(peaks: pd.DataFrame, attrs: Mapping[str, Any]) -> float:
+    if "area_km2" in attrs:
+        return float(attrs["area_km2"])
+    shape = attrs.get("shape")
+    if shape is None or not {"row", "col", "x", "y"} <= set(peaks.columns) or len(peaks) < 2:
+        raise InputError("cannot tell the analysed area: the analysis has no 'shape' attribute or row/col columns; "
+                         "pass area_km2 to TerrainType.from_peaks")
+    r, c = peaks["row"].to_numpy(float), peaks["col"].to_numpy(float)
+    x, y = peaks["x"].to_numpy(float), peaks["y"].to_numpy(float)
+    A = np.column_stack([c, r, np.ones_like(c)])
+    cx = np.linalg.lstsq(A, x, rcond=None)[0]
+    cy = np.linalg.lstsq(A, y, rcond=None)[0]
+    cell_area = abs(cx[0] * cy[1] - cx[1] * cy[0])
+    if not np.isfinite(cell_area) or cell_area <= 0:
+        raise InputError("cannot recover the cell size from the peak table; pass area_km2 explicitly")
+    if attrs.get("crs_geographic"):
+        raise InputError("geographic analyses need area_km2 explicitly")
+    return float(shape[0]) * float(shape[1]) * cell_area / 1e6
+
+
+def estimate_rho(divide_tree: Any, min_prominence_m: float = 30.0, choices: tuple[float, ...] = (0.0, 1.0, 2.0)) -> float:
+    """Ridge exponent whose Delaunay MST best reproduces the ridges of ``divide_tree``.
+
+    For each candidate rho the MST of the Delaunay triangulation of the peaks is
+    built with weight ``|Pi - Pj| / min(h_i, h_j) ** rho``; the rho sharing the most
+    peak-to-peak edges with the real tree wins (ties: the smaller rho).
+    """
+    from orokit.synthesis.ridges import delaunay_mst
+
+    tree = divide_tree.prune(min_prominence_m) if min_prominence_m > 0 else divide_tree
+    if tree.n_peaks < 4:
+        return 1.0
+    x = tree.peaks["x"].to_numpy(float)
+    y = tree.peaks["y"].to_numpy(float)
+    z = tree.peaks["elevation"].to_numpy(float)
+    real = {(min(a, b), max(a, b)) for a, b in zip(tree.edges["peak_a"], tree.edges["peak_b"])}
+    best, best_score = 1.0, -1
+    for rho in choices:
+        a, b = delaunay_mst(x, y, z, rho=rho)
+        score = len(real & {(min(i, j), max(i, j)) for i, j in zip(a.tolist(), b.tolist())})
+        logger.debug("rho=%g shares %d of %d ridges", rho, score, len(real))
+        if score > best_score:
+            best, best_score = rho, score
+    return float(best)
