@@ -1,0 +1,80 @@
+# orokit: the two entry points are `make report` (main pipeline) and `make test`.
+#
+# Both create .venv if missing and install orokit with its dev extras once
+# (stamp .venv/.installed, redone when pyproject.toml changes).
+#
+# Adding a pipeline stage (later issues): write a pattern rule whose target is ONE
+# file under reports/<stage>/<name>/ and whose prerequisites are real files from
+# earlier stages, call only `$(OROKIT) ...` in its recipe, list the outputs in a
+# variable built from $(DATASETS), and append that variable to REPORT_OUTPUTS.
+# Every target writes one file atomically, so `make -j2 report` is safe and a rerun
+# only redoes what changed.
+
+SHELL := /bin/bash
+.DELETE_ON_ERROR:
+.SUFFIXES:
+
+PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
+VENV := .venv
+BIN := $(VENV)/bin
+INSTALLED := $(VENV)/.installed
+OROKIT := $(BIN)/orokit
+PYTEST_ARGS ?=
+
+# Real data: copied from a local mirror when OROKIT_DATA_MIRROR is set (or when
+# ../shared/data exists beside the repository), else downloaded from the manifest
+# URLs into the cache (OROKIT_DATA_DIR, default ~/.cache/orokit). Hashes are always checked.
+ifeq ($(origin OROKIT_DATA_MIRROR),undefined)
+  ifneq ($(wildcard ../shared/data/README.md),)
+    export OROKIT_DATA_MIRROR := $(abspath ../shared/data)
+  endif
+endif
+
+MANIFEST := datasets_manifest/datasets.yaml
+DATASETS := alaska andes-aconcagua andes-chile appalachians gobi highlands \
+            himalaya-annapurna himalaya-everest karakoram norway pyrenees rockies sahara
+REPORTS := reports
+STAMPS := .cache/stamps
+DATA_STAMP := $(STAMPS)/data-verified
+
+# stage: per-dataset DEM summary (summary.md is written last, after hillshade.png and summary.json)
+SUMMARY_SRC := orokit/io/dem.py orokit/data/fetch.py orokit/reports/dem_summary.py orokit/cli/report_dataset.py
+DATASET_SUMMARIES := $(DATASETS:%=$(REPORTS)/datasets/%/summary.md)
+
+REPORT_OUTPUTS := $(DATASET_SUMMARIES) $(REPORTS)/README.md
+
+.PHONY: report test data venv clean-reports help
+
+report: $(REPORT_OUTPUTS)  ## main pipeline: fetch/verify data, per-dataset summaries, index
+
+help:  ## list targets
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/'
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+
+$(INSTALLED): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install -e '.[dev]'
+	touch $@
+
+venv: $(INSTALLED)  ## create .venv and install orokit[dev]
+
+test: $(INSTALLED)  ## run the test suite on 2 cores
+	$(BIN)/python -m pytest -n 2 tests $(PYTEST_ARGS)
+
+$(DATA_STAMP): $(MANIFEST) | $(INSTALLED)
+	@mkdir -p $(@D)
+	$(OROKIT) data fetch
+	$(OROKIT) data verify
+	touch $@
+
+data: $(DATA_STAMP)  ## fetch and verify every dataset of the manifest
+
+$(REPORTS)/datasets/%/summary.md: $(DATA_STAMP) $(SUMMARY_SRC) | $(INSTALLED)
+	$(OROKIT) -q report-dataset $* -o $(@D) --overwrite
+
+$(REPORTS)/README.md: $(DATASET_SUMMARIES) orokit/cli/report_index.py | $(INSTALLED)
+	$(OROKIT) -q report-index $(patsubst %/summary.md,%/summary.json,$(DATASET_SUMMARIES)) -o $@ --overwrite
+
+clean-reports:  ## delete generated reports (keeps data and .venv)
+	rm -rf $(REPORTS)/datasets $(REPORTS)/README.md
