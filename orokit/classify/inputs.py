@@ -59,22 +59,43 @@ def read_region(path: PathLike) -> Any:
     return g
 
 
-def _analysis_domain(folder: Path, meta: dict[str, Any]) -> tuple[np.ndarray, Any, Any] | None:
-    """Valid mask, transform and CRS of the DEM behind an analysis folder, when known."""
-    attrs = meta.get("attrs", meta)
-    src = attrs.get("source") or attrs.get("dem")
+def _grid_from_peaks(peaks: pd.DataFrame) -> Any:
+    """North-up affine transform fitted to the peaks' (row, col) -> (x, y) (cell centres)."""
+    from affine import Affine
+
+    if not {"row", "col"} <= set(peaks.columns) or len(peaks) < 2:
+        return None
+    r, c = peaks["row"].to_numpy(float), peaks["col"].to_numpy(float)
+    if np.ptp(r) == 0 or np.ptp(c) == 0:
+        return None
+    a, x0 = np.polyfit(c + 0.5, peaks["x"].to_numpy(float), 1)
+    e, y0 = np.polyfit(r + 0.5, peaks["y"].to_numpy(float), 1)
+    return Affine(a, 0.0, x0, 0.0, e, y0)
+
+
+def _analysis_domain(peaks: pd.DataFrame, meta: dict[str, Any]) -> tuple[np.ndarray, Any] | None:
+    """Valid mask and transform of the DEM behind an analysis folder, when known.
+
+    The grid comes from ``analysis.json`` (``shape``) and a fit of the peaks' row/col to
+    x/y; the valid mask from the source DEM named in ``analysis.json`` when it can be
+    read (its nodata), else every cell.
+    """
+    shape = meta.get("shape")
+    transform = _grid_from_peaks(peaks)
+    if not shape or transform is None:
+        return None
+    valid = np.ones(tuple(int(v) for v in shape), dtype=bool)
+    src = meta.get("source")
     if src and Path(str(src)).exists():
-        from orokit.io.dem import read_dem
+        try:
+            from orokit.io.dem import read_dem
 
-        dem = read_dem(str(src), z_units=attrs.get("z_units_in"), cell_size=attrs.get("cell_size"))
-        return np.isfinite(np.asarray(dem.values, dtype=float)), dem.rio.transform(), dem.rio.crs
-    shape = attrs.get("shape")
-    tr = attrs.get("transform")
-    if shape and tr:
-        from affine import Affine
-
-        return np.ones(tuple(shape), dtype=bool), Affine(*tr[:6]), attrs.get("crs")
-    return None
+            dem = read_dem(str(src), z_units=meta.get("z_units_in") or "m", cell_size=abs(transform.a))
+            if dem.shape == valid.shape:
+                valid = np.isfinite(np.asarray(dem.values, dtype=float))
+        except Exception as exc:  # noqa: BLE001 - the extent alone is a usable domain
+            logger.warning("cannot read %s for its nodata mask (%s); using the full extent", src, exc)
+    return valid, transform
 
 
 def features_for_input(source: PathLike, *, radius_m: float, label: str | None = None,
@@ -103,11 +124,11 @@ def features_for_input(source: PathLike, *, radius_m: float, label: str | None =
         return features_from_region(peaks, region, **kw)
     meta = peaks.attrs.get("analysis")
     if meta is not None:
-        dom = _analysis_domain(p, meta)
+        raw = pd.read_parquet(p / "peaks.parquet", columns=["row", "col", "x", "y"]) if p.is_dir() else peaks
+        dom = _analysis_domain(raw, meta)
         if dom is not None:
-            valid, transform, dcrs = dom
-            disks = sample_disks_in_mask(valid, transform=transform, radius_m=radius_m,
-                                         crs=peaks.crs if peaks.crs is not None else dcrs,
+            valid, transform = dom
+            disks = sample_disks_in_mask(valid, transform=transform, radius_m=radius_m, crs=peaks.crs,
                                          separation=separation, max_disks=max_disks, rng=rng)
             return feature_table(peaks, disks, spec=spec, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
                                  label=label, source=p.name, crs=peaks.crs, relative_elevation=relative_elevation,

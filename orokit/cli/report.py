@@ -1,0 +1,57 @@
+"""``orokit report``: the classification report (Table 2, confusion matrices, histograms)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from orokit.cli.features import RADIUS
+
+
+@click.command()
+@click.argument("inputs", nargs=-1, type=click.Path(exists=True, path_type=Path))
+@click.option("--analysis-dir", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
+              help="Folder of `orokit analyze` outputs, one sub-folder per region (used when no INPUT is given).")
+@click.option("-o", "--output", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("reports/classification"), show_default=True, help="Report folder.")
+@click.option("--radius", "radii", type=RADIUS, multiple=True,
+              help="Disk radius with unit; repeat for several (default 10km, 5km, 15km).")
+@click.option("--runs", type=int, default=100, show_default=True, help="Training runs with fresh splits.")
+@click.option("--feature-runs", type=int, default=20, show_default=True, help="Runs per feature group (Table 2 rows).")
+@click.option("--min-prominence", type=float, default=30.0, show_default=True, help="eps in METRES.")
+@click.option("--min-peaks", type=int, default=20, show_default=True, help="Skip disks with fewer peaks.")
+@click.option("--model", "model_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also save a model trained on all disks at the first radius (e.g. models/regions-10km.skops).")
+@click.option("--z-units", type=click.Choice(["m", "ft"]), default=None, help="Units of DEM inputs without units.")
+@click.option("--cell-size", type=float, default=None, help="Cell size in METRES of DEM inputs without georeference.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of disks, splits and forests.")
+@click.option("--n-jobs", type=int, default=2, show_default=True, help="Parallel fits.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing report / model.")
+@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bars.")
+def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominence, min_peaks, model_path, z_units,
+           cell_size, seed, n_jobs, overwrite, progress):
+    """Classification report on INPUTs (DEMs, analysis folders or peak lists; one region each).
+
+    Accuracies in the tables are percentages; radii in km.
+    """
+    from orokit.reports.classification import build_classification_report
+
+    if not inputs:
+        if analysis_dir is None:
+            raise click.UsageError("give INPUTs or --analysis-dir")
+        inputs = sorted(p for p in analysis_dir.iterdir() if (p / "peaks.parquet").exists())
+        if not inputs:
+            raise click.UsageError(f"{analysis_dir} holds no analysis folder (sub-folders with peaks.parquet)")
+    if (output / "README.md").exists() and not overwrite:
+        raise click.UsageError(f"{output} already holds a report; pass --overwrite to replace it")
+    if model_path is not None and model_path.exists() and not overwrite:
+        raise click.UsageError(f"{model_path} exists; pass --overwrite to replace it")
+    radii = list(radii) or [10_000.0, 5_000.0, 15_000.0]
+    res = build_classification_report(list(inputs), output, radii_m=radii, runs=runs, feature_runs=feature_runs,
+                                      min_prominence_m=min_prominence, min_peaks=min_peaks, model_path=model_path,
+                                      n_jobs=n_jobs, progress=progress, seed=seed, z_units=z_units,
+                                      cell_size=cell_size)
+    for r, e in sorted(res["evaluations"].items()):
+        click.echo(f"R = {r / 1000:g} km: random split {100 * e['random'].mean_accuracy:.1f} %, spatial hold-out "
+                   f"{100 * e['spatial'].mean_accuracy:.1f} %")
+    click.echo(f"report -> {output}")
