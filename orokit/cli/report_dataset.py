@@ -10,7 +10,8 @@ import click
 @click.argument("name")
 @click.option("-o", "--outdir", required=True, type=click.Path(file_okay=False), help="Output directory.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing summary.")
-def report_dataset(name: str, outdir: str, overwrite: bool) -> None:
+@click.pass_context
+def report_dataset(ctx: click.Context, name: str, outdir: str, overwrite: bool) -> None:
     """Fetch the manifest DEM NAME, read it, and write DIR/summary.md, summary.json, hillshade.png."""
     from orokit.data import load_manifest, open_dataset_dem
     from orokit.reports.dem_summary import write_dem_summary
@@ -22,4 +23,5 @@ def report_dataset(name: str, outdir: str, overwrite: bool) -> None:
     ds = manifest[name]
     dem = open_dataset_dem(name, manifest=manifest)
     paths = write_dem_summary(dem, out, dataset=ds)
-    click.echo(f"{name}: wrote {paths['md']}")
+    if not (ctx.find_root().obj or {}).get("quiet"):
+        click.echo(f"{name}: wrote {paths['md']}")

@@ -10,7 +10,8 @@ import click
 @click.argument("summaries", nargs=-1, required=True, type=click.Path(dir_okay=False, exists=True))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Markdown file to write.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing index.")
-def report_index(summaries: tuple[str, ...], output: str, overwrite: bool) -> None:
+@click.pass_context
+def report_index(ctx: click.Context, summaries: tuple[str, ...], output: str, overwrite: bool) -> None:
     """Write a markdown index linking the summary.json files SUMMARIES (made by report-dataset)."""
     from orokit.io.atomic import write_text_atomic
     from orokit.reports.dem_summary import render_index
@@ -19,4 +20,5 @@ def report_index(summaries: tuple[str, ...], output: str, overwrite: bool) -> No
     if out.exists() and not overwrite:
         raise click.ClickException(f"{out} exists; pass --overwrite to replace it.")
     write_text_atomic(out, render_index(list(summaries), out))
-    click.echo(f"wrote {out} ({len(summaries)} datasets)")
+    if not (ctx.find_root().obj or {}).get("quiet"):
+        click.echo(f"wrote {out} ({len(summaries)} datasets)")
