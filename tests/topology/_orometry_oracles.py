@@ -221,3 +221,49 @@ def flat_domain_cells(z: np.ndarray) -> np.ndarray:
         if np.ptp(z[m]) == 0:
             out |= m
     return out
+
+
+# ---------------------------------------------------------------- hypothesis strategies
+def grids(max_side: int = 10, *, min_side: int = 1, nan: bool = True, max_levels: int = 5):
+    """Small float32 grids with 2..max_levels distinct values (many ties) and NaN holes."""
+    from hypothesis import strategies as st
+    from hypothesis.extra.numpy import arrays
+
+    @st.composite
+    def build(draw):
+        h = draw(st.integers(min_side, max_side))
+        w = draw(st.integers(min_side, max_side))
+        k = draw(st.integers(2, max_levels))
+        levels = draw(
+            st.lists(st.integers(-20, 60), min_size=k, max_size=k, unique=True)
+            | st.lists(st.floats(-100, 3000, width=32, allow_subnormal=False), min_size=k, max_size=k, unique=True)
+        )
+        elements = st.sampled_from([float(v) for v in levels])
+        z = draw(arrays(np.float32, (h, w), elements=elements))
+        if nan and draw(st.booleans()):
+            holes = draw(arrays(np.bool_, (h, w), elements=st.booleans()))
+            if draw(st.booleans()):  # sparse holes most of the time
+                holes &= draw(arrays(np.bool_, (h, w), elements=st.booleans()))
+            z = z.copy()
+            z[holes] = np.nan
+        if not np.isfinite(z).any():
+            z = z.copy()
+            z[0, 0] = levels[0]
+        return z
+
+    return build()
+
+
+def distinct_grids(max_side: int = 10):
+    """Small float32 grids of distinct values (no ties at all)."""
+    from hypothesis import strategies as st
+
+    @st.composite
+    def build(draw):
+        h = draw(st.integers(1, max_side))
+        w = draw(st.integers(1, max_side))
+        seed = draw(st.integers(0, 2**32 - 1))
+        rng = np.random.default_rng(seed)
+        return (rng.permutation(h * w).reshape(h, w) * 1.5 + 10).astype(np.float32)
+
+    return build()
