@@ -22,7 +22,7 @@ from numba import njit
 EARTH_RADIUS_M = 6371008.8
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def build_pyramid(level0):
     """Block-maximum pyramid stored flat. Returns (values, offsets, heights, widths)."""
     H, W = level0.shape
@@ -62,7 +62,7 @@ def build_pyramid(level0):
     return vals, offs, hs, ws
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _gap(p, lo, hi):
     if p < lo:
         return lo - p
@@ -71,7 +71,7 @@ def _gap(p, lo, hi):
     return 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _lower_bound(pr, pc, r0, r1, c0, c1, geo, dx, dy, lat0, dlat, dlon):
     """Lower bound of the distance from cell (pr, pc) to any cell of the block."""
     gr = _gap(pr, r0, r1)
@@ -90,7 +90,7 @@ def _lower_bound(pr, pc, r0, r1, c0, c1, geo, dx, dy, lat0, dlat, dlon):
     return 2 * EARTH_RADIUS_M * math.asin(min(1.0, math.sqrt(s)))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cell_distance(pr, pc, r, c, geo, dx, dy, lat0, dlat, dlon):
     if not geo:
         return math.hypot((r - pr) * dy, (c - pc) * dx)
@@ -101,7 +101,7 @@ def _cell_distance(pr, pc, r, c, geo, dx, dy, lat0, dlat, dlon):
     return 2 * EARTH_RADIUS_M * math.asin(min(1.0, math.sqrt(s)))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _nearest(vals, offs, hs, ws, pr, pc, thresh, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, cand, ncand_max):
     """Best-first search of the nearest cell with value > thresh, up to ``cutoff``.
 
@@ -159,45 +159,61 @@ def _nearest(vals, offs, hs, ws, pr, pc, thresh, cutoff, geo, dx, dy, lat0, dlat
     return best, m
 
 
-@njit(cache=True)
-def isolation_search(z, prow, pcol, geo, dx, dy, lat0, dlat, dlon, slack, ncand_max):
-    """Nearest strictly higher cell and nearest "unknown" (outside/NaN) for each peak.
+@njit(cache=True, nogil=True)
+def nearest_in_block(block, prow, pcol, pz, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, ncand):
+    """Nearest cell of ``block`` strictly higher than ``pz`` for every query point.
 
-    Returns ``best`` (metric distance to the nearest higher cell, inf if none),
-    ``cand`` (n_peaks x ncand_max flat indices, -1 padded: candidates for the exact
-    ellipsoidal check), ``edge`` (distance to the nearest cell outside the raster or
-    NaN, capped at ``best``).
+    Query cells ``(prow, pcol)`` are relative to the block's first cell and may lie
+    outside it (chunked isolation). ``lat0`` is the latitude (radians) of the block's
+    top edge for geographic grids. Searches stop at ``cutoff`` (per query).
+    Returns ``best`` (distance, inf if none within the cutoff) and ``cand`` (n x
+    ncand flat indices in the block, -1 padded: every cell within ``slack`` of the
+    best, for an exact ellipsoidal check by the caller).
     """
-    H, W = z.shape
-    zz = np.where(np.isnan(z), -np.inf, z)
+    zz = np.where(np.isnan(block), -np.inf, block)
     vals, offs, hs, ws = build_pyramid(zz)
-    nanmask = np.where(np.isnan(z), 1.0, 0.0)
-    nvals, noffs, nhs, nws = build_pyramid(nanmask)
-    has_nan = nvals[noffs[nhs.size - 1]] > 0.5
-    npk = prow.size
-    best = np.full(npk, np.inf)
-    edge = np.full(npk, np.inf)
-    cand = np.full((npk, ncand_max), -1, np.int64)
-    buf = np.empty(ncand_max, np.int64)
-    for i in range(npk):
-        pr = prow[i]
-        pc = pcol[i]
-        h = z[pr, pc]
-        b, m = _nearest(vals, offs, hs, ws, pr, pc, h, np.inf, geo, dx, dy, lat0, dlat, dlon, slack, buf, ncand_max)
+    n = prow.size
+    best = np.full(n, np.inf)
+    cand = np.full((n, ncand), -1, np.int64)
+    buf = np.empty(ncand, np.int64)
+    for i in range(n):
+        b, m = _nearest(vals, offs, hs, ws, prow[i], pcol[i], pz[i], cutoff[i], geo, dx, dy, lat0, dlat, dlon,
+                        slack, buf, ncand)
         best[i] = b
         for j in range(m):
             cand[i, j] = buf[j]
-        # distance to the nearest cell outside the raster
-        e = min(
-            _cell_distance(pr, pc, -1, pc, geo, dx, dy, lat0, dlat, dlon),
-            _cell_distance(pr, pc, H, pc, geo, dx, dy, lat0, dlat, dlon),
-            _cell_distance(pr, pc, pr, -1, geo, dx, dy, lat0, dlat, dlon),
-            _cell_distance(pr, pc, pr, W, geo, dx, dy, lat0, dlat, dlon),
+    return best, cand
+
+
+@njit(cache=True, nogil=True)
+def nearest_nan_in_block(block, prow, pcol, cutoff, geo, dx, dy, lat0, dlat, dlon):
+    """Distance from each query cell to the nearest NaN cell of ``block`` (inf if none)."""
+    mask = np.where(np.isnan(block), 1.0, 0.0)
+    vals, offs, hs, ws = build_pyramid(mask)
+    n = prow.size
+    out = np.full(n, np.inf)
+    if vals[offs[hs.size - 1]] < 0.5:
+        return out
+    buf = np.empty(1, np.int64)
+    for i in range(n):
+        d, _ = _nearest(vals, offs, hs, ws, prow[i], pcol[i], 0.5, cutoff[i], geo, dx, dy, lat0, dlat, dlon,
+                        0.0, buf, 1)
+        out[i] = d
+    return out
+
+
+@njit(cache=True, nogil=True)
+def outside_distance(prow, pcol, H, W, geo, dx, dy, lat0, dlat, dlon):
+    """Distance from each cell to the nearest cell outside an H x W raster."""
+    n = prow.size
+    out = np.empty(n)
+    for i in range(n):
+        pr = prow[i]
+        pc = pcol[i]
+        out[i] = min(
+            min(_cell_distance(pr, pc, -1, pc, geo, dx, dy, lat0, dlat, dlon),
+                _cell_distance(pr, pc, H, pc, geo, dx, dy, lat0, dlat, dlon)),
+            min(_cell_distance(pr, pc, pr, -1, geo, dx, dy, lat0, dlat, dlon),
+                _cell_distance(pr, pc, pr, W, geo, dx, dy, lat0, dlat, dlon)),
         )
-        if has_nan:
-            dn, _ = _nearest(nvals, noffs, nhs, nws, pr, pc, 0.5, min(e, b), geo, dx, dy, lat0, dlat, dlon,
-                             0.0, buf, 1)
-            if dn < e:
-                e = dn
-        edge[i] = e
-    return best, cand, edge
+    return out

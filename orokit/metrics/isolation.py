@@ -1,6 +1,8 @@
 """Isolation: distance from a peak to the nearest strictly higher cell."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pandas as pd
 from pyproj import CRS, Geod
@@ -8,11 +10,51 @@ from pyproj import CRS, Geod
 from orokit.errors import CRSError
 from orokit.metrics import _kernels
 
-__all__ = ["isolation"]
+__all__ = ["isolation", "GridMetric"]
 
 _GEOD = Geod(ellps="WGS84")
-_SLACK = 0.012  # > max relative difference between sphere and WGS84 geodesic distances
-_NCAND = 64
+SLACK = 0.012  # > max relative difference between sphere and WGS84 geodesic distances
+NCAND = 64
+
+
+@dataclass(frozen=True)
+class GridMetric:
+    """How distances are measured on a north-up grid.
+
+    Geographic grids use great-circle distances for the search (refined to WGS84
+    geodesics by :func:`isolation`); other grids Euclidean distances with the two
+    cell sizes (non-square cells are fine).
+    """
+
+    geo: bool
+    dx: float
+    dy: float
+    lat0: float  # radians, top edge (geographic)
+    dlat: float  # radians per row (negative for north-up)
+    dlon: float  # radians per column
+    transform: object
+
+    @classmethod
+    def from_grid(cls, transform, crs) -> "GridMetric":
+        if transform.b != 0 or transform.d != 0:
+            raise CRSError("rotated or sheared grids are not supported; warp the DEM north-up first")
+        geo = bool(crs is not None and CRS.from_user_input(crs).is_geographic)
+        if geo:
+            return cls(True, 0.0, 0.0, np.radians(transform.f), np.radians(transform.e), np.radians(transform.a),
+                       transform)
+        return cls(False, abs(transform.a), abs(transform.e), 0.0, 0.0, 0.0, transform)
+
+    @property
+    def slack(self) -> float:
+        return SLACK if self.geo else 0.0
+
+    @property
+    def ncand(self) -> int:
+        return NCAND if self.geo else 16
+
+    def args(self, row0: int = 0) -> tuple:
+        """Kernel arguments for a block whose first row is ``row0``."""
+        return (self.geo, self.dx, self.dy, self.lat0 + row0 * self.dlat, self.dlat, self.dlon)
 
 
 def isolation(z: np.ndarray, rows: np.ndarray, cols: np.ndarray, *, transform, crs=None) -> pd.DataFrame:
@@ -43,50 +85,59 @@ def isolation(z: np.ndarray, rows: np.ndarray, cols: np.ndarray, *, transform, c
        every candidate within 1.2 % of the best; the WGS84 geodesic (Karney, pyproj)
        picks the exact nearest among them.
     """
-    if transform.b != 0 or transform.d != 0:
-        raise CRSError("rotated or sheared grids are not supported for isolation; warp the DEM north-up first")
+    metric = GridMetric.from_grid(transform, crs)
     rows = np.asarray(rows, dtype=np.int64)
     cols = np.asarray(cols, dtype=np.int64)
-    geo = bool(crs is not None and CRS.from_user_input(crs).is_geographic)
-    z = np.ascontiguousarray(z, dtype=np.float64)
-    if geo:
-        lat0, dlat, dlon = np.radians(transform.f), np.radians(transform.e), np.radians(transform.a)
-        dx = dy = 0.0
-    else:
-        lat0 = dlat = dlon = 0.0
-        dx, dy = abs(transform.a), abs(transform.e)
-    best, cand, edge = _kernels.isolation_search(
-        z, rows, cols, geo, dx, dy, lat0, dlat, dlon, _SLACK if geo else 0.0, _NCAND if geo else 1
-    )
-    W = z.shape[1]
-    target = cand[:, 0].copy()
-    dist = best.copy()
-    if geo and len(rows):
-        # exact WGS84 geodesic among the spherical candidates
-        pi, ci = np.nonzero(cand >= 0)
-        cells = cand[pi, ci]
-        lon_p = transform.c + (cols[pi] + 0.5) * transform.a
-        lat_p = transform.f + (rows[pi] + 0.5) * transform.e
-        lon_t = transform.c + (cells % W + 0.5) * transform.a
-        lat_t = transform.f + (cells // W + 0.5) * transform.e
-        _, _, d = _GEOD.inv(lon_p, lat_p, lon_t, lat_t)
-        d = np.asarray(d, dtype=float)
-        dist = np.full(len(rows), np.inf)
-        order = np.lexsort((ci, d, pi))  # per peak: smallest distance first
+    z = np.ascontiguousarray(z)
+    H, W = z.shape
+    pz = z[rows, cols].astype(np.float64)
+    inf = np.full(rows.size, np.inf)
+    best, cand = _kernels.nearest_in_block(z, rows, cols, pz, inf, *metric.args(), metric.slack, metric.ncand)
+    edge = _kernels.outside_distance(rows, cols, H, W, *metric.args())
+    nan_d = _kernels.nearest_nan_in_block(z, rows, cols, np.minimum(edge, best), *metric.args())
+    edge = np.minimum(edge, nan_d)
+    return finish_isolation(metric, rows, cols, best, cand, W, edge)
+
+
+def finish_isolation(metric: GridMetric, rows, cols, best, cand_flat, width, edge) -> pd.DataFrame:
+    """Pick the exact nearest candidate and build the isolation table.
+
+    ``cand_flat`` holds global flat indices (row * width + col), -1 padded: every cell
+    within the search slack of the best. Distances are recomputed exactly (WGS84
+    geodesic for geographic grids, Euclidean otherwise) and the nearest wins; equal
+    distances go to the first cell in raster order, so results do not depend on the
+    search order (in memory or chunked).
+    """
+    n = rows.size
+    dist = np.full(n, np.inf)
+    target = np.full(n, -1, np.int64)
+    pi, ci = np.nonzero(cand_flat >= 0)
+    if pi.size:
+        cells = cand_flat[pi, ci]
+        tr, tc = cells // width, cells % width
+        if metric.geo:
+            t = metric.transform
+            _, _, d = _GEOD.inv(
+                t.c + (cols[pi] + 0.5) * t.a, t.f + (rows[pi] + 0.5) * t.e,
+                t.c + (tc + 0.5) * t.a, t.f + (tr + 0.5) * t.e,
+            )
+            d = np.asarray(d, dtype=float)
+        else:
+            d = np.hypot((tr - rows[pi]) * metric.dy, (tc - cols[pi]) * metric.dx)
+        order = np.lexsort((cells, d, pi))  # per peak: nearest first, ties by raster order
         first = np.ones(order.size, bool)
         first[1:] = pi[order][1:] != pi[order][:-1]
         sel = order[first]
         dist[pi[sel]] = d[sel]
         target[pi[sel]] = cells[sel]
-        # the edge distance is spherical: scale to be conservative
-        edge = edge * (1.0 - _SLACK)
-    found = np.isfinite(dist)
-    out = pd.DataFrame(
+    if metric.geo:
+        edge = edge * (1.0 - SLACK)  # spherical edge distance: stay conservative
+    found = target >= 0
+    return pd.DataFrame(
         {
             "isolation": np.where(found, dist, np.nan),
-            "isolation_row": np.where(found, target // W, -1),
-            "isolation_col": np.where(found, target % W, -1),
+            "isolation_row": np.where(found, target // width, -1),
+            "isolation_col": np.where(found, target % width, -1),
             "isolation_exact": found & (dist < edge),
         }
     )
-    return out

@@ -21,13 +21,13 @@ _NEIGHBOURS_8 = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (
 _FORWARD_4 = ((0, 1), (1, -1), (1, 0), (1, 1))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def above(za, ka, zb, kb):
     """True when (za, ka) is above (zb, kb) in the total order."""
     return za > zb or (za == zb and ka < kb)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def steepest_ascent(z):
     """Pointer of every cell to its highest 8-neighbour, and border flags.
 
@@ -67,7 +67,7 @@ def steepest_ascent(z):
     return ptr, border
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def label_basins(ptr):
     """Label every cell with the id of the maximum its ascent chain reaches.
 
@@ -107,7 +107,7 @@ def label_basins(ptr):
     return label, peak_cell
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def basin_border_max(z, label, border, npk):
     """Highest border-cell elevation of every basin (-inf when it has none)."""
     out = np.full(npk, -np.inf)
@@ -120,13 +120,13 @@ def basin_border_max(z, label, border, npk):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _hash_slot(key, mask):
     h = np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)
     return np.int64((h >> np.uint64(17)) & np.uint64(mask))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _insert(keys, vals, key, cell, zf):
     mask = keys.size - 1
     s = _hash_slot(key, mask)
@@ -144,7 +144,7 @@ def _insert(keys, vals, key, cell, zf):
         s = (s + 1) & mask
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def basin_passes(z, label, npk):
     """Highest pass between every pair of adjacent basins.
 
@@ -202,7 +202,7 @@ def basin_passes(z, label, npk):
     return ea, eb, ec
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _find(parent, x):
     root = x
     while parent[root] != root:
@@ -214,7 +214,7 @@ def _find(parent, x):
     return root
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, border_z):
     """Maximum spanning forest and elder-rule prominence in one Kruskal sweep.
 
@@ -306,7 +306,7 @@ def kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, border_z):
     return in_tree, key_edge, parent, touched
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def prune_edges(n, ea, eb, ez, keep, bmax, nmin):
     """Divide Tree restricted to the kept nodes, preserving bottleneck saddles.
 
@@ -368,7 +368,7 @@ def prune_edges(n, ea, eb, ez, keep, bmax, nmin):
     return out_a[:k], out_b[:k], out_e[:k], nb, nm
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def basin_min(z, label, npk):
     """Lowest elevation of every basin."""
     out = np.full(npk, np.inf)

@@ -1,0 +1,224 @@
+"""Chunk summaries of the saddle graph and their exact merge.
+
+A :class:`ChunkSummary` describes a rectangle of the raster by a small tree whose
+nodes are candidate peaks and the cells on the rectangle's sides that face other
+chunks, and whose edges carry bottleneck (highest-pass) saddles. It keeps the exact
+bottleneck saddle between any two of its nodes, so summaries of neighbouring
+rectangles merge exactly: add "seam" edges between adjacent side cells (weight =
+the lower cell), take the maximum spanning tree, and contract the nodes that are no
+longer needed (DESIGN.md §2 step 5).
+
+Nodes whose prominence *within the rectangle* is below the threshold are contracted
+early: terrain outside can only add paths and higher ground, so a chunk-local
+prominence is an upper bound of the true one.
+
+Everything is in the global total order of the raster (elevation, then flat index),
+so the merged result equals the in-memory engine's.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from orokit.tiling import _kernels as _tk
+from orokit.topology import _kernels as _k
+from orokit.topology.engine import Orometry, finalize_graph
+
+__all__ = ["ChunkSummary", "chunk_summary", "merge_summaries", "finalize_summary"]
+
+_OFFSETS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
+
+
+@dataclass
+class ChunkSummary:
+    """Saddle tree of a raster rectangle ``rows [r0, r1) x cols [c0, c1)``."""
+
+    region: tuple[int, int, int, int]
+    shape: tuple[int, int]       # whole raster (H, W)
+    key: np.ndarray              # global flat cell of each node
+    z: np.ndarray                # elevation of each node
+    ismax: np.ndarray            # node is a maximum (candidate peak)
+    bmax: np.ndarray             # highest border ("unknown outside") value reachable
+    nmin: np.ndarray             # lowest elevation of the node's absorbed area
+    ea: np.ndarray
+    eb: np.ndarray
+    ez: np.ndarray               # saddle elevation
+    ekey: np.ndarray             # saddle cell (global flat index)
+    n_maxima: int = 0            # global maxima counted inside the rectangle
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.key.size)
+
+    def nbytes(self) -> int:
+        return sum(getattr(self, f).nbytes for f in ("key", "z", "ismax", "bmax", "nmin", "ea", "eb", "ez", "ekey"))
+
+    def to_npz(self) -> dict:
+        out = {f: getattr(self, f) for f in ("key", "z", "ismax", "bmax", "nmin", "ea", "eb", "ez", "ekey")}
+        out["meta"] = np.array([*self.region, *self.shape, self.n_maxima], dtype=np.int64)
+        return out
+
+    @classmethod
+    def from_npz(cls, data) -> "ChunkSummary":
+        m = data["meta"]
+        return cls(
+            tuple(int(v) for v in m[:4]), (int(m[4]), int(m[5])),
+            *(data[f] for f in ("key", "z", "ismax", "bmax", "nmin", "ea", "eb", "ez", "ekey")),
+            n_maxima=int(m[6]),
+        )
+
+
+def _side_mask(keys: np.ndarray, region, shape) -> np.ndarray:
+    """Cells on a side of ``region`` that faces other cells of the raster."""
+    r0, r1, c0, c1 = region
+    H, W = shape
+    r, c = keys // W, keys % W
+    return (
+        ((r == r0) & (r0 > 0)) | ((r == r1 - 1) & (r1 < H)) | ((c == c0) & (c0 > 0)) | ((c == c1 - 1) & (c1 < W))
+    )
+
+
+def _reduce(s: ChunkSummary, min_prominence: float, needed: np.ndarray) -> ChunkSummary:
+    """Maximum spanning tree of the summary graph, then contract unneeded nodes.
+
+    Kept: ``needed`` nodes (side cells) and maxima that are roots or whose
+    prominence within the rectangle reaches the threshold (and is > 0).
+    """
+    n = s.n_nodes
+    if n == 0:
+        return s
+    order = np.lexsort((s.ekey, -s.ez))
+    ea, eb, ez, ekey = s.ea[order], s.eb[order], s.ez[order], s.ekey[order]
+    in_tree, key_edge, _, _ = _k.kruskal_sweep(s.z, s.key, ea, eb, ez, ekey, s.bmax)
+    root = key_edge < 0
+    prom = np.full(n, np.inf)
+    prom[~root] = s.z[~root] - ez[key_edge[~root]]
+    keep = needed | (s.ismax & (root | ((prom >= min_prominence) & (prom > 0))))
+    ta, tb, tz, tk = ea[in_tree], eb[in_tree], ez[in_tree], ekey[in_tree]
+    oa, ob, oe, nb, nm = _k.prune_edges(n, ta, tb, tz, keep, s.bmax, s.nmin)
+    new_id = np.full(n, -1, np.int64)
+    kept = np.flatnonzero(keep)
+    new_id[kept] = np.arange(kept.size)
+    return ChunkSummary(
+        s.region, s.shape, s.key[kept], s.z[kept], s.ismax[kept], nb[kept], nm[kept],
+        new_id[oa], new_id[ob], tz[oe], tk[oe], s.n_maxima,
+    )
+
+
+def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
+                  min_prominence: float) -> ChunkSummary:
+    """Summary of one chunk given with a one-cell halo (NaN outside the raster).
+
+    Parameters
+    ----------
+    zh : (h + 2, w + 2) array: the chunk and one cell of its neighbours all round.
+    row0, col0 : global position of the chunk's first cell; shape : raster (H, W).
+    """
+    H, W = shape
+    zh = np.ascontiguousarray(zh)
+    core = np.ascontiguousarray(zh[1:-1, 1:-1])
+    h, w = core.shape
+    region = (row0, row0 + h, col0, col0 + w)
+    ptr, border = _tk.steepest_ascent_halo(zh)
+    label, max_cell = _k.label_basins(ptr)
+    npk = max_cell.size
+    empty_i = np.empty(0, np.int64)
+    if npk == 0:
+        return ChunkSummary(region, (H, W), empty_i, np.empty(0), np.empty(0, bool), np.empty(0), np.empty(0),
+                            empty_i, empty_i, np.empty(0), empty_i, 0)
+    zf = core.ravel()
+    bz = _k.basin_border_max(core, label, border, npk)
+    nmin = _k.basin_min(core, label, npk)
+    ea, eb, ec = _k.basin_passes(core, label, npk)
+
+    def glob(i):
+        return (row0 + i // w) * W + col0 + i % w
+
+    # side cells that are not maxima become extra nodes tied to their basin's maximum
+    rr, cc = np.divmod(np.arange(h * w), w)
+    side = (rr == 0) | (rr == h - 1) | (cc == 0) | (cc == w - 1)
+    side_cells = np.flatnonzero(side & (label >= 0))
+    side_cells = side_cells[_side_mask(glob(side_cells), region, shape)]
+    is_max_cell = np.zeros(h * w, bool)
+    is_max_cell[max_cell] = True
+    extra = side_cells[~is_max_cell[side_cells]]
+    ne = extra.size
+    key = np.concatenate([glob(max_cell), glob(extra)])
+    z = np.concatenate([zf[max_cell], zf[extra]]).astype(np.float64)
+    ismax = np.concatenate([np.ones(npk, bool), np.zeros(ne, bool)])
+    bmax = np.concatenate([bz, np.full(ne, -np.inf)])
+    nm = np.concatenate([nmin, zf[extra].astype(np.float64)])
+    xa = np.concatenate([ea, npk + np.arange(ne)])
+    xb = np.concatenate([eb, label[extra]])
+    xk = np.concatenate([glob(ec), glob(extra)])
+    xz = np.concatenate([zf[ec], zf[extra]]).astype(np.float64)
+    n_global_max = int(_count_global_maxima(zh, max_cell, w))
+    s = ChunkSummary(region, (H, W), key, z, ismax, bmax, nm, xa, xb, xz, xk, n_global_max)
+    return _reduce(s, min_prominence, _side_mask(key, region, shape))
+
+
+def _count_global_maxima(zh, max_cell, w) -> int:
+    """Chunk maxima that stay maxima of the whole raster (checked against the halo)."""
+    r = max_cell // w + 1
+    c = max_cell % w + 1
+    zc = zh[r, c]
+    ok = np.ones(max_cell.size, bool)
+    for dr, dc in _OFFSETS:
+        zn = zh[r + dr, c + dc]
+        # a halo neighbour before the cell in raster order wins ties
+        before = (dr < 0) | ((dr == 0) & (dc < 0))
+        ok &= ~((zn > zc) | ((zn == zc) & before))
+    return int(ok.sum())
+
+
+def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence: float) -> ChunkSummary:
+    """Exact merge of the summaries of two rectangles that together form a rectangle."""
+    H, W = a.shape
+    region = (min(a.region[0], b.region[0]), max(a.region[1], b.region[1]),
+              min(a.region[2], b.region[2]), max(a.region[3], b.region[3]))
+    na = a.n_nodes
+    # seam edges between 8-adjacent side cells of a and b
+    order_b = np.argsort(b.key)
+    kb = b.key[order_b]
+    sa = np.flatnonzero(_side_mask(a.key, a.region, a.shape))
+    ra, ca = a.key[sa] // W, a.key[sa] % W
+    sea, seb = [], []
+    for dr, dc in _OFFSETS:
+        nr, nc = ra + dr, ca + dc
+        ok = (nr >= b.region[0]) & (nr < b.region[1]) & (nc >= b.region[2]) & (nc < b.region[3])
+        nk = nr * W + nc
+        pos = np.searchsorted(kb, nk)
+        pos = np.minimum(pos, max(kb.size - 1, 0))
+        hit = ok & (kb.size > 0) & (kb[pos] == nk) if kb.size else np.zeros_like(ok)
+        sea.append(sa[hit])
+        seb.append(order_b[pos[hit]])
+    sea = np.concatenate(sea) if sea else np.empty(0, np.int64)
+    seb = np.concatenate(seb) if seb else np.empty(0, np.int64)
+    za, zb = a.z[sea], b.z[seb]
+    ka, kbb = a.key[sea], b.key[seb]
+    a_lower = (za < zb) | ((za == zb) & (ka > kbb))
+    sz = np.where(a_lower, za, zb)
+    sk = np.where(a_lower, ka, kbb)
+    s = ChunkSummary(
+        region, a.shape,
+        np.concatenate([a.key, b.key]), np.concatenate([a.z, b.z]), np.concatenate([a.ismax, b.ismax]),
+        np.concatenate([a.bmax, b.bmax]), np.concatenate([a.nmin, b.nmin]),
+        np.concatenate([a.ea, b.ea + na, sea]), np.concatenate([a.eb, b.eb + na, seb + na]),
+        np.concatenate([a.ez, b.ez, sz]), np.concatenate([a.ekey, b.ekey, sk]),
+        a.n_maxima + b.n_maxima,
+    )
+    return _reduce(s, min_prominence, _side_mask(s.key, region, s.shape))
+
+
+def finalize_summary(s: ChunkSummary, *, min_prominence: float, outside: str) -> Orometry:
+    """Peaks and Divide Tree of the whole raster from its root summary."""
+    if s.n_nodes == 0:
+        from orokit.errors import InputError
+
+        raise InputError("the DEM has no valid cells (all nodata)")
+    return finalize_graph(
+        node_key=s.key, node_z=s.z, node_bmax=s.bmax, node_nmin=s.nmin, node_ismax=s.ismax,
+        ea=s.ea, eb=s.eb, ez=s.ez, ekey=s.ekey, min_prominence=min_prominence, outside=outside,
+        shape=s.shape, n_maxima=s.n_maxima,
+    )
