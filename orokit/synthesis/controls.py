@@ -17,7 +17,7 @@ from orokit.errors import CRSError, InputError, OrokitWarning
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Domain", "make_domain", "ControlMaps", "load_control", "build_controls"]
+__all__ = ["Domain", "make_domain", "ControlMaps", "load_control", "build_controls", "random_elevation_field"]
 
 
 @dataclass(frozen=True)
@@ -269,3 +269,26 @@ def build_controls(
     if not (dens > 0).any():
         raise InputError("the density control is 0 everywhere in the domain: there is no room for peaks")
     return ControlMaps(dens.astype(float), None if elev is None else elev.astype(float), types)
+
+
+def random_elevation_field(domain: Domain, elevation_hist: Any, *, correlation_m: float, rng: Any) -> np.ndarray:
+    """A smooth random C_H whose values follow ``elevation_hist`` (orokit default).
+
+    Without a user C_H, peak elevations would be spatially uncorrelated, so high peaks
+    would sit among low ones and their ridges would dip through low peaks (too much
+    prominence). Gaussian-filtered white noise (standard deviation ``correlation_m``)
+    is mapped by rank onto the quantiles of the type's elevation histogram.
+    """
+    from scipy.ndimage import gaussian_filter
+
+    rng = np.random.default_rng(rng)
+    cx, cy = domain.cell
+    noise = gaussian_filter(rng.standard_normal(domain.shape), sigma=(correlation_m / cy, correlation_m / cx),
+                            mode="wrap")
+    ranks = np.argsort(np.argsort(noise.ravel(), kind="stable"), kind="stable")
+    q = (ranks + 0.5) / ranks.size
+    p = elevation_hist.probabilities()
+    cdf = np.concatenate([[0.0], np.cumsum(p)])
+    e = np.asarray(elevation_hist.edges, float)
+    vals = np.interp(q, cdf, e)
+    return vals.reshape(domain.shape)

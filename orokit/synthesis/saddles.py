@@ -62,35 +62,84 @@ def _emd_assign(cost: np.ndarray) -> np.ndarray:
     return np.argmax(plan, axis=1).astype(np.int64)
 
 
-def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTargets, rng):
-    """One OT assignment (dominance or prominence); returns new saddle elevations."""
+def _blocks(order_key: np.ndarray, block_size: int, rng: np.random.Generator) -> list[np.ndarray]:
+    """Positions split into rank blocks of about ``block_size`` (random boundary offset)."""
+    n = order_key.size
+    if n <= block_size:
+        return [np.arange(n)]
+    order = np.argsort(order_key, kind="stable")
+    k = int(np.ceil(n / block_size))
+    size = n / k
+    shift = rng.uniform(0, size)
+    cuts = np.unique(np.clip(np.rint(shift + size * np.arange(k)).astype(np.int64), 0, n))
+    cuts = cuts[(cuts > 0) & (cuts < n)]
+    return np.split(order, cuts)
+
+
+def _blocked_targets(row_key: np.ndarray, want: np.ndarray, cost_fn, block_size: int,
+                     rng: np.random.Generator) -> np.ndarray:
+    """Assign the values ``want`` to rows by exact OT (``ot.emd``) within blocks.
+
+    Problems larger than ``block_size`` are split into ``k`` random blocks of rows;
+    block ``j`` receives every ``k``-th sorted target starting at ``j``, i.e. a
+    stratified sub-sample spanning the whole target distribution, so each block is a
+    small copy of the full problem. ``cost_fn(rows, targets)`` returns a block's cost
+    matrix. Returns the target value of every row. ``row_key`` is kept for API
+    stability (ranking is not needed with stratified blocks).
+    """
+    want = np.sort(want)
+    n = want.size
+    out = np.empty(n)
+    k = max(1, int(np.ceil(n / max(block_size, 2))))
+    perm = rng.permutation(n)
+    start = 0
+    for j in range(k):
+        w = want[j::k]
+        blk = perm[start: start + w.size]
+        start += w.size
+        col = _emd_assign(np.ascontiguousarray(cost_fn(blk, w), dtype=np.float64))
+        out[blk] = w[col]
+    return out
+
+
+def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTargets, rng, block_size):
+    """One OT assignment (dominance or prominence); returns new saddle elevations.
+
+    Large problems are split into blocks of rows and targets of equal rank range
+    (rows ranked by their current value, targets sorted), each solved exactly with
+    ``ot.emd``; block boundaries move randomly between rounds. For the 1-D convex
+    costs used here the optimal plan is close to monotone, so this keeps the exact
+    solution's character at a fraction of the O(n^2)+ cost.
+    """
     key = key_saddles(pz, a, b, sz)
     sz = sz.copy()
     prom = np.where(key >= 0, pz - sz[np.maximum(key, 0)], pz)
     for g in range(len(targets.dominance)):
-        rows = np.flatnonzero((targets.group == g) & (key >= 0))
-        rows = rows[movable[key[rows]]]
-        if rows.size == 0:
+        rows_all = np.flatnonzero((targets.group == g) & (key >= 0))
+        rows_all = rows_all[movable[key[rows_all]]]
+        if rows_all.size == 0:
             continue
         hist = targets.dominance[g] if kind == "dominance" else targets.prominence[g]
-        want = hist.sample(rows.size, rng)
-        h = pz[rows]
-        cur = prom[rows]
-        if kind == "dominance":
-            target_prom = want[None, :] * h[:, None]
-        else:
-            target_prom = np.broadcast_to(want[None, :], (rows.size, rows.size))
-        delta = target_prom - cur[:, None]  # change of prominence = lowering of the key saddle
-        e = key[rows]
-        new_h = sz[e][:, None] - delta
-        cost = delta**2 / ridge_len[e][:, None]
-        bad = (new_h < 0) | (new_h > hmax[e][:, None])
-        if bad.all():
-            continue
-        big = float(cost[~bad].max(initial=1.0)) * 1e3 + 1.0
-        cost = np.where(bad, big, cost)
-        col = _emd_assign(np.ascontiguousarray(cost, dtype=np.float64))
-        sz[e] = np.clip(new_h[np.arange(rows.size), col], 0.0, hmax[e])
+        want_all = hist.sample(rows_all.size, rng)
+        cur_all = prom[rows_all] / pz[rows_all] if kind == "dominance" else prom[rows_all]
+        h_all = pz[rows_all]
+        e_all = key[rows_all]
+
+        def cost_fn(blk, w):
+            tp = w[None, :] * h_all[blk][:, None] if kind == "dominance" else w[None, :]
+            delta = tp - prom[rows_all[blk]][:, None]  # prominence change = lowering of the key saddle
+            e = e_all[blk]
+            new_h = sz[e][:, None] - delta
+            cost = delta**2 / ridge_len[e][:, None]
+            bad = (new_h < 0) | (new_h > hmax[e][:, None])
+            if bad.all():
+                return np.zeros_like(cost)
+            big = float(cost[~bad].max(initial=1.0)) * 1e3 + 1.0
+            return np.where(bad, big, cost)
+
+        got = _blocked_targets(cur_all, want_all, cost_fn, block_size, rng)
+        new_prom = got * h_all if kind == "dominance" else got
+        sz[e_all] = np.clip(sz[e_all] - (new_prom - prom[rows_all]), 0.0, hmax[e_all])
     return sz
 
 
@@ -118,8 +167,10 @@ def assign_saddle_elevations(
     targets: SaddleTargets,
     *,
     movable: np.ndarray | None = None,
-    max_iterations: int = 8,
-    tol: float = 0.002,
+    max_iterations: int = 16,
+    tol: float = 0.001,
+    patience: int = 3,
+    block_size: int = 500,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, dict]:
     """Alternate dominance and prominence OT assignments until the errors are stable.
@@ -131,7 +182,9 @@ def assign_saddle_elevations(
     targets : per-group target histograms.
     movable : bool per ridge; fixed saddles (pasted fragments) are never changed.
     max_iterations : upper bound on dominance+prominence rounds.
-    tol : stop when the worst max-bin error improved by less than this in a round.
+    tol, patience : stop after ``patience`` rounds in a row that did not improve the
+        best worst-feature max-bin error by more than ``tol``.
+    block_size : rows per exact OT block (see :func:`_ot_step`).
 
     Returns
     -------
@@ -146,16 +199,20 @@ def assign_saddle_elevations(
     best_err = max(_max_bin_error(pz, a, b, sz, targets))
     history = []
     it = 0
+    stale = 0
     for it in range(1, max_iterations + 1):
-        sz = _ot_step("dominance", pz, a, b, sz, hmax, ridge_len, movable, targets, rng)
-        sz = _ot_step("prominence", pz, a, b, sz, hmax, ridge_len, movable, targets, rng)
+        sz = _ot_step("dominance", pz, a, b, sz, hmax, ridge_len, movable, targets, rng, block_size)
+        sz = _ot_step("prominence", pz, a, b, sz, hmax, ridge_len, movable, targets, rng, block_size)
         errs = _max_bin_error(pz, a, b, sz, targets)
         history.append([round(errs[0], 5), round(errs[1], 5)])
         logger.debug("saddle OT round %d: max bin error dominance %.4f, prominence %.4f", it, *errs)
-        improved = best_err - max(errs)
+        if max(errs) < best_err - tol:
+            stale = 0
+        else:
+            stale += 1
         if max(errs) < best_err:
             best, best_err = sz.copy(), max(errs)
-        if it >= 2 and improved < tol:
+        if stale >= patience:
             break
     return best, {"iterations": it, "errors": history}
 
@@ -203,6 +260,7 @@ def place_key_saddles(
     t_range: tuple[float, float] = (0.03, 0.97),
     max_offset: float = 0.25,
     movable: np.ndarray | None = None,
+    block_size: int = 500,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Saddle positions whose key-saddle distances and directions follow the targets.
@@ -212,7 +270,7 @@ def place_key_saddles(
     perpendicular offset ``o`` within ``max_offset``.
 
     1. Target distances are sampled (stratified) per peak group and assigned to saddles
-       by exact OT (``ot.emd``) with cost ``(clip(d, dmin, dmax) - d)^2`` where
+       by exact OT (``ot.emd``, in rank blocks of ``block_size``) with cost ``(clip(d, dmin, dmax) - d)^2`` where
        ``[dmin, dmax]`` is the range of distances reachable along the ridge.
     2. ``t`` is solved so the distance is the assigned one (the closest reachable).
     3. Target directions are assigned the same way to saddles, with the cost the
@@ -253,12 +311,15 @@ def place_key_saddles(
         rows = np.flatnonzero(ok & (group[np.maximum(owner, 0)] == g))
         if rows.size == 0:
             continue
-        want = distance_hists[g].sample(rows.size, rng)
-        reach = np.clip(want[None, :], dmin[rows][:, None], dmax[rows][:, None])
-        cost = (reach - want[None, :]) ** 2
-        col = _emd_assign(np.ascontiguousarray(cost)) if rows.size > 1 else np.zeros(1, np.int64)
-        d = np.clip(want[col], dmin[rows], dmax[rows])
-        # solve L^2 t^2 - 2 c t + r0^2 - d^2 = 0 on the side of t_star with the larger span
+        lo_r, hi_r = dmin[rows], dmax[rows]
+
+        def dist_cost(blk, w, lo_r=lo_r, hi_r=hi_r):
+            return (np.clip(w[None, :], lo_r[blk][:, None], hi_r[blk][:, None]) - w[None, :]) ** 2
+
+        want = _blocked_targets(0.5 * (lo_r + hi_r), distance_hists[g].sample(rows.size, rng), dist_cost,
+                                block_size, rng)
+        d = np.clip(want, lo_r, hi_r)
+        # solve L^2 t^2 - 2 c t + r0^2 - d^2 = 0, choosing a root inside t_range
         A2, B2, C2 = L[rows] ** 2, -2 * c[rows], r0[rows] ** 2 - d**2
         disc = np.sqrt(np.maximum(B2**2 - 4 * A2 * C2, 0.0))
         t1 = (-B2 - disc) / (2 * A2)
@@ -279,13 +340,14 @@ def place_key_saddles(
         r = np.maximum(np.hypot(vx, vy), 1e-9)
         base = np.degrees(np.arctan2(vy, vx)) % 360.0
         span = np.degrees(np.minimum(max_offset * L[rows] / r, np.pi / 2))  # rotation reachable
-        want = direction_hists[g].sample(rows.size, rng)
-        gap = (want[None, :] - base[:, None] + 180.0) % 360.0 - 180.0
-        miss = np.maximum(np.abs(gap) - span[:, None], 0.0)
-        cost = miss**2 + 1e-3 * gap**2
-        col = _emd_assign(np.ascontiguousarray(cost))
-        rot = np.clip(gap[np.arange(rows.size), col], -span, span)
-        ang = np.radians(base + rot)
+
+        def dir_cost(blk, w, base=base, span=span):
+            gap = (w[None, :] - base[blk][:, None] + 180.0) % 360.0 - 180.0
+            return np.maximum(np.abs(gap) - span[blk][:, None], 0.0) ** 2 + 1e-3 * gap**2
+
+        want = _blocked_targets(base, direction_hists[g].sample(rows.size, rng), dir_cost, block_size, rng)
+        gap = (want - base + 180.0) % 360.0 - 180.0
+        ang = np.radians(base + np.clip(gap, -span, span))
         bx0[rows] = qx[rows] + r * np.cos(ang)
         by0[rows] = qy[rows] + r * np.sin(ang)
     sx = np.where(ok, bx0, sx)

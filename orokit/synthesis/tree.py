@@ -58,9 +58,10 @@ def synthesize_divide_tree(
     fragment_offset: tuple[float, float] = (0.0, 0.0),
     n_passes: int = 4,
     n_candidates: int = 48,
-    max_ot_iterations: int = 8,
+    max_ot_iterations: int = 16,
     saddle_placement: str = "targeted",
     grid_cells: int = 256,
+    auto_elevation_m: float | None = 8000.0,
     domain: Domain | None = None,
     rng: SeedLike = None,
 ) -> DivideTree:
@@ -86,6 +87,10 @@ def synthesize_divide_tree(
     max_ot_iterations : bound on the alternating dominance / prominence rounds.
     saddle_placement : "targeted" (key-saddle distance and direction follow the
         type) or "paper" (random split point with a small perpendicular jitter).
+    grid_cells : cells along the longer side of the control grid.
+    auto_elevation_m : without ``control_elevation``, use a smooth random C_H with
+        this correlation length (metres) following the elevation histogram, so peak
+        elevations are spatially correlated as in real ranges (None: no C_H term).
     rng : seed or Generator; the same seed gives the same tree.
 
     Returns
@@ -141,6 +146,13 @@ def synthesize_divide_tree(
     controls = build_controls(domain, control_density=control_density, control_elevation=control_elevation,
                               type_map=type_map, n_types=len(types))
     eps = max(t.min_prominence_m for t in types)
+    if controls.elevation is None and auto_elevation_m and len(types) == 1:
+        from dataclasses import replace
+
+        from orokit.synthesis.controls import random_elevation_field
+
+        controls = replace(controls, elevation=random_elevation_field(
+            domain, types[0].histograms["elevation"], correlation_m=float(auto_elevation_m), rng=rng))
 
     # ---- fixed peaks (user + fragment)
     user = _fixed_frame(fixed_peaks)
