@@ -84,6 +84,9 @@ def analyze(
     progress: bool = False,
     z_units: str | None = None,
     cell_size: float | None = None,
+    chunks: int | tuple[int, int] | None = None,
+    scheduler: Any = None,
+    checkpoint: str | Path | None = None,
 ) -> AnalysisResult:
     """Peaks, key saddles, prominence, dominance, isolation and the Divide Tree.
 
@@ -99,6 +102,12 @@ def analyze(
     isolation : compute isolation (nearest strictly higher cell).
     progress : show a progress bar over the stages.
     z_units, cell_size : forwarded to ``read_dem`` when ``dem`` is a path.
+    chunks : cells per chunk side (int or (rows, cols)). When given, or when ``dem``
+        is dask-backed, the raster is analysed chunk by chunk (out of core) with the
+        exact tiled engine; results are identical to the in-memory engine.
+    scheduler : dask scheduler for the chunked engine: None (default threads or the
+        active distributed client), a name, a ``distributed.Client`` or an address.
+    checkpoint : folder for chunk summaries; a rerun with it reuses finished chunks.
 
     Returns
     -------
@@ -129,7 +138,7 @@ def analyze(
     if not hasattr(dem, "dims"):
         from orokit.io.dem import read_dem
 
-        dem = read_dem(dem, z_units=z_units, cell_size=cell_size)
+        dem = read_dem(dem, z_units=z_units, cell_size=cell_size, chunks=chunks)
     if dem.ndim != 2:
         raise InputError(f"the DEM must be 2-D (y, x); got dims {dem.dims}")
     units = dem.attrs.get("units", "m")
@@ -138,23 +147,38 @@ def analyze(
 
         raise UnitsError(f"DEM elevations must be in metres (read it with read_dem(z_units=...)); attrs units={units!r}")
     transform, crs = _georef(dem)
-    z = np.asarray(dem.values)
-    if not np.issubdtype(z.dtype, np.floating):
-        z = z.astype(np.float64)
-    z = np.ascontiguousarray(z)
+    tiled = chunks is not None or dem.chunks is not None
+    bar = _progress(progress and not tiled, ["peaks, saddles and Divide Tree", "isolation", "tables"])
+    if tiled:
+        from orokit.tiling.engine import get_compute, tiled_orometry
+        from orokit.tiling.isolation import tiled_isolation
 
-    stages = ["peaks, saddles and Divide Tree", "isolation", "tables"]
-    bar = _progress(progress, stages)
-    core = engine.orometry(z, min_prominence=min_prominence, outside=outside)
-    t_core = time.perf_counter()
-    _advance(bar)
-    iso = None
-    if isolation and core.n_kept:
-        from orokit.metrics.isolation import isolation as _isolation
+        data = dem.data
+        if chunks is not None:
+            data = data.rechunk(chunks) if hasattr(data, "rechunk") else _as_dask(data, chunks)
+        core = tiled_orometry(data, min_prominence=min_prominence, outside=outside, scheduler=scheduler,
+                              checkpoint=checkpoint, progress=progress)
+        t_core = time.perf_counter()
+        iso = None
+        if isolation and core.n_kept:
+            iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform, crs=crs,
+                                  compute=get_compute(scheduler))
+        t_iso = time.perf_counter()
+    else:
+        z = np.asarray(dem.values)
+        if not np.issubdtype(z.dtype, np.floating):
+            z = z.astype(np.float64)
+        z = np.ascontiguousarray(z)
+        core = engine.orometry(z, min_prominence=min_prominence, outside=outside)
+        t_core = time.perf_counter()
+        _advance(bar)
+        iso = None
+        if isolation and core.n_kept:
+            from orokit.metrics.isolation import isolation as _isolation
 
-        iso = _isolation(z, core.peak_row, core.peak_col, transform=transform, crs=crs)
-    t_iso = time.perf_counter()
-    _advance(bar)
+            iso = _isolation(z, core.peak_row, core.peak_col, transform=transform, crs=crs)
+        t_iso = time.perf_counter()
+        _advance(bar)
     result = engine.build_result(core, transform=transform, crs=crs, isolation=iso)
     t_end = time.perf_counter()
     _advance(bar)
@@ -169,7 +193,8 @@ def analyze(
             "connectivity": 8,
             "local_grid": bool(dem.attrs.get("local_grid", crs is None)),
             "source": str(dem.attrs.get("source", "")),
-            "shape": list(z.shape),
+            "shape": list(dem.shape),
+            "engine": "tiled" if tiled else "in-memory",
             "n_local_maxima": int(core.n_maxima),
             "timings_s": {
                 "tree_and_prominence": round(t_core - t0, 4),
@@ -202,6 +227,12 @@ def _georef(dem):
     if dem.attrs.get("local_grid"):
         crs = None
     return transform, crs
+
+
+def _as_dask(data, chunks):
+    import dask.array as da
+
+    return da.from_array(data, chunks=chunks)
 
 
 def _progress(enabled: bool, stages: list[str]):

@@ -21,10 +21,18 @@ import click
               help="What lies beyond the data edge and nodata: unknown (edge prominences flagged as upper "
                    "bounds) or sea (all exact).")
 @click.option("--no-isolation", is_flag=True, help="Skip the isolation search.")
+@click.option("--chunks", type=int, default=None,
+              help="Analyse chunk by chunk (out of core) with chunks of N x N cells; exact, same results.")
+@click.option("--scheduler", default=None,
+              help="dask scheduler for --chunks: threads (default), processes, synchronous, or the address "
+                   "of a dask.distributed scheduler (tcp://host:8786).")
+@click.option("--checkpoint", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Folder for chunk summaries; rerunning with it reuses the finished chunks.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing analysis in OUTPUT.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
 def analyze(dem: Path, outdir: Path, min_prominence: float, z_units: str | None, cell_size: float | None,
-            outside: str, no_isolation: bool, overwrite: bool, progress: bool) -> None:
+            outside: str, no_isolation: bool, chunks: int | None, scheduler: str | None,
+            checkpoint: Path | None, overwrite: bool, progress: bool) -> None:
     """Analyse DEM (any GDAL raster; PNG needs --z-units and --cell-size) into OUTPUT.
 
     Row/col are 0-based on the input grid with row 0 at the top; all elevations,
@@ -36,9 +44,13 @@ def analyze(dem: Path, outdir: Path, min_prominence: float, z_units: str | None,
     if (outdir / "analysis.json").exists() and not overwrite:
         raise click.UsageError(f"{outdir} already holds an analysis; pass --overwrite to replace it")
     t0 = time.perf_counter()
-    da = read_dem(dem, z_units=z_units, cell_size=cell_size)
+    if chunks is not None and chunks < 1:
+        raise click.BadParameter(f"must be a positive number of cells, got {chunks}", param_hint="--chunks")
+    if (scheduler or checkpoint) and chunks is None:
+        raise click.UsageError("--scheduler and --checkpoint need --chunks N")
+    da = read_dem(dem, z_units=z_units, cell_size=cell_size, chunks=chunks)
     result = run(da, min_prominence=min_prominence, outside=outside, isolation=not no_isolation,
-                 progress=progress)
+                 progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint)
     result.write(outdir, overwrite=True)
     n = len(result.peaks)
     click.echo(

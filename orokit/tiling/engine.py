@@ -1,0 +1,159 @@
+"""Out-of-core / distributed orometry with dask.
+
+The raster is read chunk by chunk (each with a one-cell halo); every chunk becomes a
+:class:`~orokit.tiling.summary.ChunkSummary`, and summaries are merged by a tree
+reduction that halves the longer side of the chunk grid at each level, so a task
+holds at most two summaries (side cells + kept peaks), never the raster. The same
+graph runs on the threaded scheduler or a ``dask.distributed`` cluster.
+
+Chunk summaries can be written to a checkpoint folder (one ``.npz`` per chunk,
+written atomically); a rerun with the same folder reuses the finished chunks.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from orokit.errors import TilingError
+from orokit.tiling.summary import ChunkSummary, chunk_summary, finalize_summary, merge_summaries
+from orokit.topology.engine import Orometry
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["tiled_orometry", "get_compute"]
+
+
+def get_compute(scheduler: Any = None):
+    """A function computing a list of dask objects on ``scheduler``.
+
+    ``scheduler`` is None (dask's default: threads, or the active distributed client),
+    a scheduler name ("threads", "processes", "synchronous"), a
+    ``distributed.Client``, or the address of a distributed scheduler.
+    """
+    import dask
+
+    if scheduler is None or scheduler in ("threads", "threading", "processes", "synchronous", "sync"):
+        return lambda objs: dask.compute(*objs, scheduler=scheduler)
+    if isinstance(scheduler, str):
+        from distributed import Client
+
+        client = Client(scheduler)
+    else:
+        client = scheduler
+    return lambda objs: client.compute(list(objs), sync=True)
+
+
+def _load_summary(path: str) -> ChunkSummary:
+    with np.load(path) as data:
+        return ChunkSummary.from_npz(data)
+
+
+def _tile_task(block: np.ndarray, row0: int, col0: int, shape, min_prominence: float,
+               path: str | None) -> ChunkSummary:
+    summary = chunk_summary(np.asarray(block, dtype=np.float64), row0, col0, shape, min_prominence)
+    if path is not None:
+        from orokit.io.atomic import atomic_path
+
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **summary.to_npz())
+    return summary
+
+
+def _checkpoint_dir(checkpoint, data, min_prominence: float) -> Path | None:
+    if checkpoint is None:
+        return None
+    root = Path(checkpoint)
+    root.mkdir(parents=True, exist_ok=True)
+    fingerprint = {
+        "shape": list(data.shape),
+        "chunks": [list(c) for c in data.chunks],
+        "min_prominence": float(min_prominence),
+        "graph": data.name,  # dask name: a hash of the source and its processing
+        "format": 1,
+    }
+    meta = root / "checkpoint.json"
+    if meta.exists():
+        old = json.loads(meta.read_text())
+        if old != fingerprint:
+            raise TilingError(
+                f"checkpoint folder {root} belongs to another run (different input, chunks or threshold); "
+                "use a new folder or delete it"
+            )
+    else:
+        from orokit.io.atomic import write_text_atomic
+
+        write_text_atomic(meta, json.dumps(fingerprint, indent=1))
+    return root
+
+
+def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", scheduler: Any = None,
+                   checkpoint=None, progress: bool = False) -> Orometry:
+    """Exact orometry of a 2-D dask array (NaN = nodata), chunk by chunk.
+
+    Gives exactly the :class:`~orokit.topology.engine.Orometry` of the in-memory
+    engine (same peaks, prominences, key saddles, parents, flags and ridge saddles).
+    """
+    import dask
+    import dask.array as da
+
+    if data.ndim != 2:
+        raise TilingError(f"expected a 2-D array, got shape {data.shape}")
+    if not np.issubdtype(data.dtype, np.floating):
+        data = data.astype(np.float64)
+    H, W = data.shape
+    padded = da.overlap.overlap(data, depth={0: 1, 1: 1}, boundary={0: np.nan, 1: np.nan})
+    blocks = padded.to_delayed()
+    rb = np.concatenate([[0], np.cumsum(data.chunks[0])]).astype(int)
+    cb = np.concatenate([[0], np.cumsum(data.chunks[1])]).astype(int)
+    ckpt = _checkpoint_dir(checkpoint, data, min_prominence)
+    tiles = {}
+    reused = 0
+    for i in range(len(rb) - 1):
+        for j in range(len(cb) - 1):
+            path = None if ckpt is None else str(ckpt / f"chunk_{i:05d}_{j:05d}.npz")
+            if path is not None and Path(path).exists():
+                tiles[i, j] = dask.delayed(_load_summary)(path, dask_key_name=f"orokit-load-{i}-{j}-{_h(path)}")
+                reused += 1
+            else:
+                tiles[i, j] = dask.delayed(_tile_task)(
+                    blocks[i, j], int(rb[i]), int(cb[j]), (H, W), float(min_prominence), path,
+                    dask_key_name=f"orokit-tile-{i}-{j}-{data.name}-{min_prominence}",
+                )
+    if reused:
+        logger.info("reusing %d chunk summaries from %s", reused, ckpt)
+
+    def reduce(i0, i1, j0, j1):
+        if i1 - i0 == 1 and j1 - j0 == 1:
+            return tiles[i0, j0]
+        if i1 - i0 >= j1 - j0:
+            m = (i0 + i1) // 2
+            a, b = reduce(i0, m, j0, j1), reduce(m, i1, j0, j1)
+        else:
+            m = (j0 + j1) // 2
+            a, b = reduce(i0, i1, j0, m), reduce(i0, i1, m, j1)
+        return dask.delayed(merge_summaries)(
+            a, b, float(min_prominence), dask_key_name=f"orokit-merge-{i0}-{i1}-{j0}-{j1}-{data.name}"
+        )
+
+    root = reduce(0, len(rb) - 1, 0, len(cb) - 1)
+    final = dask.delayed(finalize_summary)(root, min_prominence=float(min_prominence), outside=outside)
+    compute = get_compute(scheduler)
+    logger.info("tiled analysis of %dx%d cells in %d chunks", H, W, (len(rb) - 1) * (len(cb) - 1))
+    if progress and (scheduler is None or isinstance(scheduler, str) and "://" not in scheduler):
+        from dask.diagnostics import ProgressBar
+
+        with ProgressBar():
+            (result,) = compute([final])
+    else:
+        (result,) = compute([final])
+    return result
+
+
+def _h(text: str) -> str:
+    return hashlib.sha1(text.encode()).hexdigest()[:10]

@@ -1,0 +1,145 @@
+"""Isolation over a chunked raster: the search for higher ground crosses chunk borders.
+
+Each chunk's maximum (and whether it holds NaN) is computed once. For every peak the
+chunks are visited by increasing lower bound of their distance, skipping chunks
+whose maximum is not strictly higher; inside a chunk the block-maximum pyramid search
+of :mod:`orokit.metrics._kernels` runs with the peak given relative to the chunk.
+Peaks are handled in spatially sorted batches so a chunk is loaded a few times at
+most; memory stays at one chunk plus the batch.
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pandas as pd
+
+from orokit.metrics import _kernels as _mk
+from orokit.metrics._kernels import EARTH_RADIUS_M
+from orokit.metrics.isolation import GridMetric, finish_isolation
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["tiled_isolation"]
+
+_BATCH = 4096
+
+
+def _chunk_bounds(rows, cols, rb, cb, metric: GridMetric) -> np.ndarray:
+    """Lower bound of the distance from each cell to each chunk (n x nchunks)."""
+    r0, r1 = rb[:-1], rb[1:] - 1
+    c0, c1 = cb[:-1], cb[1:] - 1
+    R0, C0 = np.meshgrid(r0, c0, indexing="ij")
+    R1, C1 = np.meshgrid(r1, c1, indexing="ij")
+    R0, R1, C0, C1 = (a.ravel()[None, :] for a in (R0, R1, C0, C1))
+    pr, pc = rows[:, None], cols[:, None]
+    gr = np.maximum(0, np.maximum(R0 - pr, pr - R1))
+    gc = np.maximum(0, np.maximum(C0 - pc, pc - C1))
+    if not metric.geo:
+        return np.hypot(gr * metric.dy, gc * metric.dx)
+    lat = lambda r: np.abs(metric.lat0 + (r + 0.5) * metric.dlat)  # noqa: E731
+    phimax = np.minimum(np.maximum(lat(pr), np.maximum(lat(R0), lat(R1))), np.pi / 2)
+    s = np.sin(gr * abs(metric.dlat) / 2) ** 2 + np.cos(phimax) ** 2 * np.sin(gc * abs(metric.dlon) / 2) ** 2
+    return 2 * EARTH_RADIUS_M * np.arcsin(np.minimum(1.0, np.sqrt(s)))
+
+
+def _block_stats(block: np.ndarray) -> tuple[float, bool]:
+    valid = ~np.isnan(block)
+    return (float(block[valid].max()) if valid.any() else -np.inf), bool((~valid).any())
+
+
+def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None) -> pd.DataFrame:
+    """Isolation of peaks at (rows, cols) with elevations pz on a dask array.
+
+    Same result as :func:`orokit.metrics.isolation.isolation` on the whole array.
+    ``compute`` is a callable that computes a list of dask objects (defaults to
+    ``dask.compute``), so a distributed client can be used.
+    """
+    import dask
+
+    compute = compute or (lambda objs: dask.compute(*objs))
+    metric = GridMetric.from_grid(transform, crs)
+    H, W = data.shape
+    rows = np.asarray(rows, np.int64)
+    cols = np.asarray(cols, np.int64)
+    pz = np.asarray(pz, np.float64)
+    rb = np.concatenate([[0], np.cumsum(data.chunks[0])])
+    cb = np.concatenate([[0], np.cumsum(data.chunks[1])])
+    nby, nbx = len(rb) - 1, len(cb) - 1
+    blocks = data.to_delayed()
+    stats = compute([dask.delayed(_block_stats)(blocks[i, j]) for i in range(nby) for j in range(nbx)])
+    cmax = np.array([s[0] for s in stats])
+    cnan = np.array([s[1] for s in stats])
+    n = rows.size
+    best = np.full(n, np.inf)
+    cand = np.full((n, metric.ncand), -1, np.int64)
+    ncand = np.zeros(n, np.int64)
+    edge = _mk.outside_distance(rows, cols, H, W, *metric.args())
+    # batches of peaks sorted by chunk so each batch touches few chunks
+    ci = np.searchsorted(rb, rows, side="right") - 1
+    cj = np.searchsorted(cb, cols, side="right") - 1
+    order = np.lexsort((cols, rows, cj, ci))
+    slack = 1.0 + metric.slack
+    for start in range(0, n, _BATCH):
+        idx = order[start:start + _BATCH]
+        lb = _chunk_bounds(rows[idx], cols[idx], rb, cb, metric)
+        lb_nan = np.where(cnan[None, :], lb, np.inf)
+        lb = np.where(cmax[None, :] > pz[idx, None], lb, np.inf)
+        _visit(lb, idx, blocks, rb, cb, nbx, metric, compute, best, cand, ncand, pz, rows, cols, W, slack)
+        # nearest NaN cell, only where it could be closer than the edge and the target
+        _visit_nan(lb_nan, idx, blocks, rb, cb, nbx, metric, compute, best, edge, rows, cols)
+    return finish_isolation(metric, rows, cols, best, cand, W, edge)
+
+
+def _visit(lb, idx, blocks, rb, cb, nbx, metric, compute, best, cand, ncand, pz, rows, cols, W, slack):
+    while True:
+        nxt = np.argmin(lb, axis=1)
+        val = lb[np.arange(idx.size), nxt]
+        active = np.isfinite(val) & (val <= best[idx] * slack)
+        if not active.any():
+            return
+        chunks = np.unique(nxt[active])
+        loaded = compute([blocks[k // nbx, k % nbx] for k in chunks])
+        for k, block in zip(chunks, loaded):
+            sel = np.flatnonzero(active & (nxt == k))
+            p = idx[sel]
+            i, j = k // nbx, k % nbx
+            r0, c0 = rb[i], cb[j]
+            b, cl = _mk.nearest_in_block(
+                np.ascontiguousarray(block), rows[p] - r0, cols[p] - c0, pz[p], best[p] * slack,
+                *metric.args(r0), metric.slack, metric.ncand,
+            )
+            bw = block.shape[1]
+            for t, q in enumerate(p):
+                found = cl[t][cl[t] >= 0]
+                if found.size:
+                    g = (r0 + found // bw) * W + c0 + found % bw
+                    room = cand.shape[1] - ncand[q]
+                    g = g[:room]
+                    cand[q, ncand[q]:ncand[q] + g.size] = g
+                    ncand[q] += g.size
+                if b[t] < best[q]:
+                    best[q] = b[t]
+            lb[sel, k] = np.inf
+
+
+def _visit_nan(lb, idx, blocks, rb, cb, nbx, metric, compute, best, edge, rows, cols):
+    while True:
+        nxt = np.argmin(lb, axis=1)
+        val = lb[np.arange(idx.size), nxt]
+        cut = np.minimum(edge[idx], best[idx])
+        active = np.isfinite(val) & (val < cut)
+        if not active.any():
+            return
+        chunks = np.unique(nxt[active])
+        loaded = compute([blocks[k // nbx, k % nbx] for k in chunks])
+        for k, block in zip(chunks, loaded):
+            sel = np.flatnonzero(active & (nxt == k))
+            p = idx[sel]
+            r0, c0 = rb[k // nbx], cb[k % nbx]
+            d = _mk.nearest_nan_in_block(
+                np.ascontiguousarray(block), rows[p] - r0, cols[p] - c0, np.minimum(edge[p], best[p]),
+                *metric.args(r0),
+            )
+            edge[p] = np.minimum(edge[p], d)
+            lb[sel, k] = np.inf
