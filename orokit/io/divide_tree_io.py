@@ -103,12 +103,6 @@ def _parse_sections(path: Path) -> dict[str, list[tuple[int, list[str]]]]:
             f"{path}:{lineno}: file ends inside section {name} (header at line {header_line} declares "
             f"{expected} lines, found {len(sections[name])}); the file is truncated"
         )
-    for required in ("Peaks", "PromSaddles", "Edges"):
-        if required not in sections:
-            raise InputError(
-                f"{path}: missing section {required!r} (found {sorted(sections) or 'none'}); "
-                "a Divide Tree TXT file needs at least Peaks, PromSaddles and Edges"
-            )
     return sections
 
 
@@ -251,6 +245,12 @@ def read_divide_tree_txt(
     factor = factor_to_metres(z_units)
     sections = _parse_sections(path)
     frames = {n: _points_frame(path, n, sections.get(n, [])) for n in _POINT_SECTIONS}
+    for required in ("Peaks", "PromSaddles", "Edges"):
+        if required not in sections:
+            raise InputError(
+                f"{path}: missing section {required!r} (found {sorted(sections) or 'none'}); "
+                "a Divide Tree TXT file needs at least Peaks, PromSaddles and Edges"
+            )
     arcsec = _infer_cell_arcsec(list(frames.values()))
     if cell_size is None:
         if arcsec is None:
