@@ -23,6 +23,8 @@ COMMANDS: dict[str, str] = {
     "train": "orokit.cli.train:train",
     "classify": "orokit.cli.classify:classify",
     "report": "orokit.cli.report:report",
+    "type": "orokit.cli.type_cmd:type_cmd",
+    "synthesize-tree": "orokit.cli.synthesize_tree:synthesize_tree",
 }
 
 

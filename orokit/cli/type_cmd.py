@@ -1,0 +1,89 @@
+"""``orokit type``: a terrain type (orometric statistics) from an analysis, a DEM or a Divide Tree."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command(name="type")
+@click.argument("source", type=click.Path(exists=True, dir_okay=True, path_type=Path))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Terrain type JSON to write.")
+@click.option("--name", default=None, help="Type name (default: the input's name).")
+@click.option("--min-prominence", default=None, type=float,
+              help="Prominence threshold eps in METRES (default: the analysis' threshold, else 30).")
+@click.option("--z-units", type=click.Choice(["m", "ft"]), default=None,
+              help="Elevation units of a DEM or Divide Tree TXT input (PNG DEMs and TXT trees: ft).")
+@click.option("--cell-size", type=float, default=None,
+              help="Cell size in metres for a PNG DEM or a Divide Tree TXT.")
+@click.option("--isolation-basis", type=click.Choice(["peaks", "terrain"]), default="peaks", show_default=True,
+              help="Isolation to the nearest higher peak (comparable with synthesized trees) or to the "
+                   "nearest higher terrain cell (analysis column).")
+@click.option("--rho", type=float, default=None, help="Ridge exponent (default: estimated from the Divide Tree).")
+@click.option("--scale-prominence", type=float, default=None, help="Edit: multiply prominences by this factor.")
+@click.option("--scale-elevation", type=float, default=None, help="Edit: multiply elevations by this factor.")
+@click.option("--shift-elevation", type=float, default=None, help="Edit: add this many metres to elevations.")
+@click.option("--density", type=float, default=None, help="Edit: peak density in peaks per km2.")
+@click.option("--area-km2", type=float, default=None,
+              help="Area of a Divide Tree input in km2 (default: extent of its peaks, saddles and runoffs).")
+@click.option("--overwrite", is_flag=True, help="Replace an existing OUTPUT.")
+def type_cmd(source: Path, output: Path, name: str | None, min_prominence: float | None, z_units: str | None,
+             cell_size: float | None, isolation_basis: str, rho: float | None, scale_prominence: float | None,
+             scale_elevation: float | None, shift_elevation: float | None, density: float | None,
+             area_km2: float | None, overwrite: bool) -> None:
+    """Build the terrain type of SOURCE and write it as versioned JSON.
+
+    SOURCE is an `orokit analyze` output folder, a DEM (analysed first), or a Divide
+    Tree (reference .txt or .gpkg; its area is the extent of its peaks, saddles and
+    runoffs unless --area-km2 is given).
+    """
+    from orokit.synthesis.terrain_type import TerrainType
+
+    if output.exists() and not overwrite:
+        raise click.UsageError(f"{output} exists; pass --overwrite to replace it")
+    if source.is_dir():
+        tt = TerrainType.from_analysis(source, min_prominence_m=min_prominence, name=name,
+                                       isolation_basis=isolation_basis, rho=rho)
+    elif source.suffix.lower() in (".txt", ".gpkg"):
+        from orokit.io.divide_tree_io import read_divide_tree_gpkg, read_divide_tree_txt
+
+        if source.suffix.lower() == ".txt":
+            tree = read_divide_tree_txt(source, cell_size=cell_size, z_units=z_units or "ft")
+        else:
+            tree = read_divide_tree_gpkg(source)
+        area = area_km2 if area_km2 is not None else _tree_area_km2(tree)
+        tt = TerrainType.from_divide_tree(tree, area_km2=area, min_prominence_m=min_prominence or 30.0,
+                                          name=name or source.stem, rho=rho,
+                                          provenance={"source": str(source), "area_from": "tree extent"})
+    else:
+        from orokit.analysis import analyze
+        from orokit.io.dem import read_dem
+
+        da = read_dem(source, z_units=z_units, cell_size=cell_size)
+        result = analyze(da, min_prominence=min_prominence or 30.0, progress=True)
+        tt = TerrainType.from_analysis(result, name=name or source.stem, isolation_basis=isolation_basis, rho=rho)
+    if scale_prominence is not None:
+        tt = tt.scaled("prominence", scale_prominence)
+    if scale_elevation is not None:
+        tt = tt.scaled("elevation", scale_elevation)
+    if shift_elevation is not None:
+        tt = tt.shifted("elevation", shift_elevation)
+    if density is not None:
+        tt = tt.with_density(density)
+    tt.save(output)
+    click.echo(f"terrain type {tt.name!r}: {tt.provenance.get('n_peaks')} peaks, "
+               f"{tt.peak_density_per_km2:.4f} peaks/km2, rho={tt.rho:g} -> {output}")
+
+
+def _tree_area_km2(tree) -> float:
+    """Area covered by a Divide Tree read from a file: its raster extent or bounding box."""
+    import pandas as pd
+
+    parts = [tree.peaks[["x", "y"]], tree.saddles[["x", "y"]]]
+    run = (tree.attrs or {}).get("runoffs")
+    if isinstance(run, pd.DataFrame) and {"x", "y"} <= set(run.columns):
+        parts.append(run[["x", "y"]])
+    xy = pd.concat(parts)
+    cell = float((tree.attrs or {}).get("cell_size") or 0.0)
+    return float((xy["x"].max() - xy["x"].min() + cell) * (xy["y"].max() - xy["y"].min() + cell)) / 1e6
