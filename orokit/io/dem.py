@@ -200,8 +200,9 @@ def read_dem(
     ----------
     source
         Path of any raster GDAL reads (GeoTIFF/COG, SRTM ``.hgt``/``.hgt.zip`` named
-        like ``N32W098.hgt``, ESRI ASCII grid, VRT mosaic, 16-bit PNG...) or a GDAL
-        virtual path (``/vsizip/...``, ``/vsicurl/...``).
+        like ``N32W098.hgt``, ESRI ASCII grid, VRT mosaic, 16-bit PNG...), a GDAL
+        virtual path (``/vsizip/...``, ``/vsicurl/...``), or a directory of tiles
+        (mosaicked by geotransform through a VRT, see :mod:`orokit.io.mosaic`).
     z_units
         Elevation units of the file: ``"m"``, ``"ft"`` (x 0.3048 exactly) or
         ``"us-ft"``. Default: the band's unit metadata if any, else metres for a
@@ -279,7 +280,13 @@ def read_dem(
         if not p.exists():
             raise InputError(f"DEM file not found: {path}. Check the path (or fetch it: orokit data fetch NAME).")
         if p.is_dir():
-            raise InputError(f"{path} is a directory, not a raster file; pass the path of the DEM file itself.")
+            # a directory of tiles: mosaic them by geotransform in a VRT (read lazily with chunks=)
+            import tempfile
+
+            from orokit.io.mosaic import build_vrt
+
+            path = os.fspath(build_vrt(p, Path(tempfile.mkdtemp(prefix="orokit-mosaic-")) / f"{p.name}.vrt"))
+            p = Path(path)
         if p.stat().st_size == 0:
             raise InputError(f"DEM file {path} is empty (0 bytes); download or export it again.")
 
