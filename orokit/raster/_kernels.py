@@ -1,0 +1,264 @@
+"""Numerical kernels of the terrain renderer (ndarrays and scalars only).
+
+numba is used where numpy cannot vectorise: dart throwing with a background grid
+(each acceptance depends on the previous ones), per-triangle scan conversion
+(variable-size pixel loops) and sweeps along an oriented river forest (each node
+depends on its donors).
+"""
+from __future__ import annotations
+
+import heapq
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def poisson_disk(xmin: float, ymin: float, xmax: float, ymax: float, radius: float,
+                 n_trials: int, seed: int) -> np.ndarray:
+    """Dart-throwing blue noise: points of the box at mutual distance >= ``radius``.
+
+    A background grid of cell ``radius / sqrt(2)`` holds at most one point per cell, so
+    each dart checks a 5 x 5 neighbourhood. ``n_trials`` uniform darts are thrown
+    (numba: sequential acceptance cannot be vectorised).
+    """
+    np.random.seed(seed)
+    cell = radius / np.sqrt(2.0)
+    nx = int(np.ceil((xmax - xmin) / cell)) + 1
+    ny = int(np.ceil((ymax - ymin) / cell)) + 1
+    grid = -np.ones((ny, nx), np.int64)
+    out = np.empty((nx * ny, 2))
+    n = 0
+    r2 = radius * radius
+    for _ in range(n_trials):
+        x = xmin + np.random.random() * (xmax - xmin)
+        y = ymin + np.random.random() * (ymax - ymin)
+        gi = int((y - ymin) / cell)
+        gj = int((x - xmin) / cell)
+        if grid[gi, gj] >= 0:
+            continue
+        ok = True
+        for di in range(-2, 3):
+            ii = gi + di
+            if ii < 0 or ii >= ny:
+                continue
+            for dj in range(-2, 3):
+                jj = gj + dj
+                if jj < 0 or jj >= nx:
+                    continue
+                k = grid[ii, jj]
+                if k >= 0:
+                    dx = out[k, 0] - x
+                    dy = out[k, 1] - y
+                    if dx * dx + dy * dy < r2:
+                        ok = False
+                        break
+            if not ok:
+                break
+        if ok:
+            grid[gi, gj] = n
+            out[n, 0] = x
+            out[n, 1] = y
+            n += 1
+    return out[:n].copy()
+
+
+@njit(cache=True)
+def rasterize_triangles(vx: np.ndarray, vy: np.ndarray, vz: np.ndarray, tri: np.ndarray,
+                        x0: float, y0: float, res: float, ny: int, nx: int) -> np.ndarray:
+    """Barycentric scan conversion of a TIN onto cell centres.
+
+    Cell ``(i, j)`` has centre ``(x0 + (j + 0.5) res, y0 - (i + 0.5) res)`` (``y0`` is
+    the top edge). Cells not covered by any triangle stay NaN (numba: per-triangle
+    loops over a variable number of cells).
+    """
+    out = np.full((ny, nx), np.nan, np.float32)
+    tol = -1e-9
+    for t in range(tri.shape[0]):
+        a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]
+        ax, ay, az = vx[a], vy[a], vz[a]
+        bx, by, bz = vx[b], vy[b], vz[b]
+        cx, cy, cz = vx[c], vy[c], vz[c]
+        det = (by - cy) * (ax - cx) + (cx - bx) * (ay - cy)
+        if det == 0.0:
+            continue
+        jmin = max(int(np.floor((min(ax, bx, cx) - x0) / res - 0.5)), 0)
+        jmax = min(int(np.ceil((max(ax, bx, cx) - x0) / res - 0.5)), nx - 1)
+        imin = max(int(np.floor((y0 - max(ay, by, cy)) / res - 0.5)), 0)
+        imax = min(int(np.ceil((y0 - min(ay, by, cy)) / res - 0.5)), ny - 1)
+        for i in range(imin, imax + 1):
+            py = y0 - (i + 0.5) * res
+            for j in range(jmin, jmax + 1):
+                px = x0 + (j + 0.5) * res
+                l1 = ((by - cy) * (px - cx) + (cx - bx) * (py - cy)) / det
+                l2 = ((cy - ay) * (px - cx) + (ax - cx) * (py - cy)) / det
+                l3 = 1.0 - l1 - l2
+                if l1 >= tol and l2 >= tol and l3 >= tol:
+                    out[i, j] = l1 * az + l2 * bz + l3 * cz
+    return out
+
+
+@njit(cache=True)
+def river_elevations(order: np.ndarray, receiver: np.ndarray, length: np.ndarray,
+                     h: np.ndarray, slope: float, floor: float) -> np.ndarray:
+    """Downstream pass: ``h[r] = min(h[r], h[d] - slope * length[d])`` over donors ``d``.
+
+    ``order`` lists nodes from outlets upstream (flood order); it is walked backwards so
+    every donor is final before its receiver. Nodes never go below ``floor``
+    (numba: sequential dependency along the forest).
+    """
+    out = h.copy()
+    for k in range(order.size - 1, -1, -1):
+        v = order[k]
+        if out[v] < floor:
+            out[v] = floor
+        r = receiver[v]
+        if r >= 0:
+            cand = out[v] - slope * length[v]
+            if cand < out[r]:
+                out[r] = cand
+    return out
+
+
+@njit(cache=True)
+def accumulate(order: np.ndarray, receiver: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """Drainage accumulation along the forest (``order`` from outlets upstream)."""
+    out = local.copy()
+    for k in range(order.size - 1, -1, -1):
+        v = order[k]
+        r = receiver[v]
+        if r >= 0:
+            out[r] += out[v]
+    return out
+
+
+@njit(cache=True)
+def reconstruct_from_markers(indptr: np.ndarray, indices: np.ndarray, h: np.ndarray,
+                             marker: np.ndarray) -> np.ndarray:
+    """Grey reconstruction by dilation on a graph: ``min(h, best bottleneck from a marker)``.
+
+    Every vertex not reachable from a marker through ground at least as high keeps
+    only the height of its highest path from a marker, so the only local maxima left
+    are the markers (spurious hills become flat shelves at their pass height). A
+    max-heap sweep from the markers (numba: priority queue).
+    """
+    n = h.size
+    out = np.full(n, -np.inf)
+    done = np.zeros(n, np.bool_)
+    heap = [(0.0, np.int64(0))]
+    heap.pop()
+    for v in range(n):
+        if marker[v]:
+            out[v] = h[v]
+            heapq.heappush(heap, (-h[v], np.int64(v)))
+    while heap:
+        negz, v = heapq.heappop(heap)
+        if done[v]:
+            continue
+        done[v] = True
+        zv = -negz
+        for k in range(indptr[v], indptr[v + 1]):
+            w = indices[k]
+            if done[w]:
+                continue
+            cand = min(zv, h[w])
+            if cand > out[w]:
+                out[w] = cand
+                heapq.heappush(heap, (-cand, w))
+    for v in range(n):
+        if not done[v]:
+            out[v] = h[v]
+    return out
+
+
+@njit(cache=True)
+def reconstruct_raster(z: np.ndarray, marker_r: np.ndarray, marker_c: np.ndarray, step: float) -> np.ndarray:
+    """Lower every 8-connected hill of ``z`` that holds no marker cell (peak cutting).
+
+    A cell keeps ``min(z, b - step * k)`` where ``b`` is the bottleneck height of its
+    best path from a marker and ``k`` the number of cells on that path since the last
+    strictly lower cell, so every cell has a strictly ascending path to a marker and the
+    only local maxima left are the markers (NaN cells are left alone). The dual of
+    priority-flood depression filling (numba: priority queue).
+    """
+    ny, nx = z.shape
+    out = np.full((ny, nx), -np.inf, np.float32)
+    done = np.zeros((ny, nx), np.bool_)
+    heap = [(np.float32(0.0), np.int64(0))]
+    heap.pop()
+    for k in range(marker_r.size):
+        i, j = marker_r[k], marker_c[k]
+        if 0 <= i < ny and 0 <= j < nx and np.isfinite(z[i, j]):
+            out[i, j] = z[i, j]
+            heapq.heappush(heap, (-z[i, j], np.int64(i * nx + j)))
+    while heap:
+        negz, v = heapq.heappop(heap)
+        i = v // nx
+        j = v - i * nx
+        if done[i, j]:
+            continue
+        done[i, j] = True
+        zv = -negz
+        for di in range(-1, 2):
+            ii = i + di
+            if ii < 0 or ii >= ny:
+                continue
+            for dj in range(-1, 2):
+                jj = j + dj
+                if jj < 0 or jj >= nx or done[ii, jj]:
+                    continue
+                h = z[ii, jj]
+                if not np.isfinite(h):
+                    continue
+                cand = h if h < zv else zv - np.float32(step)
+                if cand > out[ii, jj]:
+                    out[ii, jj] = cand
+                    heapq.heappush(heap, (-cand, np.int64(ii * nx + jj)))
+    for i in range(ny):
+        for j in range(nx):
+            if not done[i, j]:
+                out[i, j] = z[i, j]
+    return out
+
+
+@njit(cache=True)
+def carve_saddles(z: np.ndarray, x0: float, y0: float, res: float, sx: np.ndarray, sy: np.ndarray,
+                  sz: np.ndarray, nxv: np.ndarray, nyv: np.ndarray, max_len: float, drop: float) -> int:
+    """Cut a 4-connected trench through each saddle, perpendicular to its ridge (in place).
+
+    From the saddle, both ways along the unit normal ``(nxv, nyv)``, cells are lowered
+    to ``min(z, sz - drop)`` until the ground is already below ``sz - drop`` (or after
+    ``max_len`` metres), so no path beside the saddle crosses the ridge above it. Each
+    diagonal step also lowers one 4-neighbour so the trench stops 8-connected paths.
+    Returns the number of cells lowered (numba: walks of data-dependent length).
+    """
+    ny, nx = z.shape
+    count = 0
+    for s in range(sx.size):
+        target = np.float32(sz[s] - drop)
+        for side in (-1.0, 1.0):
+            pi = -1
+            pj = -1
+            t = 0.5 * res
+            while t <= max_len:
+                x = sx[s] + side * nxv[s] * t
+                y = sy[s] + side * nyv[s] * t
+                j = int(np.floor((x - x0) / res))
+                i = int(np.floor((y0 - y) / res))
+                t += 0.5 * res
+                if i < 0 or i >= ny or j < 0 or j >= nx:
+                    break
+                if i == pi and j == pj:
+                    continue
+                if pi >= 0 and i != pi and j != pj:
+                    if z[pi, j] > target:
+                        z[pi, j] = target
+                        count += 1
+                pi, pj = i, j
+                if z[i, j] <= target:
+                    if t > 1.5 * res:
+                        break
+                    continue
+                z[i, j] = target
+                count += 1
+    return count

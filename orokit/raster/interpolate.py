@@ -1,0 +1,74 @@
+"""Poisson-disk samples and their elevations between ridges and rivers (paper §6.2)."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from orokit._typing import SeedLike
+from orokit.raster import _kernels
+
+__all__ = ["poisson_samples", "valley_width", "sample_elevation", "flank_envelope"]
+
+
+def poisson_samples(extent: tuple[float, float, float, float], radius: float, *, rng: SeedLike = None) -> np.ndarray:
+    """Blue-noise points of the box ``extent`` at mutual distance ``>= radius``.
+
+    Dart throwing on a background grid (about 30 darts per final point), which gives a
+    near-maximal Poisson-disk set; ``scipy.stats.qmc.PoissonDisk`` gives the same
+    distribution but takes ~40 s for the 10^5 points of a 90 km domain.
+    """
+    xmin, ymin, xmax, ymax = extent
+    rng = np.random.default_rng(rng)
+    n_expected = (xmax - xmin) * (ymax - ymin) / (radius * radius)
+    n_trials = int(max(30 * n_expected, 100))
+    seed = int(rng.integers(0, 2**31 - 1))
+    return _kernels.poisson_disk(float(xmin), float(ymin), float(xmax), float(ymax), float(radius), n_trials, seed)
+
+
+def valley_width(drainage_area_m2: np.ndarray, *, coef: float = 0.15, exponent: float = 0.4) -> np.ndarray:
+    """Valley floor width ``w = coef * A^exponent`` in metres (May et al. 2013: w ~ A^0.4)."""
+    return coef * np.power(np.maximum(drainage_area_m2, 0.0), exponent)
+
+
+def sample_elevation(
+    points: np.ndarray,
+    ridge_xy: np.ndarray,
+    ridge_z: np.ndarray,
+    river_xy: np.ndarray,
+    river_z: np.ndarray,
+    river_w: np.ndarray,
+    *,
+    ridge_slope: np.ndarray | None = None,
+    k_neighbours: int = 16,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Elevation of ``points`` from the nearest ridge point q and river point r.
+
+    ``h = h(r)`` when ``d(p, R) < w`` (valley floor), else
+    ``h = (1 - a) h(q) + a h(r)`` with ``a = d(p, T) / (d(p, R) + d(p, T) - w)``.
+    With ``ridge_slope`` (one value per ridge point), ``h`` is also capped by the cone
+    envelope ``max_q h(q) - s_q |p - q|`` over the ``k_neighbours`` nearest ridge points
+    (orokit): flanks then fall faster than the ridge rises, so the ground beside a
+    saddle stays below it and the saddle stays the highest pass.
+    Returns ``(h, d_ridge, d_river)``.
+    """
+    tree = cKDTree(ridge_xy)
+    dT, iq = tree.query(points)
+    dR, ir = cKDTree(river_xy).query(points)
+    w = river_w[ir]
+    hq, hr = ridge_z[iq], river_z[ir]
+    denom = np.maximum(dR + dT - w, 1e-9)
+    alpha = np.clip(dT / denom, 0.0, 1.0)
+    h = np.where(dR < w, hr, (1.0 - alpha) * hq + alpha * hr)
+    if ridge_slope is not None:
+        h = np.minimum(h, flank_envelope(points, ridge_xy, ridge_z, ridge_slope, k_neighbours=k_neighbours, tree=tree))
+    return h, dT, dR
+
+
+def flank_envelope(points: np.ndarray, ridge_xy: np.ndarray, ridge_z: np.ndarray, ridge_slope: np.ndarray,
+                   *, k_neighbours: int = 16, tree: cKDTree | None = None) -> np.ndarray:
+    """Upper envelope of cones ``h(q) - s_q |p - q|`` over the nearest ridge points q."""
+    tree = tree if tree is not None else cKDTree(ridge_xy)
+    k = min(k_neighbours, ridge_xy.shape[0])
+    dk, ik = tree.query(points, k=k)
+    dk, ik = dk.reshape(points.shape[0], -1), ik.reshape(points.shape[0], -1)
+    return np.max(ridge_z[ik] - ridge_slope[ik] * dk, axis=1)

@@ -1,0 +1,236 @@
+"""River network as the dual of the ridges of a Divide Tree (Argudo et al. 2019, §6.1).
+
+Rivers run along the edges of the Voronoi diagram of the peaks and saddles that do
+not cross a ridge; their elevations are bounded by the ridges they are wedged
+between and decrease downstream to outlets on the border of the domain.
+"""
+from __future__ import annotations
+
+import heapq
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from scipy.spatial import Voronoi
+
+from orokit.raster import _kernels
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["RidgeSegments", "RiverNetwork", "ridge_segments", "river_network"]
+
+
+@dataclass(frozen=True)
+class RidgeSegments:
+    """Straight ridge pieces peak -> saddle: endpoints ``(k, 2)`` and elevations ``(k,)``."""
+
+    p0: np.ndarray
+    p1: np.ndarray
+    z0: np.ndarray
+    z1: np.ndarray
+    node0: np.ndarray  # index into the node table (peaks then saddles)
+    node1: np.ndarray
+
+
+@dataclass(frozen=True)
+class RiverNetwork:
+    """An oriented river forest.
+
+    Attributes
+    ----------
+    xy : (n, 2) node positions.
+    elevation : (n,) river bed elevation (metres), non-increasing downstream.
+    receiver : (n,) downstream node, -1 at outlets.
+    length : (n,) length of the edge to the receiver (0 at outlets).
+    order : node ids from the outlets upstream (each receiver comes before its donors).
+    outlet : (n,) bool, True for outlet nodes on the border of the domain.
+    """
+
+    xy: np.ndarray
+    elevation: np.ndarray
+    receiver: np.ndarray
+    length: np.ndarray
+    order: np.ndarray
+    outlet: np.ndarray
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.xy.shape[0])
+
+    def edges(self) -> np.ndarray:
+        """(k, 2) array of ``(donor, receiver)`` pairs."""
+        has = self.receiver >= 0
+        return np.column_stack([np.flatnonzero(has), self.receiver[has]])
+
+    def drainage_area(self, local_area: np.ndarray) -> np.ndarray:
+        """Accumulate per-node ``local_area`` downstream (m^2)."""
+        return _kernels.accumulate(self.order, self.receiver, np.asarray(local_area, float))
+
+
+def ridge_segments(peak_xyz: np.ndarray, saddle_xyz: np.ndarray, edges: np.ndarray) -> RidgeSegments:
+    """Split every ridge ``peak_a - saddle - peak_b`` into two straight pieces."""
+    n = peak_xyz.shape[0]
+    a, b, s = edges[:, 0], edges[:, 1], edges[:, 2]
+    peaks = np.concatenate([a, b])
+    sad = np.concatenate([s, s])
+    return RidgeSegments(
+        p0=peak_xyz[peaks, :2], p1=saddle_xyz[sad, :2],
+        z0=peak_xyz[peaks, 2], z1=saddle_xyz[sad, 2],
+        node0=peaks.astype(np.int64), node1=(n + sad).astype(np.int64),
+    )
+
+
+def _segment_params(p0, p1, q0, q1):
+    """Parameter along q of the intersection of segments p and q (rows paired)."""
+    r = p1 - p0
+    s = q1 - q0
+    denom = r[:, 0] * s[:, 1] - r[:, 1] * s[:, 0]
+    qp = q0 - p0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = (qp[:, 0] * r[:, 1] - qp[:, 1] * r[:, 0]) / denom
+    return np.clip(np.nan_to_num(u, nan=0.5), 0.0, 1.0)
+
+
+def river_network(
+    ridges: RidgeSegments,
+    node_xy: np.ndarray,
+    extent: tuple[float, float, float, float],
+    *,
+    base_elevation: float,
+    margin_m: float = 5.0,
+    slope: float = 0.01,
+    cap=None,
+) -> RiverNetwork:
+    """Rivers of a Divide Tree: dual Voronoi edges not crossing a ridge, oriented to outlets.
+
+    Parameters
+    ----------
+    ridges : straight ridge pieces (see :func:`ridge_segments`).
+    node_xy : (k, 2) positions of the peaks and saddles (Voronoi generators).
+    extent : ``(xmin, ymin, xmax, ymax)`` of the domain; rivers leave it at outlets.
+    base_elevation : elevation of the outlets and lowest allowed river bed (metres).
+    margin_m : a river node lies at least this far below every ridge point it faces.
+    slope : minimum downstream bed slope (m/m).
+    cap : optional callable ``(k, 2) xy -> (k,)`` upper bound of the ground (e.g. the
+        flank envelope of the ridges); river beds stay ``margin_m`` below it.
+
+    Returns
+    -------
+    RiverNetwork
+
+    Notes
+    -----
+    1. Generators are the peaks and saddles plus a ring of ghost points outside the
+       domain, so every Voronoi cell of the tree is bounded.
+    2. Voronoi edges crossing a ridge piece are dropped; each crossing bounds the
+       elevation of both end vertices by the ridge elevation at the crossing.
+    3. Vertices outside the domain are outlets. A priority flood from the outlets,
+       lowest bound first, gives every reachable vertex one receiver: a forest.
+    4. Bed elevations: ``min(bound - margin, donor - slope * length)`` swept from the
+       sources down, never below ``base_elevation``; vertices with no bound start at
+       ``base_elevation + slope * flow distance``.
+    """
+    xmin, ymin, xmax, ymax = extent
+    width, height = xmax - xmin, ymax - ymin
+    n_gen = max(node_xy.shape[0], 1)
+    spacing = float(np.sqrt(width * height / n_gen))
+    pad = max(spacing, 0.02 * max(width, height))
+    gx0, gy0, gx1, gy1 = xmin - pad, ymin - pad, xmax + pad, ymax + pad
+    nxg = max(int(np.ceil((gx1 - gx0) / spacing)), 4)
+    nyg = max(int(np.ceil((gy1 - gy0) / spacing)), 4)
+    tx = np.linspace(gx0, gx1, nxg + 1)
+    ty = np.linspace(gy0, gy1, nyg + 1)
+    ghosts = np.concatenate([
+        np.column_stack([tx, np.full_like(tx, gy0)]), np.column_stack([tx, np.full_like(tx, gy1)]),
+        np.column_stack([np.full_like(ty[1:-1], gx0), ty[1:-1]]),
+        np.column_stack([np.full_like(ty[1:-1], gx1), ty[1:-1]]),
+    ])
+    gens = np.concatenate([node_xy, ghosts])
+    vor = Voronoi(gens, qhull_options="Qbb Qc Qz")
+    vv = vor.vertices
+    rv = np.asarray(vor.ridge_vertices, dtype=np.int64)
+    finite = (rv >= 0).all(axis=1)
+    rv = rv[finite]
+    inside_box = (vv[:, 0] >= gx0) & (vv[:, 0] <= gx1) & (vv[:, 1] >= gy0) & (vv[:, 1] <= gy1)
+    rv = rv[inside_box[rv].all(axis=1)]
+
+    # crossings with ridges
+    vlines = shapely.linestrings(np.stack([vv[rv[:, 0]], vv[rv[:, 1]]], axis=1))
+    bound = np.full(vv.shape[0], np.inf)
+    crossed = np.zeros(rv.shape[0], bool)
+    if ridges.p0.shape[0]:
+        rlines = shapely.linestrings(np.stack([ridges.p0, ridges.p1], axis=1))
+        tree = shapely.STRtree(rlines)
+        ei, ri = tree.query(vlines, predicate="intersects")
+        if ei.size:
+            u = _segment_params(vv[rv[ei, 0]], vv[rv[ei, 1]], ridges.p0[ri], ridges.p1[ri])
+            alt = ridges.z0[ri] + u * (ridges.z1[ri] - ridges.z0[ri])
+            crossed[ei] = True
+            np.minimum.at(bound, rv[ei, 0], alt)
+            np.minimum.at(bound, rv[ei, 1], alt)
+    keep = rv[~crossed]
+    inside = (vv[:, 0] > xmin) & (vv[:, 0] < xmax) & (vv[:, 1] > ymin) & (vv[:, 1] < ymax)
+    keep = keep[inside[keep].any(axis=1)]  # edges wholly outside the domain are not rivers
+
+    used = np.unique(keep)
+    remap = np.full(vv.shape[0], -1, np.int64)
+    remap[used] = np.arange(used.size)
+    xy = vv[used]
+    bnd = bound[used]
+    e = remap[keep]
+    outlet = ~inside[used]
+    n = used.size
+    # adjacency (CSR)
+    src = np.concatenate([e[:, 0], e[:, 1]])
+    dst = np.concatenate([e[:, 1], e[:, 0]])
+    order_e = np.argsort(src, kind="stable")
+    src, dst = src[order_e], dst[order_e]
+    start = np.searchsorted(src, np.arange(n + 1))
+
+    receiver = np.full(n, -1, np.int64)
+    flowdist = np.zeros(n)
+    seen = np.zeros(n, bool)
+    heap: list[tuple[float, float, int]] = []
+    for v in np.flatnonzero(outlet):
+        heapq.heappush(heap, (float(min(bnd[v], base_elevation)), 0.0, int(v)))
+        seen[v] = True
+    order: list[int] = []
+    while heap:
+        key, dist, v = heapq.heappop(heap)
+        order.append(v)
+        for k in range(start[v], start[v + 1]):
+            w = int(dst[k])
+            if seen[w]:
+                continue
+            seen[w] = True
+            receiver[w] = v
+            d = float(np.hypot(*(xy[w] - xy[v])))
+            flowdist[w] = dist + d
+            heapq.heappush(heap, (max(key, float(bnd[w])), dist + d, w))
+    reached = np.asarray(order, dtype=np.int64)
+    if reached.size < n:
+        logger.debug("%d river nodes cannot reach an outlet; dropped", n - reached.size)
+    # compact to the reached nodes
+    sel = np.zeros(n, bool)
+    sel[reached] = True
+    new = np.full(n, -1, np.int64)
+    new[reached] = np.arange(reached.size)
+    xy = xy[reached]
+    bnd = bnd[reached]
+    outlet = outlet[reached]
+    flowdist = flowdist[reached]
+    rec_old = receiver[reached]
+    receiver = np.where(rec_old >= 0, new[np.maximum(rec_old, 0)], -1)
+    order_arr = np.arange(reached.size, dtype=np.int64)
+    length = np.zeros(reached.size)
+    has = receiver >= 0
+    length[has] = np.hypot(*(xy[has] - xy[receiver[has]]).T)
+
+    h0 = np.where(np.isfinite(bnd), bnd - margin_m, base_elevation + slope * flowdist)
+    if cap is not None and xy.shape[0]:
+        h0 = np.minimum(h0, np.asarray(cap(xy), float) - margin_m)
+    h0[outlet] = np.minimum(h0[outlet], base_elevation)
+    h = _kernels.river_elevations(order_arr, receiver, length, h0, float(slope), float(base_elevation))
+    logger.info("rivers: %d nodes, %d outlets", h.size, int(outlet.sum()))
+    return RiverNetwork(xy=xy, elevation=h, receiver=receiver, length=length, order=order_arr, outlet=outlet)
