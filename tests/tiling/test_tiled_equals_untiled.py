@@ -1,0 +1,161 @@
+"""The chunked (dask) engine gives exactly the in-memory engine's tables."""
+from __future__ import annotations
+
+import dask.array as da
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import orokit
+from orokit.tiling.summary import chunk_summary, finalize_summary, merge_summaries
+from orokit.topology.engine import orometry
+
+FIELDS = ["peak_cell", "peak_z", "prominence", "key_saddle_cell", "parent", "prominence_exact"]
+
+
+def _assert_same_tables(a, b):
+    cols = [c for c in a.peaks.columns if c != "geometry"]
+    for c in cols:
+        np.testing.assert_array_equal(a.peaks[c].to_numpy(), b.peaks[c].to_numpy(), err_msg=c)
+    sc = [c for c in a.saddles.columns if c != "geometry"]
+    for c in sc:
+        np.testing.assert_array_equal(a.saddles[c].to_numpy(), b.saddles[c].to_numpy(), err_msg=c)
+    assert a.divide_tree.n_peaks == b.divide_tree.n_peaks
+    # ridge sets: equal saddle multisets; the tree is unique up to ridges sharing a saddle cell
+    assert sorted(a.divide_tree.edges["saddle"]) == sorted(b.divide_tree.edges["saddle"])
+    np.testing.assert_array_equal(a.divide_tree.prominence(), b.divide_tree.prominence())
+
+
+@st.composite
+def grids(draw):
+    h = draw(st.integers(1, 12))
+    w = draw(st.integers(1, 12))
+    levels = draw(st.integers(2, 6))
+    z = np.array(draw(st.lists(st.integers(0, levels - 1), min_size=h * w, max_size=h * w)), float).reshape(h, w)
+    holes = draw(st.lists(st.booleans(), min_size=h * w, max_size=h * w))
+    if draw(st.booleans()):
+        z[np.array(holes).reshape(h, w) & (np.arange(h * w).reshape(h, w) % 3 == 0)] = np.nan
+    ch = draw(st.integers(1, h))
+    cw = draw(st.integers(1, w))
+    return z, ch, cw
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(grids(), st.sampled_from([0.0, 0.0, 1.0, 2.0]), st.sampled_from(["unknown", "sea"]))
+def test_chunk_summaries_merge_exactly(case, eps, outside):
+    """Summaries over any chunking (1-row chunks, chunks cutting plateaus) merge to the exact result."""
+    z, ch, cw = case
+    if np.isnan(z).all():
+        return
+    H, W = z.shape
+    zp = np.pad(z, 1, constant_values=np.nan)
+    rb, cb = list(range(0, H, ch)) + [H], list(range(0, W, cw)) + [W]
+    tiles = {
+        (i, j): chunk_summary(zp[rb[i]:rb[i + 1] + 2, cb[j]:cb[j + 1] + 2], rb[i], cb[j], (H, W), eps)
+        for i in range(len(rb) - 1) for j in range(len(cb) - 1)
+    }
+    # merge in raster order (row strips first), unlike the engine's halving order
+    rows = []
+    for i in range(len(rb) - 1):
+        s = tiles[i, 0]
+        for j in range(1, len(cb) - 1):
+            s = merge_summaries(s, tiles[i, j], eps)
+        rows.append(s)
+    s = rows[0]
+    for r in rows[1:]:
+        s = merge_summaries(s, r, eps)
+    a = orometry(z, min_prominence=eps, outside=outside)
+    b = finalize_summary(s, min_prominence=eps, outside=outside)
+    for f in FIELDS:
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+    assert a.n_maxima == b.n_maxima
+    assert sorted(a.ridge_saddle_cell) == sorted(b.ridge_saddle_cell)
+
+
+@settings(max_examples=40, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(grids(), st.sampled_from([0.0, 1.0]))
+def test_dask_analyze_equals_in_memory(make_dem, case, eps):
+    z, ch, cw = case
+    if np.isnan(z).all():
+        return
+    dem = make_dem(z, res=(30.0, 20.0))
+    a = orokit.analyze(dem, min_prominence=eps)
+    b = orokit.analyze(dem.copy(data=da.from_array(z, chunks=(ch, cw))), min_prominence=eps, scheduler="synchronous")
+    _assert_same_tables(a, b)
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("eps", [0.0, 30.48])
+def test_real_dem_in_many_chunks(real_data, eps):
+    from orokit.io.dem import read_dem
+
+    dem = read_dem(real_data("norway"), z_units="ft", cell_size=92.6)
+    a = orokit.analyze(dem, min_prominence=eps)
+    b = orokit.analyze(dem, min_prominence=eps, chunks=(97, 130))
+    assert b.attrs["engine"] == "tiled" and a.attrs["engine"] == "in-memory"
+    assert len(a.peaks) > 100
+    _assert_same_tables(a, b)
+
+
+@pytest.mark.realdata
+def test_geographic_geotiff_with_nodata_chunked(real_data):
+    from orokit.io.dem import read_dem
+
+    dem = read_dem(real_data("pysheds-dem"))
+    a = orokit.analyze(dem, min_prominence=0)
+    b = orokit.analyze(dem, min_prominence=0, chunks=64)
+    _assert_same_tables(a, b)
+
+
+@pytest.mark.realdata
+def test_mosaic_of_geotiff_tiles_and_vrt(real_data, tmp_path):
+    """Several DEMs written as separate GeoTIFF tiles + a VRT, with a void across a seam."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    from orokit.io.dem import read_dem
+    from orokit.io.mosaic import build_vrt
+
+    z1 = read_dem(real_data("rockies"), z_units="ft", cell_size=92.6).values
+    z2 = read_dem(real_data("alaska"), z_units="ft", cell_size=92.6).values
+    big = np.block([[z1, z2], [z2[::-1], z1[:, ::-1]]])
+    big[600:700, 500:800] = np.nan
+    res = 92.6
+    paths = []
+    for i in range(0, big.shape[0], 500):
+        for j in range(0, big.shape[1], 400):
+            t = big[i:i + 500, j:j + 400]
+            p = tmp_path / f"tile_{i}_{j}.tif"
+            with rasterio.open(p, "w", driver="GTiff", width=t.shape[1], height=t.shape[0], count=1, dtype="float32",
+                               crs="EPSG:32611", transform=from_origin(500000 + j * res, 4000000 - i * res, res, res),
+                               nodata=-9999) as ds:
+                ds.write(np.where(np.isnan(t), -9999, t).astype("float32"), 1)
+            paths.append(p)
+    vrt = build_vrt(paths, tmp_path / "mosaic.vrt")
+    lazy = read_dem(vrt, chunks=300)
+    assert lazy.chunks is not None
+    eager = read_dem(tmp_path)  # a directory of tiles
+    np.testing.assert_array_equal(np.isnan(eager.values), np.isnan(big))
+    a = orokit.analyze(eager, min_prominence=30)
+    b = orokit.analyze(lazy, min_prominence=30)
+    _assert_same_tables(a, b)
+
+
+def test_checkpoint_resume_and_mismatch(make_dem, tmp_path):
+    from orokit.errors import TilingError
+
+    rng = np.random.default_rng(3)
+    z = rng.normal(size=(60, 70)).cumsum(0).cumsum(1)
+    dem = make_dem(z)
+    ck = tmp_path / "ck"
+    a = orokit.analyze(dem, min_prominence=1.0, chunks=20, checkpoint=ck)
+    files = sorted(ck.glob("chunk_*.npz"))
+    assert len(files) == 12
+    files[0].unlink()  # an interrupted run: one chunk missing
+    b = orokit.analyze(dem, min_prominence=1.0, chunks=20, checkpoint=ck)
+    _assert_same_tables(a, b)
+    assert len(sorted(ck.glob("chunk_*.npz"))) == 12
+    with pytest.raises(TilingError, match="another run"):
+        orokit.analyze(dem, min_prominence=2.0, chunks=20, checkpoint=ck)
