@@ -41,9 +41,16 @@ DATA_STAMP := $(STAMPS)/data-verified
 SUMMARY_SRC := orokit/io/dem.py orokit/data/fetch.py orokit/reports/dem_summary.py orokit/cli/report_dataset.py
 DATASET_SUMMARIES := $(DATASETS:%=$(REPORTS)/datasets/%/summary.md)
 
-REPORT_OUTPUTS := $(DATASET_SUMMARIES) $(REPORTS)/README.md
+# stage: classification (issue 6). Reads the analysis folders reports/analysis/<name>/;
+# the pattern rule for them below is a stand-in until the analysis stage owns it.
+ANALYSIS_JSONS := $(DATASETS:%=$(REPORTS)/analysis/%/analysis.json)
+CLASSIFY_SRC := $(wildcard orokit/classify/*.py orokit/sampling/*.py orokit/metrics/disk.py) \
+                orokit/reports/classification.py orokit/cli/report.py
+CLASSIFICATION_README := $(REPORTS)/classification/README.md
 
-.PHONY: report test data venv clean-reports help
+REPORT_OUTPUTS := $(DATASET_SUMMARIES) $(REPORTS)/README.md $(CLASSIFICATION_README)
+
+.PHONY: report test data venv clean-reports help classification
 
 report: $(REPORT_OUTPUTS)  ## main pipeline: fetch/verify data, per-dataset summaries, index
 
@@ -75,6 +82,16 @@ $(REPORTS)/datasets/%/summary.md: $(DATA_STAMP) $(SUMMARY_SRC) | $(INSTALLED)
 
 $(REPORTS)/README.md: $(DATASET_SUMMARIES) orokit/cli/report_index.py | $(INSTALLED)
 	$(OROKIT) -q report-index $(patsubst %/summary.md,%/summary.json,$(DATASET_SUMMARIES)) -o $@ --overwrite
+
+$(REPORTS)/analysis/%/analysis.json: $(DATA_STAMP) | $(INSTALLED)
+	$(OROKIT) -q analyze "$$($(OROKIT) data path $*)" -o $(@D) --z-units ft \
+	  --cell-size $(if $(filter pyrenees,$*),30.9,92.6) --min-prominence 30 --overwrite --no-progress
+
+$(CLASSIFICATION_README): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
+	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(@D) --radius 10km --radius 5km --radius 15km \
+	  --runs 100 --feature-runs 20 --model models/regions-10km.skops --overwrite --no-progress
+
+classification: $(CLASSIFICATION_README)  ## region classification report (Table 2) and models/regions-10km.skops
 
 clean-reports:  ## delete generated reports (keeps data and .venv)
 	rm -rf $(REPORTS)/datasets $(REPORTS)/README.md
