@@ -25,6 +25,9 @@ COMMANDS: dict[str, str] = {
     "report": "orokit.cli.report:report",
     "type": "orokit.cli.type_cmd:type_cmd",
     "synthesize-tree": "orokit.cli.synthesize_tree:synthesize_tree",
+    "render": "orokit.cli.render:render",
+    "synthesize": "orokit.cli.synthesize:synthesize",
+    "validate": "orokit.cli.validate:validate",
 }
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import rioxarray  # noqa: F401 - registers the .rio accessor
 import xarray as xr
 from scipy import ndimage
 
@@ -123,10 +124,16 @@ def _check_crs(tree) -> Any:
 
 
 def tree_extent(tree, *, pad_m: float | None = None) -> tuple[float, float, float, float]:
-    """Extent of a tree: ``tree.attrs['extent']`` when present, else its bounding box padded."""
-    ext = tree.attrs.get("extent") if isinstance(tree.attrs, dict) else None
-    if ext is not None:
-        return tuple(float(v) for v in ext)  # type: ignore[return-value]
+    """Extent ``(xmin, ymin, xmax, ymax)`` of a tree: ``attrs['extent']``, the synthesis
+    ``attrs['domain']`` (x0, y0 = south-west corner, width, height), else the bounding
+    box of its peaks and saddles padded by ``pad_m`` (default 5 %, at least 1 km)."""
+    attrs = tree.attrs if isinstance(tree.attrs, dict) else {}
+    if attrs.get("extent") is not None:
+        return tuple(float(v) for v in attrs["extent"])  # type: ignore[return-value]
+    dom = attrs.get("domain")
+    if isinstance(dom, dict) and {"x0", "y0", "width", "height"} <= set(dom):
+        x0, y0 = float(dom["x0"]), float(dom["y0"])
+        return (x0, y0, x0 + float(dom["width"]), y0 + float(dom["height"]))
     xy = np.concatenate([tree.peaks[["x", "y"]].to_numpy(float), tree.saddles[["x", "y"]].to_numpy(float)])
     xmin, ymin = xy.min(axis=0)
     xmax, ymax = xy.max(axis=0)
@@ -246,8 +253,7 @@ def render_elevation(
     ----------
     divide_tree : DivideTree in a projected CRS or a local metric frame (x, y, elevation in metres).
     resolution_m : cell size of the output in metres.
-    extent : ``(xmin, ymin, xmax, ymax)`` in the tree's CRS; default
-        ``divide_tree.attrs['extent']`` or the tree's bounding box padded by 5 %.
+    extent : ``(xmin, ymin, xmax, ymax)`` in the tree's CRS; default :func:`tree_extent`.
     erosion : run the multi-scale constrained erosion.
     params : :class:`RenderParams` (lambda, noise, erosion...).
     max_cells : refuse rasters larger than this (checked before allocating).

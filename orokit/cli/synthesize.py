@@ -1,0 +1,72 @@
+"""``orokit synthesize``: a Divide Tree from a terrain type and its terrain, in one go."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+#: files written into OUT besides those of ``orokit synthesize-tree``
+TERRAIN_FILES = ("dem.tif", "hillshade.png")
+
+
+@click.command(name="synthesize")
+@click.option("--type", "type_file", required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Terrain type JSON (from `orokit type`).")
+@click.option("--size", default="90km", show_default=True, help="Domain size: 90km, 90000m, 90x60km.")
+@click.option("--resolution", default="30m", show_default=True, help="Cell size of the raster.")
+@click.option("--n-peaks", type=int, default=None, help="Number of peaks (default: type density x area).")
+@click.option("--erosion/--no-erosion", default=True, show_default=True, help="Multi-scale constrained erosion.")
+@click.option("--seed", type=int, default=None, help="Random seed (tree and raster).")
+@click.option("--crs", default=None, help="Output CRS (projected). Default: local frame.")
+@click.option("--tin", "write_tin", is_flag=True, help="Also write the TIN as tin.ply.")
+@click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Output folder: dividetree.gpkg/.txt, peaks.csv, synthesis.json, dem.tif, hillshade.png.")
+@click.option("--overwrite", is_flag=True, help="Replace existing outputs in OUTPUT.")
+@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
+def synthesize(type_file, size, resolution, n_peaks, erosion, seed, crs, write_tin, outdir, overwrite, progress) -> None:
+    """Synthesize a Divide Tree following a terrain type and render it to a raster."""
+    import time
+
+    import numpy as np
+
+    from orokit.cli.render import parse_length, write_outputs
+    from orokit.cli.synthesize_tree import parse_size
+    from orokit.raster.render import RenderParams, make_grid, render_elevation, tree_extent
+    from orokit.synthesis.fidelity import compare_to_type
+    from orokit.synthesis.output import SYNTHESIS_FILES, write_synthesis
+    from orokit.synthesis.terrain_type import load_terrain_type
+    from orokit.synthesis.tree import synthesize_divide_tree
+
+    existing = [f for f in SYNTHESIS_FILES + TERRAIN_FILES + ("tin.ply",) if (outdir / f).exists()]
+    if existing and not overwrite:
+        raise click.UsageError(f"{outdir} already holds {', '.join(existing)}; pass --overwrite to replace them")
+    w, h = parse_size(size)
+    res = parse_length(resolution)
+    make_grid((0.0, 0.0, w, h), res)  # resolution errors before the synthesis
+    ttype = load_terrain_type(type_file)
+    rng = np.random.default_rng(seed)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=3, desc="synthesize", unit="stage")
+    t0 = time.perf_counter()
+    tree = synthesize_divide_tree(ttype, size_m=(w, h), n_peaks=n_peaks, crs=crs, rng=rng)
+    if bar is not None:
+        bar.update(1)
+    dem, skel = render_elevation(tree, resolution_m=res, extent=tree_extent(tree), erosion=erosion,
+                                 params=RenderParams(min_prominence=float(tree.attrs.get("min_prominence", 30.0))),
+                                 return_skeleton=True, rng=rng)
+    if bar is not None:
+        bar.update(1)
+    outdir.mkdir(parents=True, exist_ok=True)
+    extra = {"seed": seed, "types": [str(type_file)], "resolution_m": res, "erosion": bool(erosion),
+             "fidelity": compare_to_type(tree, ttype).reset_index().to_dict(orient="records")}
+    write_synthesis(tree, outdir, extra=extra)
+    write_outputs(dem, outdir / "dem.tif", preview=outdir / "hillshade.png",
+                  tin_path=outdir / "tin.ply" if write_tin else None, skeleton=skel)
+    if bar is not None:
+        bar.update(1)
+        bar.close()
+    click.echo(f"{tree.n_peaks} peaks, {dem.shape[1]} x {dem.shape[0]} cells at {res:g} m "
+               f"in {time.perf_counter() - t0:.1f} s -> {outdir}")

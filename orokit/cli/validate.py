@@ -1,0 +1,84 @@
+"""``orokit validate``: round trip of a rendered terrain (re-analysis, histograms, classification)."""
+from __future__ import annotations
+
+import datetime as _dt
+from pathlib import Path
+
+import click
+
+
+def append_row(table: Path, row: dict) -> None:
+    """Append one row to a CSV table (rewritten atomically; new columns are added)."""
+    import pandas as pd
+
+    from orokit.io.atomic import atomic_path
+
+    df = pd.DataFrame([row])
+    if table.exists():
+        df = pd.concat([pd.read_csv(table), df], ignore_index=True)
+    table.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(table) as tmp:
+        df.to_csv(tmp, index=False)
+
+
+@click.command(name="validate")
+@click.argument("out", type=click.Path(exists=True, path_type=Path))
+@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Trained region model (.skops) to classify the terrain with.")
+@click.option("--tree", "tree_path", type=click.Path(exists=True, path_type=Path), default=None,
+              help="Divide Tree the raster was rendered from (default: OUT/dividetree.gpkg).")
+@click.option("--type", "type_file", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Terrain type JSON to compare histograms with (default: the one in OUT/synthesis.json).")
+@click.option("--label", default=None, help="Expected region (default: the type's name).")
+@click.option("--min-prominence", type=float, default=30.0, show_default=True, help="eps (m) of the re-analysis.")
+@click.option("--reports", "reports_dir", type=click.Path(file_okay=False, path_type=Path), default=Path("reports"),
+              show_default=True, help="Folder of roundtrip.csv (one row appended per run).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the disk placement.")
+def validate(out, model_path, tree_path, type_file, label, min_prominence, reports_dir, seed) -> None:
+    """Re-analyse OUT (a synthesize folder or a raster), compare it with its Divide Tree, classify it."""
+    import json
+
+    from orokit.cli.render import read_tree
+    from orokit.io.atomic import write_text_atomic
+    from orokit.io.dem import read_dem
+    from orokit.validate.roundtrip import roundtrip, summary_json
+
+    folder = out if out.is_dir() else None
+    raster = folder / "dem.tif" if folder else out
+    if tree_path is None:
+        if folder is None or not (folder / "dividetree.gpkg").exists():
+            raise click.UsageError("give --tree (the Divide Tree the raster was rendered from)")
+        tree_path = folder / "dividetree.gpkg"
+    if type_file is None and folder is not None and (folder / "synthesis.json").exists():
+        types = json.loads((folder / "synthesis.json").read_text()).get("types") or []
+        if len(types) == 1 and Path(types[0]).exists():
+            type_file = Path(types[0])
+    dem = read_dem(str(raster), z_units="m")
+    tree = read_tree(tree_path)
+    ttype = None
+    if type_file is not None:
+        from orokit.synthesis.terrain_type import load_terrain_type
+
+        ttype = load_terrain_type(type_file)
+    model = None
+    if model_path is not None:
+        from orokit.classify.model import load_model
+
+        model = load_model(model_path)
+    rt = roundtrip(dem, tree, min_prominence=min_prominence, terrain_type=ttype, model=model,
+                   expected_label=label, rng=seed)
+    row = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "raster": str(raster),
+           "tree": str(tree_path), "model": str(model_path) if model_path else "", **rt.summary()}
+    append_row(reports_dir / "roundtrip.csv", row)
+    if folder is not None:
+        write_text_atomic(folder / "validation.json", summary_json(rt))
+    s = rt.summary()
+    msg = (f"recovered {100 * s['recovered_share']:.1f} % of {s['tree_peaks']} tree peaks >= {min_prominence:g} m, "
+           f"{s['extra_peaks']} extra ({100 * s['extra_share']:.1f} %)")
+    if "max_bin_error" in s:
+        msg += f"; max histogram bin error {s['max_bin_error']:.3f}"
+    if "predicted" in s:
+        msg += f"; classified as {s['predicted']}"
+        if "disk_accuracy" in s:
+            msg += f" ({100 * s['disk_accuracy']:.0f} % of {s['n_disks']} disks right)"
+    click.echo(msg + f" -> {reports_dir / 'roundtrip.csv'}")
