@@ -29,7 +29,8 @@ def oracle_pairs(z: np.ndarray, eps: float) -> tuple[list[tuple[float, float]], 
     if not np.isfinite(zz).any():
         return [], []
     fin, ess = persistence_pairs(zz)
-    return [(b, d) for b, d in fin if b - d >= eps], [b for b in ess if b >= eps]
+    # roots: prominence = elevation, kept when it reaches eps; eps = 0 keeps every peak
+    return [(b, d) for b, d in fin if b - d >= eps], [b for b in ess if eps == 0 or b >= eps]
 
 
 def check(z: np.ndarray, eps: float) -> None:
