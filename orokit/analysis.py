@@ -154,6 +154,11 @@ def analyze(
         from orokit.tiling.isolation import tiled_isolation
 
         data = dem.data
+        client = None
+        if isinstance(scheduler, str) and "://" in scheduler:
+            from distributed import Client
+
+            client = scheduler = Client(scheduler, set_as_default=False)
         if chunks is not None:
             data = data.rechunk(chunks) if hasattr(data, "rechunk") else _as_dask(data, chunks)
         core = tiled_orometry(data, min_prominence=min_prominence, outside=outside, scheduler=scheduler,
@@ -164,6 +169,8 @@ def analyze(
             iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform, crs=crs,
                                   compute=get_compute(scheduler))
         t_iso = time.perf_counter()
+        if client is not None:
+            client.close()
     else:
         z = np.asarray(dem.values)
         if not np.issubdtype(z.dtype, np.floating):
