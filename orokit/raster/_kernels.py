@@ -223,12 +223,15 @@ def reconstruct_raster(z: np.ndarray, marker_r: np.ndarray, marker_c: np.ndarray
 
 @njit(cache=True)
 def carve_saddles(z: np.ndarray, x0: float, y0: float, res: float, sx: np.ndarray, sy: np.ndarray,
-                  sz: np.ndarray, nxv: np.ndarray, nyv: np.ndarray, max_len: float, drop: float) -> int:
+                  sz: np.ndarray, nxv: np.ndarray, nyv: np.ndarray, max_len: float, drop: float,
+                  label: np.ndarray) -> int:
     """Cut a 4-connected trench through each saddle, perpendicular to its ridge (in place).
 
     From the saddle, both ways along the unit normal ``(nxv, nyv)``, cells are lowered
     to ``min(z, sz - drop)`` until the ground is already below ``sz - drop`` (or after
-    ``max_len`` metres), so no path beside the saddle crosses the ridge above it. Each
+    ``max_len`` metres) or a cell of another ridge (``label`` holds the ridge id of
+    each burnt cell; saddle ``s`` belongs to ridge ``s``), so no path beside the saddle
+    crosses the ridge above it. Each
     diagonal step also lowers one 4-neighbour so the trench stops 8-connected paths.
     Returns the number of cells lowered (numba: walks of data-dependent length).
     """
@@ -250,6 +253,8 @@ def carve_saddles(z: np.ndarray, x0: float, y0: float, res: float, sx: np.ndarra
                     break
                 if i == pi and j == pj:
                     continue
+                if label[i, j] >= 0 and label[i, j] != s:
+                    break
                 if pi >= 0 and i != pi and j != pj:
                     if z[pi, j] > target:
                         z[pi, j] = target

@@ -19,6 +19,7 @@ class Polylines:
     z: np.ndarray
     a: np.ndarray
     segments: np.ndarray
+    origin: np.ndarray | None = None  # (s,) index of the input segment each piece comes from
 
 
 def refine_segments(
@@ -76,14 +77,17 @@ def refine_segments(
         z=np.concatenate([node_z, z]),
         a=np.concatenate([node_a, a]),
         segments=np.concatenate(segs).astype(np.int64),
+        origin=np.concatenate([np.arange(seg.shape[0]), sid]).astype(np.int64),
     )
 
 
-def densify(lines: Polylines, spacing: float, *, value: str = "a") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def densify(lines: Polylines, spacing: float, *, value: str = "a", origin: bool = False):
     """Points every ``<= spacing`` along all segments: ``(xy, z, v)``.
 
     ``v`` is the interpolated value ``a`` (``value="a"``) or the absolute slope
-    ``|dz/ds|`` of the segment each point lies on (``value="slope"``).
+    ``|dz/ds|`` of the segment each point lies on (``value="slope"``). With
+    ``origin=True`` a fourth array gives each point's input segment (-1 for the
+    appended vertices).
     """
     s = lines.segments
     p0, p1 = lines.xy[s[:, 0]], lines.xy[s[:, 1]]
@@ -107,4 +111,7 @@ def densify(lines: Polylines, spacing: float, *, value: str = "a") -> tuple[np.n
     xy = np.concatenate([xy, lines.xy])
     z = np.concatenate([z, lines.z])
     a = np.concatenate([a, node_v])
+    if origin:
+        src = lines.origin if lines.origin is not None else np.arange(s.shape[0])
+        return xy, z, a, np.concatenate([src[sid], np.full(lines.xy.shape[0], -1, np.int64)])
     return xy, z, a

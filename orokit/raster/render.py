@@ -88,6 +88,7 @@ class TerrainSkeleton:
     node_xyz: np.ndarray  # peaks then used saddles (x, y, z)
     n_peaks: int
     timings: dict[str, float] = field(default_factory=dict)
+    piece_saddle: np.ndarray | None = None  # saddle (0..m-1) of each straight ridge piece
 
 
 def _tree_arrays(tree) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -233,7 +234,7 @@ def build_skeleton(
     t["tin"] = time.perf_counter() - t0
     logger.info("skeleton: %d ridge pts, %d river pts, %d samples, %d triangles",
                 nr, nv, pts.shape[0], tin.n_triangles)
-    return TerrainSkeleton(ridge_lines, river_lines, rivers, tin, extent, nodes, n, t)
+    return TerrainSkeleton(ridge_lines, river_lines, rivers, tin, extent, nodes, n, t, ridges.node1 - n)
 
 
 def render_elevation(
@@ -309,8 +310,13 @@ def render_elevation(
 
     t0 = time.perf_counter()
     z = rasterize_tin(skel.tin, grid)
-    rxy, rz, _ = densify(skel.ridges, 0.5 * grid.res)
+    rxy, rz, _, rorig = densify(skel.ridges, 0.5 * grid.res, origin=True)
     burn_max(z, grid, rxy, rz)
+    label = np.full(z.shape, -1, np.int32)  # saddle of the ridge of every burnt cell
+    row, col, ok = grid.cell_of(rxy)
+    ok &= rorig >= 0
+    if skel.piece_saddle is not None and skel.piece_saddle.size:
+        label[row[ok], col[ok]] = skel.piece_saddle[rorig[ok]].astype(np.int32)
     nodes = skel.node_xyz
     set_cells(z, grid, nodes[:, :2], nodes[:, 2])
     if np.isnan(z).any():
@@ -339,7 +345,7 @@ def render_elevation(
         timings["erosion"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     set_cells(z, grid, nodes[:, :2], nodes[:, 2])
-    enforce_orometry(z, grid, skel)
+    enforce_orometry(z, grid, skel, label=label)
     timings["orometry"] = time.perf_counter() - t0
 
     x, y = grid.centres()
@@ -391,12 +397,13 @@ def _saddle_normals(skel: TerrainSkeleton) -> tuple[np.ndarray, np.ndarray]:
     return -d[:, 1] / norm, d[:, 0] / norm
 
 
-def enforce_orometry(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, drop_m: float = 0.5,
-                     trench_m: float = 3000.0) -> np.ndarray:
+def enforce_orometry(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, label: np.ndarray | None = None,
+                     drop_m: float = 0.5, trench_m: float = 3000.0) -> np.ndarray:
     """Make the raster's orometry that of the tree (in place).
 
     1. A trench perpendicular to the ridge through every saddle, just below it, until the
-       ground is lower (no path beside a saddle crosses the ridge above it).
+       ground is lower (no path beside a saddle crosses the ridge above it); a trench
+       stops at a cell of another ridge (``label``: tree edge id of burnt ridge cells).
     2. Peak cutting: every hill without a tree peak is lowered until it has a strictly
        ascending path (1 mm per cell) to a tree peak, so the tree's peaks are the only
        local maxima.
@@ -409,7 +416,8 @@ def enforce_orometry(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, drop_m
         s = nodes[n:]
         _kernels.carve_saddles(z, float(grid.x0), float(grid.y0), float(grid.res),
                                np.ascontiguousarray(s[:, 0]), np.ascontiguousarray(s[:, 1]),
-                               np.ascontiguousarray(s[:, 2]), nxv, nyv, float(trench_m), float(drop_m))
+                               np.ascontiguousarray(s[:, 2]), nxv, nyv, float(trench_m), float(drop_m),
+                               label if label is not None else np.full(z.shape, -1, np.int32))
     set_cells(z, grid, nodes[:, :2], nodes[:, 2])
     row, col, ok = grid.cell_of(nodes[:n, :2])
     z[...] = _kernels.reconstruct_raster(z, row[ok], col[ok], 1e-3)
