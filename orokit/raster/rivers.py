@@ -134,7 +134,7 @@ def river_network(
     xmin, ymin, xmax, ymax = extent
     width, height = xmax - xmin, ymax - ymin
     n_gen = max(node_xy.shape[0], 1)
-    spacing = float(np.sqrt(width * height / n_gen))
+    spacing = min(float(np.sqrt(width * height / n_gen)), max(width, height) / 8.0)
     pad = max(spacing, 0.02 * max(width, height))
     gx0, gy0, gx1, gy1 = xmin - pad, ymin - pad, xmax + pad, ymax + pad
     nxg = max(int(np.ceil((gx1 - gx0) / spacing)), 4)

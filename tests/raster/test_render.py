@@ -1,0 +1,183 @@
+"""Renderer: rivers, orometry of the raster, reproducibility, bad inputs."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import orokit
+from orokit.errors import CRSError, DivideTreeError, InputError
+from orokit.raster.render import RenderParams, build_skeleton, render_elevation
+from orokit.topology.divide_tree import DivideTree
+from orokit.validate.roundtrip import compare_peaks
+
+FAST = RenderParams(lam=200.0, erosion_steps=2)
+
+
+def small_tree(crs=None) -> DivideTree:
+    """Five peaks in a 8 x 8 km square, hand made: A 1500 m is the highest."""
+    peaks = np.array([
+        [2000.0, 2000.0, 1500.0],  # 0 A
+        [6000.0, 2500.0, 1300.0],  # 1 B
+        [4000.0, 6000.0, 1400.0],  # 2 C
+        [1500.0, 6200.0, 1100.0],  # 3 D
+        [6500.0, 6500.0, 1000.0],  # 4 E
+    ])
+    saddles = np.array([
+        [4000.0, 2200.0, 1100.0],  # A-B
+        [3000.0, 4000.0, 1200.0],  # A-C
+        [2800.0, 6100.0, 950.0],   # C-D
+        [5300.0, 6300.0, 900.0],   # C-E
+    ])
+    edges = np.array([[0, 1, 0], [0, 2, 1], [2, 3, 2], [2, 4, 3]])
+    return DivideTree.from_arrays(peaks, saddles, edges, crs=crs, attrs={"extent": [0.0, 0.0, 8000.0, 8000.0]})
+
+
+@pytest.fixture(scope="module")
+def rendered():
+    tree = small_tree()
+    dem, skel = render_elevation(tree, resolution_m=50.0, erosion=False, params=FAST, return_skeleton=True, rng=7)
+    return tree, dem, skel
+
+
+def test_river_graph_is_forest_draining_to_outlets(rendered):
+    _, _, skel = rendered
+    rv = skel.river_network
+    assert rv.n_nodes > 10
+    # following receivers from every node ends at an outlet within n steps (no cycle)
+    v = np.arange(rv.n_nodes)
+    for _ in range(rv.n_nodes):
+        nxt = rv.receiver[v]
+        v = np.where(nxt >= 0, nxt, v)
+    assert rv.outlet[v].all()
+    assert (rv.receiver[rv.outlet] == -1).all()
+    # beds never rise downstream
+    has = rv.receiver >= 0
+    assert (rv.elevation[rv.receiver[has]] <= rv.elevation[has] + 1e-9).all()
+
+
+def test_no_river_crosses_a_ridge(rendered):
+    import shapely
+
+    tree, _, skel = rendered
+    p = tree.peaks[["x", "y"]].to_numpy()
+    s = tree.saddles[["x", "y"]].to_numpy()
+    e = tree.edges.to_numpy()
+    ridges = shapely.linestrings(np.concatenate([np.stack([p[e[:, 0]], s[e[:, 2]]], 1),
+                                                 np.stack([s[e[:, 2]], p[e[:, 1]]], 1)]))
+    rv = skel.river_network
+    ed = rv.edges()
+    rivers = shapely.linestrings(np.stack([rv.xy[ed[:, 0]], rv.xy[ed[:, 1]]], 1))
+    # the straight tree ridges (before jitter) are crossed by no unrefined river edge
+    # except through the jitter band: check against the refined ridges exactly
+    fine = skel.ridges
+    fr = shapely.linestrings(np.stack([fine.xy[fine.segments[:, 0]], fine.xy[fine.segments[:, 1]]], 1))
+    hits = shapely.STRtree(fr).query(rivers, predicate="crosses")
+    assert hits.shape[1] == 0
+    assert len(ridges) == 8
+
+
+def test_raster_honours_peaks_and_saddles(rendered):
+    tree, dem, _ = rendered
+    z = dem.values
+    for frame in (tree.peaks, tree.saddles):
+        col = np.floor(frame["x"].to_numpy() / 50.0).astype(int)
+        row = np.floor((8000.0 - frame["y"].to_numpy()) / 50.0).astype(int)
+        np.testing.assert_allclose(z[row, col], frame["elevation"].to_numpy(), atol=0.01)
+    assert z.max() == pytest.approx(1500.0, abs=0.01)
+    assert dem.attrs["units"] == "m" and dem.rio.transform().a == 50.0
+
+
+def test_round_trip_recovers_every_peak(rendered):
+    tree, dem, _ = rendered
+    res = orokit.analyze(dem, min_prominence=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0
+    assert len(comp.extra) == 0
+    got = comp.peaks["raster_prominence"].to_numpy()
+    # expected prominences written by hand: A 1500 (root), B 200, C 200, D 150, E 100
+    # tolerance: a 50 m cell beside a saddle may pass up to ~slope * cell / 2 above it
+    np.testing.assert_allclose(got, [1500.0, 200.0, 200.0, 150.0, 100.0], atol=6.0)
+
+
+def test_resolution_independence():
+    tree = small_tree()
+    proms = []
+    for res in (100.0, 40.0):
+        dem = render_elevation(tree, resolution_m=res, erosion=False, params=FAST, rng=3)
+        r = orokit.analyze(dem, min_prominence=30.0, isolation=False)
+        comp = compare_peaks(tree, r.peaks, min_prominence=30.0, distance_tol_m=2 * res)
+        assert comp.recovered_share == 1.0
+        proms.append(comp.peaks["raster_prominence"].to_numpy())
+    # consistent within eps / 3 (10 m): discretisation beside saddles grows with the cell
+    np.testing.assert_allclose(proms[0], proms[1], atol=10.0)
+
+
+def test_same_seed_same_raster_other_seed_differs():
+    tree = small_tree()
+    a = render_elevation(tree, resolution_m=100.0, erosion=False, params=FAST, rng=11).values
+    b = render_elevation(tree, resolution_m=100.0, erosion=False, params=FAST, rng=11).values
+    c = render_elevation(tree, resolution_m=100.0, erosion=False, params=FAST, rng=12).values
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+def test_erosion_keeps_peaks_and_saddles_and_lowers_valleys():
+    tree = small_tree()
+    plain = render_elevation(tree, resolution_m=50.0, erosion=False, params=FAST, rng=5).values
+    eroded = render_elevation(tree, resolution_m=50.0, erosion=True, params=FAST, rng=5).values
+    for frame in (tree.peaks, tree.saddles):
+        col = np.floor(frame["x"].to_numpy() / 50.0).astype(int)
+        row = np.floor((8000.0 - frame["y"].to_numpy()) / 50.0).astype(int)
+        assert np.all(np.abs(eroded[row, col] - frame["elevation"].to_numpy()) <= 1.0)
+    assert (eroded < plain - 1.0).sum() > 100  # erosion did something
+
+
+def test_single_peak_and_collinear_trees_render():
+    one = DivideTree.from_arrays([[1000.0, 1000.0, 500.0]], np.empty((0, 3)), np.empty((0, 3)),
+                                 attrs={"extent": [0, 0, 2000, 2000]})
+    dem = render_elevation(one, resolution_m=50.0, erosion=False, params=FAST, rng=0)
+    assert float(dem.max()) == pytest.approx(500.0, abs=0.01)
+    line = DivideTree.from_arrays([[1000.0, 1000.0, 500.0], [2000.0, 1000.0, 450.0], [3000.0, 1000.0, 480.0]],
+                                  [[1500.0, 1000.0, 400.0], [2500.0, 1000.0, 420.0]], [[0, 1, 0], [1, 2, 1]],
+                                  attrs={"extent": [0, 0, 4000, 2000]})
+    dem = render_elevation(line, resolution_m=50.0, erosion=False, params=FAST, rng=0)
+    r = orokit.analyze(dem, min_prominence=20.0, isolation=False)
+    assert compare_peaks(line, r.peaks, min_prominence=20.0, distance_tol_m=100.0).recovered_share == 1.0
+
+
+@pytest.mark.parametrize("res", [0.0, -30.0, float("nan"), float("inf")])
+def test_bad_resolution(res):
+    with pytest.raises(InputError, match="resolution"):
+        render_elevation(small_tree(), resolution_m=res, erosion=False)
+
+
+def test_enormous_raster_refused_before_allocating():
+    with pytest.raises(InputError, match="exceeds the limit"):
+        render_elevation(small_tree(), resolution_m=0.01, erosion=False)
+    with pytest.raises(InputError, match="coarser than the extent"):
+        render_elevation(small_tree(), resolution_m=1e6, erosion=False)
+
+
+def test_tree_outside_extent_and_bad_trees():
+    with pytest.raises(InputError, match="no peak"):
+        render_elevation(small_tree(), resolution_m=100.0, extent=(1e6, 1e6, 1.01e6, 1.01e6), erosion=False)
+    empty = DivideTree.from_arrays(np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3)))
+    with pytest.raises(DivideTreeError):
+        render_elevation(empty, resolution_m=100.0, extent=(0, 0, 1000, 1000), erosion=False)
+    with pytest.raises(CRSError, match="geographic"):
+        render_elevation(small_tree(crs="EPSG:4326"), resolution_m=100.0, erosion=False)
+
+
+def test_skeleton_tin_keeps_ridge_segments(rendered):
+    tree, _, skel = rendered
+    tin = skel.tin
+    edges = {tuple(sorted(e)) for t in tin.triangles for e in ((t[0], t[1]), (t[1], t[2]), (t[0], t[2]))}
+    from scipy.spatial import cKDTree
+
+    # every refined ridge piece is an edge of the TIN (Triangle may split a piece, never drop it)
+    kd = cKDTree(tin.xy)
+    seg = skel.ridges.segments
+    a = kd.query(skel.ridges.xy[seg[:, 0]])[1]
+    b = kd.query(skel.ridges.xy[seg[:, 1]])[1]
+    present = np.mean([tuple(sorted((i, j))) in edges for i, j in zip(a, b)])
+    assert present > 0.95
