@@ -134,7 +134,7 @@ def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTarget
             bad = (new_h < 0) | (new_h > hmax[e][:, None])
             if bad.all():
                 return np.zeros_like(cost)
-            big = float(cost[~bad].max(initial=1.0)) * 1e3 + 1.0
+            big = float(cost[~bad].max(initial=1.0)) * 10.0 + 1.0
             return np.where(bad, big, cost)
 
         got = _blocked_targets(cur_all, want_all, cost_fn, block_size, rng)
@@ -170,7 +170,7 @@ def assign_saddle_elevations(
     max_iterations: int = 16,
     tol: float = 0.001,
     patience: int = 3,
-    block_size: int = 500,
+    block_size: int = 300,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, dict]:
     """Alternate dominance and prominence OT assignments until the errors are stable.
@@ -260,7 +260,7 @@ def place_key_saddles(
     t_range: tuple[float, float] = (0.03, 0.97),
     max_offset: float = 0.25,
     movable: np.ndarray | None = None,
-    block_size: int = 500,
+    block_size: int = 300,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Saddle positions whose key-saddle distances and directions follow the targets.
