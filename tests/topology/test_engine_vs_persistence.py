@@ -33,10 +33,24 @@ def oracle_pairs(z: np.ndarray, eps: float) -> tuple[list[tuple[float, float]], 
     return [(b, d) for b, d in fin if b - d >= eps], [b for b in ess if eps == 0 or b >= eps]
 
 
+def _roots_of_domains_with_kept_peaks(z: np.ndarray, peaks) -> list[float]:
+    """Domain maxima of the 8-connected domains that hold a kept non-root peak: the engine
+    keeps such a root even below eps (it is the parent of a kept peak)."""
+    from scipy import ndimage
+
+    lab, _ = ndimage.label(np.isfinite(z), structure=np.ones((3, 3), bool))
+    nonroot = peaks[peaks["parent"] != -1]
+    doms = set(lab[nonroot["row"].to_numpy(int), nonroot["col"].to_numpy(int)].tolist())
+    return [float(np.nanmax(np.where(lab == d, z, np.nan))) for d in doms]
+
+
 def check(z: np.ndarray, eps: float) -> None:
     peaks = orokit.analyze(make_dem(z), min_prominence=eps, isolation=False).peaks
     got_fin, got_roots = engine_pairs(peaks)
     exp_fin, exp_roots = oracle_pairs(z, eps)
+    if eps > 0:
+        below = sorted(r for r in _roots_of_domains_with_kept_peaks(z, peaks) if r < eps)
+        exp_roots = sorted(exp_roots + below)
     assert got_fin == exp_fin, f"finite pairs differ at eps={eps} for\n{z!r}"
     assert got_roots == exp_roots, f"roots differ at eps={eps} for\n{z!r}"
 
