@@ -43,7 +43,7 @@ def key_saddles(pz: np.ndarray, a: np.ndarray, b: np.ndarray, sz: np.ndarray) ->
 
 @dataclass
 class SaddleTargets:
-    """Target samplers per peak group (terrain type): callables ``n, rng -> values``."""
+    """Target histograms per peak group (terrain type index in ``group``)."""
 
     group: np.ndarray  # int per peak
     dominance: list  # per group: FeatureHistogram
@@ -62,30 +62,14 @@ def _emd_assign(cost: np.ndarray) -> np.ndarray:
     return np.argmax(plan, axis=1).astype(np.int64)
 
 
-def _blocks(order_key: np.ndarray, block_size: int, rng: np.random.Generator) -> list[np.ndarray]:
-    """Positions split into rank blocks of about ``block_size`` (random boundary offset)."""
-    n = order_key.size
-    if n <= block_size:
-        return [np.arange(n)]
-    order = np.argsort(order_key, kind="stable")
-    k = int(np.ceil(n / block_size))
-    size = n / k
-    shift = rng.uniform(0, size)
-    cuts = np.unique(np.clip(np.rint(shift + size * np.arange(k)).astype(np.int64), 0, n))
-    cuts = cuts[(cuts > 0) & (cuts < n)]
-    return np.split(order, cuts)
-
-
-def _blocked_targets(row_key: np.ndarray, want: np.ndarray, cost_fn, block_size: int,
-                     rng: np.random.Generator) -> np.ndarray:
+def _blocked_targets(want: np.ndarray, cost_fn, block_size: int, rng: np.random.Generator) -> np.ndarray:
     """Assign the values ``want`` to rows by exact OT (``ot.emd``) within blocks.
 
     Problems larger than ``block_size`` are split into ``k`` random blocks of rows;
     block ``j`` receives every ``k``-th sorted target starting at ``j``, i.e. a
     stratified sub-sample spanning the whole target distribution, so each block is a
     small copy of the full problem. ``cost_fn(rows, targets)`` returns a block's cost
-    matrix. Returns the target value of every row. ``row_key`` is kept for API
-    stability (ranking is not needed with stratified blocks).
+    matrix. Returns the target value of every row (as many rows as targets).
     """
     want = np.sort(want)
     n = want.size
@@ -105,11 +89,10 @@ def _blocked_targets(row_key: np.ndarray, want: np.ndarray, cost_fn, block_size:
 def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTargets, rng, block_size):
     """One OT assignment (dominance or prominence); returns new saddle elevations.
 
-    Large problems are split into blocks of rows and targets of equal rank range
-    (rows ranked by their current value, targets sorted), each solved exactly with
-    ``ot.emd``; block boundaries move randomly between rounds. For the 1-D convex
-    costs used here the optimal plan is close to monotone, so this keeps the exact
-    solution's character at a fraction of the O(n^2)+ cost.
+    Large problems are split into random row blocks, each receiving a stratified
+    sub-sample of the sorted targets and solved exactly with ``ot.emd`` (see
+    :func:`_blocked_targets`): O(n * block) memory and time instead of the O(n^2)+
+    of one exact plan, with fresh blocks every round.
     """
     key = key_saddles(pz, a, b, sz)
     sz = sz.copy()
@@ -137,7 +120,7 @@ def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTarget
             big = float(cost[~bad].max(initial=1.0)) * 10.0 + 1.0
             return np.where(bad, big, cost)
 
-        got = _blocked_targets(cur_all, want_all, cost_fn, block_size, rng)
+        got = _blocked_targets(want_all, cost_fn, block_size, rng)
         new_prom = got * h_all if kind == "dominance" else got
         sz[e_all] = np.clip(sz[e_all] - (new_prom - prom[rows_all]), 0.0, hmax[e_all])
     return sz
@@ -228,7 +211,6 @@ def enforce_min_prominence(
     than ``eps`` itself).
     """
     sz = sz.copy()
-    left = 0
     for _ in range(max_rounds):
         key = key_saddles(pz, a, b, sz)
         has = key >= 0
@@ -238,12 +220,10 @@ def enforce_min_prominence(
             return sz, 0
         e = key[low]
         sz[e] = np.maximum(np.minimum(sz[e], pz[low] - eps), 0.0)
-        left = int((low & (pz - 0.0 < eps)).sum())
     key = key_saddles(pz, a, b, sz)
     has = key >= 0
     prom = np.where(has, pz - sz[np.maximum(key, 0)], pz)
-    left = int((has & (prom < eps)).sum())
-    return sz, left
+    return sz, int((has & (prom < eps)).sum())
 
 
 def place_key_saddles(
@@ -316,8 +296,7 @@ def place_key_saddles(
         def dist_cost(blk, w, lo_r=lo_r, hi_r=hi_r):
             return (np.clip(w[None, :], lo_r[blk][:, None], hi_r[blk][:, None]) - w[None, :]) ** 2
 
-        want = _blocked_targets(0.5 * (lo_r + hi_r), distance_hists[g].sample(rows.size, rng), dist_cost,
-                                block_size, rng)
+        want = _blocked_targets(distance_hists[g].sample(rows.size, rng), dist_cost, block_size, rng)
         d = np.clip(want, lo_r, hi_r)
         # solve L^2 t^2 - 2 c t + r0^2 - d^2 = 0, choosing a root inside t_range
         A2, B2, C2 = L[rows] ** 2, -2 * c[rows], r0[rows] ** 2 - d**2
@@ -345,7 +324,7 @@ def place_key_saddles(
             gap = (w[None, :] - base[blk][:, None] + 180.0) % 360.0 - 180.0
             return np.maximum(np.abs(gap) - span[blk][:, None], 0.0) ** 2 + 1e-3 * gap**2
 
-        want = _blocked_targets(base, direction_hists[g].sample(rows.size, rng), dir_cost, block_size, rng)
+        want = _blocked_targets(direction_hists[g].sample(rows.size, rng), dir_cost, block_size, rng)
         gap = (want - base + 180.0) % 360.0 - 180.0
         ang = np.radians(base + np.clip(gap, -span, span))
         bx0[rows] = qx[rows] + r * np.cos(ang)

@@ -381,8 +381,9 @@ class TerrainType:
     def scaled(self, feature: str, factor: float) -> "TerrainType":
         """New type with a linear feature's values multiplied by ``factor`` (> 0).
 
-        Scaling prominence also scales the key-saddle depth, so the dominance
-        histogram is rebuilt consistently is *not* attempted: edit it separately.
+        Features are edited independently: scaling prominence leaves the dominance
+        histogram as it is (scale or edit it separately if wanted). Scaled dominance
+        is clipped to [0, 1], the excess mass going to the last bin.
         """
         _check_feature(feature)
         if FEATURES[feature][1] != "linear":
