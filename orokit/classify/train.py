@@ -152,11 +152,13 @@ class Evaluation:
 
     @property
     def mean_accuracy(self) -> float:
-        return float(np.mean(self.accuracies)) if len(self.accuracies) else float("nan")
+        a = self.accuracies[np.isfinite(self.accuracies)]
+        return float(np.mean(a)) if len(a) else float("nan")
 
     @property
     def median_accuracy(self) -> float:
-        return float(np.median(self.accuracies)) if len(self.accuracies) else float("nan")
+        a = self.accuracies[np.isfinite(self.accuracies)]
+        return float(np.median(a)) if len(a) else float("nan")
 
     def confusion_normalized(self) -> NDArray[np.float64]:
         c = self.confusion.astype(float)
@@ -167,7 +169,8 @@ class Evaluation:
         return {
             "split": self.split, "runs": int(len(self.accuracies)),
             "mean_accuracy": self.mean_accuracy, "median_accuracy": self.median_accuracy,
-            "std_accuracy": float(np.std(self.accuracies)) if len(self.accuracies) else float("nan"),
+            "std_accuracy": float(np.nanstd(self.accuracies)) if np.isfinite(self.accuracies).any() else float("nan"),
+            "runs_without_training_set": int(np.sum(~np.isfinite(self.accuracies))),
             "per_class": self.per_class, "per_feature": self.per_feature,
             "per_feature_runs": self.per_feature_runs, "classes": self.classes,
             "confusion": self.confusion.tolist(), "mean_train_disks": self.mean_train,
@@ -180,6 +183,8 @@ def _fit_score(X: NDArray, y: NDArray, tr: NDArray, va: NDArray, cols: NDArray |
     from sklearn.ensemble import RandomForestClassifier
     from sklearn.metrics import confusion_matrix
 
+    if len(va) == 0 or len(np.unique(y[tr])) < 2:  # spatial split left no usable training set
+        return float("nan"), np.zeros((len(classes), len(classes)), dtype=np.int64)
     Xs = X if cols is None else X[:, cols]
     rf = RandomForestClassifier(n_estimators=n_estimators, n_jobs=1, random_state=seed)
     rf.fit(Xs[tr], y[tr])
@@ -270,8 +275,10 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
     accs = np.array([r[0] for (name, _, _), r in zip(tasks, results) if name is None])
     conf = sum((r[1] for (name, _, _), r in zip(tasks, results) if name is None),
                np.zeros((len(classes), len(classes)), dtype=np.int64))
-    per_feature = {name: float(np.nanmean([r[0] for (n, _, _), r in zip(tasks, results) if n == name]))
-                   for name in groups_cols}
+    per_feature = {}
+    for name in groups_cols:
+        a = np.array([r[0] for (n, _, _), r in zip(tasks, results) if n == name])
+        per_feature[name] = float(np.mean(a[np.isfinite(a)])) if np.isfinite(a).any() else float("nan")
     recalls = {c: [] for c in classes}
     for (name, _, _), r in zip(tasks, results):
         if name is None:
