@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
     "report": "orokit.cli.report:report",
     "type": "orokit.cli.type_cmd:type_cmd",
     "synthesize-tree": "orokit.cli.synthesize_tree:synthesize_tree",
+    "synthesis-report": "orokit.cli.synthesis_report:synthesis_report",
     "render": "orokit.cli.render:render",
     "synthesize": "orokit.cli.synthesize:synthesize",
     "validate": "orokit.cli.validate:validate",

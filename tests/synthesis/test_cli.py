@@ -121,3 +121,22 @@ def test_type_from_reference_tree_and_fidelity(tmp_path, real_data):
     assert err["prominence"] < 0.03 and err["dominance"] < 0.03
     assert err["isolation_distance"] < 0.08
     assert err["saddle_distance"] < 0.04 and err["saddle_direction"] < 0.04
+
+
+def test_synthesis_report_table(tmp_path, type_file):
+    dirs = []
+    for name, seed in (("a", "1"), ("b", "2")):
+        out = tmp_path / name
+        res = CliRunner().invoke(cli, ["synthesize-tree", "--type", str(type_file), "--size", "12km", "--seed", seed,
+                                       "--no-progress", "-o", str(out)])
+        assert res.exit_code == 0, res.output
+        dirs.append(str(out))
+    md = tmp_path / "R.md"
+    res = CliRunner().invoke(cli, ["synthesis-report", *dirs, "-o", str(md)])
+    assert res.exit_code == 0, res.output
+    text = md.read_text()
+    meta = json.loads((tmp_path / "a" / "synthesis.json").read_text())
+    assert f"| a | {meta['n_peaks']} |" in text
+    prom = next(f for f in meta["fidelity"] if f["feature"] == "prominence")["max_bin_error"]
+    assert f"{prom:.4f}" in text
+    assert CliRunner().invoke(cli, ["synthesis-report", *dirs, "-o", str(md)]).exit_code != 0
