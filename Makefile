@@ -50,7 +50,15 @@ CLASSIFICATION_README := $(REPORTS)/classification/README.md
 
 REPORT_OUTPUTS := $(DATASET_SUMMARIES) $(REPORTS)/README.md $(CLASSIFICATION_README)
 
-.PHONY: report test data venv clean-reports help classification
+# stage: Divide Tree synthesis (issue 7): a terrain type per region (from its analysis), a
+# 90 x 90 km synthesized tree per type (seed 0), and the fidelity table reports/synthesis/README.md.
+SYNTH_SRC := $(wildcard orokit/synthesis/*.py) orokit/cli/type_cmd.py orokit/cli/synthesize_tree.py
+SYNTH_TYPES := $(DATASETS:%=$(REPORTS)/synthesis/types/%.json)
+SYNTH_TREES := $(DATASETS:%=$(REPORTS)/synthesis/trees/%/synthesis.json)
+SYNTHESIS_README := $(REPORTS)/synthesis/README.md
+REPORT_OUTPUTS += $(SYNTHESIS_README)
+
+.PHONY: report test data venv clean-reports help classification synthesis
 
 report: $(REPORT_OUTPUTS)  ## main pipeline: fetch/verify data, per-dataset summaries, index
 
@@ -92,6 +100,18 @@ $(CLASSIFICATION_README): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
 	  --runs 100 --feature-runs 20 --model models/regions-10km.skops --overwrite --no-progress
 
 classification: $(CLASSIFICATION_README)  ## region classification report (Table 2) and models/regions-10km.skops
+
+$(REPORTS)/synthesis/types/%.json: $(REPORTS)/analysis/%/analysis.json $(SYNTH_SRC) | $(INSTALLED)
+	$(OROKIT) -q type $(<D) -o $@ --name $* --overwrite
+
+# synthesis.json is the last of the four files synthesize-tree writes
+$(REPORTS)/synthesis/trees/%/synthesis.json: $(REPORTS)/synthesis/types/%.json $(SYNTH_SRC) | $(INSTALLED)
+	$(OROKIT) -q synthesize-tree --type $< --size 90km --seed 0 -o $(@D) --overwrite --no-progress
+
+$(SYNTHESIS_README): $(SYNTH_TREES) orokit/cli/synthesis_report.py | $(INSTALLED)
+	$(OROKIT) -q synthesis-report $(SYNTH_TREES:%/synthesis.json=%) -o $@ --overwrite
+
+synthesis: $(SYNTHESIS_README)  ## terrain types per region, synthesized 90 km trees, fidelity table
 
 clean-reports:  ## delete generated reports (keeps data and .venv)
 	rm -rf $(REPORTS)/datasets $(REPORTS)/README.md
