@@ -56,7 +56,7 @@ SYNTH_SRC := $(wildcard orokit/synthesis/*.py) orokit/cli/type_cmd.py orokit/cli
 SYNTH_TYPES := $(DATASETS:%=$(REPORTS)/synthesis/types/%.json)
 SYNTH_TREES := $(DATASETS:%=$(REPORTS)/synthesis/trees/%/synthesis.json)
 SYNTHESIS_README := $(REPORTS)/synthesis/README.md
-REPORT_OUTPUTS += $(SYNTHESIS_README)
+REPORT_OUTPUTS += $(SYNTH_TYPES) $(SYNTHESIS_README)
 
 .PHONY: report test data venv clean-reports help classification synthesis
 
