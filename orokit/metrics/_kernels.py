@@ -17,7 +17,7 @@ import heapq
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 EARTH_RADIUS_M = 6371008.8
 
@@ -160,6 +160,39 @@ def _nearest(vals, offs, hs, ws, pr, pc, thresh, cutoff, geo, dx, dy, lat0, dlat
 
 
 @njit(cache=True, nogil=True)
+def _window_scan(block, pr, pc, thresh, cutoff, geo, dx, dy, lat0, dlat, dlon, radius, buf):
+    """Exact answer from the cells within ``radius`` cells of (pr, pc), if it is there.
+
+    Returns (best, n_candidates); best = inf when the window cannot prove the answer
+    (no higher cell inside the disc that the window fully contains).
+    """
+    H, W = block.shape
+    best = np.inf
+    r0 = max(pr - radius, 0)
+    r1 = min(pr + radius, H - 1)
+    c0 = max(pc - radius, 0)
+    c1 = min(pc + radius, W - 1)
+    for r in range(r0, r1 + 1):
+        for c in range(c0, c1 + 1):
+            v = block[r, c]
+            if v > thresh:
+                d = math.hypot((r - pr) * dy, (c - pc) * dx)
+                if d < best:
+                    best = d
+    # the window holds every cell closer than (radius + 1) cells of the smaller size
+    if not best < (radius + 1) * min(dx, dy) or best > cutoff:
+        return np.inf, 0
+    n = 0
+    for r in range(r0, r1 + 1):
+        for c in range(c0, c1 + 1):
+            if block[r, c] > thresh and n < buf.size:
+                if math.hypot((r - pr) * dy, (c - pc) * dx) <= best:
+                    buf[n] = r * W + c
+                    n += 1
+    return best, n
+
+
+@njit(cache=True, parallel=True)
 def nearest_in_block(block, prow, pcol, pz, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, ncand):
     """Nearest cell of ``block`` strictly higher than ``pz`` for every query point.
 
@@ -168,17 +201,25 @@ def nearest_in_block(block, prow, pcol, pz, cutoff, geo, dx, dy, lat0, dlat, dlo
     top edge for geographic grids. Searches stop at ``cutoff`` (per query).
     Returns ``best`` (distance, inf if none within the cutoff) and ``cand`` (n x
     ncand flat indices in the block, -1 padded: every cell within ``slack`` of the
-    best, for an exact ellipsoidal check by the caller).
+    best, for an exact check by the caller). Queries run in parallel threads.
     """
     zz = np.where(np.isnan(block), -np.inf, block)
     vals, offs, hs, ws = build_pyramid(zz)
+    H, W = block.shape
     n = prow.size
     best = np.full(n, np.inf)
     cand = np.full((n, ncand), -1, np.int64)
-    buf = np.empty(ncand, np.int64)
-    for i in range(n):
-        b, m = _nearest(vals, offs, hs, ws, prow[i], pcol[i], pz[i], cutoff[i], geo, dx, dy, lat0, dlat, dlon,
-                        slack, buf, ncand)
+    for i in prange(n):
+        buf = np.empty(ncand, np.int64)
+        b = np.inf
+        m = 0
+        inside = prow[i] >= 0 and prow[i] < H and pcol[i] >= 0 and pcol[i] < W
+        if inside and not geo:
+            # most peaks have higher ground a few cells away: a small window proves it
+            b, m = _window_scan(zz, prow[i], pcol[i], pz[i], cutoff[i], geo, dx, dy, lat0, dlat, dlon, 6, buf)
+        if m == 0:
+            b, m = _nearest(vals, offs, hs, ws, prow[i], pcol[i], pz[i], cutoff[i], geo, dx, dy, lat0, dlat,
+                            dlon, slack, buf, ncand)
         best[i] = b
         for j in range(m):
             cand[i, j] = buf[j]
