@@ -216,6 +216,13 @@ def _readme(t2: pd.DataFrame, evals: Mapping[float, Mapping[str, Any]], meta: di
         s.append(f"; {len(base.classes)} regions, {base.params['n_disks']} disks")
         if base.params.get("dropped_classes"):
             s.append(f"; dropped (< 2 disks): {', '.join(base.params['dropped_classes'])}")
+        absent = sorted(set(meta["labels"]) - set(base.classes) - set(base.params.get("dropped_classes", [])))
+        if absent:
+            s.append(f"; no disk with >= {meta['min_peaks']} peaks: {', '.join(absent)}")
+        if "spatial" in e:
+            n0 = int(np.sum(~np.isfinite(e["spatial"].accuracies)))
+            if n0:
+                s.append(f"; {n0} spatial runs had no training disk left (not counted)")
         lines.append(" ".join(s) + ".")
         worst = sorted(base.per_class.items(), key=lambda kv: kv[1])[:3]
         lines.append("  Lowest per-region accuracy (random split): " +
