@@ -48,6 +48,7 @@ class SaddleTargets:
     group: np.ndarray  # int per peak
     dominance: list  # per group: FeatureHistogram
     prominence: list
+    owner: list | None = None  # per group: terrain-type index (errors are pooled per type)
 
 
 def _emd_assign(cost: np.ndarray) -> np.ndarray:
@@ -86,7 +87,7 @@ def _blocked_targets(want: np.ndarray, cost_fn, block_size: int, rng: np.random.
     return out
 
 
-def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTargets, rng, block_size):
+def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTargets, rng, block_size, keep_keys=0):
     """One OT assignment (dominance or prominence); returns new saddle elevations.
 
     Large problems are split into random row blocks, each receiving a stratified
@@ -95,6 +96,7 @@ def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTarget
     of one exact plan, with fresh blocks every round.
     """
     key = key_saddles(pz, a, b, sz)
+    sz0 = sz
     sz = sz.copy()
     prom = np.where(key >= 0, pz - sz[np.maximum(key, 0)], pz)
     for g in range(len(targets.dominance)):
@@ -123,20 +125,40 @@ def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTarget
         got = _blocked_targets(want_all, cost_fn, block_size, rng)
         new_prom = got * h_all if kind == "dominance" else got
         sz[e_all] = np.clip(sz[e_all] - (new_prom - prom[rows_all]), 0.0, hmax[e_all])
+    if keep_keys:
+        # moves that change which saddle is a peak's key saddle scramble the matched
+        # values (the paper's Fig. 11): undo them, a few times as undoing can cascade
+        for _ in range(keep_keys):
+            new_key = key_saddles(pz, a, b, sz)
+            moved = np.flatnonzero((new_key != key) & (key >= 0))
+            if moved.size == 0:
+                break
+            back = np.unique(np.concatenate([key[moved], new_key[moved][new_key[moved] >= 0]]))
+            sz[back] = sz0[back]
     return sz
 
 
 def _max_bin_error(pz, a, b, sz, targets: SaddleTargets) -> tuple[float, float]:
+    """Worst max-bin error of dominance and prominence, pooled over each type's groups."""
     key = key_saddles(pz, a, b, sz)
     prom = np.where(key >= 0, pz - sz[np.maximum(key, 0)], pz)
+    owner = targets.owner if targets.owner is not None else list(range(len(targets.dominance)))
     err_d = err_p = 0.0
-    for g in range(len(targets.dominance)):
-        m = (targets.group == g) & (key >= 0)
-        if not m.any():
+    for t in sorted(set(owner)):
+        groups = [g for g in range(len(owner)) if owner[g] == t]
+        m_all = np.isin(targets.group, groups) & (key >= 0)
+        if not m_all.any():
             continue
-        hd, hp = targets.dominance[g], targets.prominence[g]
-        err_d = max(err_d, float(np.abs(hd.histogram(prom[m] / pz[m]) - hd.probabilities()).max()))
-        err_p = max(err_p, float(np.abs(hp.histogram(prom[m]) - hp.probabilities()).max()))
+        for hists, vals, which in ((targets.dominance, prom / pz, "d"), (targets.prominence, prom, "p")):
+            want = np.zeros(hists[groups[0]].n_bins)
+            for g in groups:
+                want += hists[g].probabilities() * ((targets.group == g) & (key >= 0)).sum()
+            got = hists[groups[0]].histogram(vals[m_all]) * m_all.sum()
+            e = float(np.abs(got - want).max() / m_all.sum())
+            if which == "d":
+                err_d = max(err_d, e)
+            else:
+                err_p = max(err_p, e)
     return err_d, err_p
 
 
@@ -153,6 +175,8 @@ def assign_saddle_elevations(
     max_iterations: int = 16,
     tol: float = 0.001,
     patience: int = 3,
+    keep_keys: int = 3,
+    restarts: int = 3,
     block_size: int = 300,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, dict]:
@@ -168,6 +192,10 @@ def assign_saddle_elevations(
     tol, patience : stop after ``patience`` rounds in a row that did not improve the
         best worst-feature max-bin error by more than ``tol``.
     block_size : rows per exact OT block (see :func:`_ot_step`).
+    restarts : the first ``restarts`` rounds each start from the initial saddles with
+        fresh random blocks and targets; the best of them is refined further.
+    keep_keys : after the restarts, undo (up to this many times) the saddle
+        moves that changed a peak's key saddle (0: the paper's plain alternation).
 
     Returns
     -------
@@ -183,9 +211,14 @@ def assign_saddle_elevations(
     history = []
     it = 0
     stale = 0
+    start = sz
     for it in range(1, max_iterations + 1):
-        sz = _ot_step("dominance", pz, a, b, sz, hmax, ridge_len, movable, targets, rng, block_size)
-        sz = _ot_step("prominence", pz, a, b, sz, hmax, ridge_len, movable, targets, rng, block_size)
+        if it <= restarts:
+            sz = start  # the first rounds all start from the initial saddles (restarts)
+        sz = _ot_step("dominance", pz, a, b, sz, hmax, ridge_len, movable, targets, rng, block_size,
+                      keep_keys if it > restarts else 0)
+        sz = _ot_step("prominence", pz, a, b, sz, hmax, ridge_len, movable, targets, rng, block_size,
+                      keep_keys if it > restarts else 0)
         errs = _max_bin_error(pz, a, b, sz, targets)
         history.append([round(errs[0], 5), round(errs[1], 5)])
         logger.debug("saddle OT round %d: max bin error dominance %.4f, prominence %.4f", it, *errs)
@@ -195,7 +228,9 @@ def assign_saddle_elevations(
             stale += 1
         if max(errs) < best_err:
             best, best_err = sz.copy(), max(errs)
-        if stale >= patience:
+        if it == restarts:
+            sz = best  # continue from the best restart
+        if stale >= patience and it > restarts:
             break
     return best, {"iterations": it, "errors": history}
 

@@ -190,6 +190,12 @@ class TerrainType:
     isolation_basis : "peaks" (distance to the nearest higher peak of the tree, what a
         synthesized Divide Tree can measure) or "terrain" (nearest higher cell).
     provenance : free metadata (source, area, counts, edits).
+    bands : optional joint statistics (orokit): ``{"elevation_bins": [i0, ..., iK],
+        "prominence": [[...]] * K, "dominance": [[...]] * K}``: prominence and dominance
+        counts (on the marginal histograms' bins) of the peaks whose elevation falls in
+        elevation bins ``i_k .. i_{k+1} - 1``. Synthesis draws saddle targets per band so
+        prominence stays paired with elevation as in the real region. Edits that change
+        the elevation bins or hand-edit those histograms drop them.
     """
 
     name: str
@@ -199,6 +205,7 @@ class TerrainType:
     min_prominence_m: float = 30.0
     isolation_basis: str = "peaks"
     provenance: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    bands: Mapping[str, Any] | None = None
 
     def __post_init__(self) -> None:
         missing = set(FEATURES) - set(self.histograms)
@@ -213,6 +220,8 @@ class TerrainType:
             raise SchemaError(f"min_prominence_m must be >= 0, got {self.min_prominence_m!r}")
         if self.isolation_basis not in ("peaks", "terrain"):
             raise SchemaError(f"isolation_basis must be 'peaks' or 'terrain', got {self.isolation_basis!r}")
+        if self.bands is not None:
+            _check_bands(self.bands, self.histograms)
         e = self.histograms["elevation"]
         if e.edges[-1] <= 0:
             raise SchemaError("the elevation histogram lies entirely at or below 0 m: peaks need positive elevations")
@@ -316,8 +325,9 @@ class TerrainType:
             "edits": [],
         }
         prov.update(dict(provenance or {}))
+        bands = _elevation_bands(z[keyed], values["prominence"], values["dominance"], hists)
         return cls(name, hists, len(p) / float(area_km2), float(rho), float(min_prominence_m),
-                   isolation_basis, prov)
+                   isolation_basis, prov, bands)
 
     @classmethod
     def from_divide_tree(cls, tree: Any, *, area_km2: float, min_prominence_m: float = 30.0,
@@ -371,7 +381,8 @@ class TerrainType:
         _check_range(feature, h)
         hists = dict(self.histograms)
         hists[feature] = h
-        return self._edited(f"set {feature} histogram", histograms=hists)
+        keep = self.bands if feature not in ("elevation", "prominence", "dominance") else None
+        return self._edited(f"set {feature} histogram", histograms=hists, bands=keep)
 
     def with_counts(self, feature: str, counts: Any) -> "TerrainType":
         """New type with the counts of one histogram replaced (hand-edited bins)."""
@@ -398,7 +409,7 @@ class TerrainType:
             counts = np.asarray(h.counts)[keep]
             counts[-1] += np.asarray(h.counts)[~keep].sum()
             edges = np.append(edges[:-1][keep], 1.0)
-            return self._edited(f"scale {feature} x{factor:g}", histograms={
+            return self._edited(f"scale {feature} x{factor:g}", bands=None, histograms={
                 **self.histograms, feature: FeatureHistogram(tuple(edges), tuple(counts), h.open_last)})
         new = FeatureHistogram(tuple(float(v) for v in edges), h.counts, h.open_last)
         _check_range(feature, new)
@@ -433,6 +444,7 @@ class TerrainType:
             "isolation_basis": self.isolation_basis,
             "histograms": {k: self.histograms[k].to_dict() for k in FEATURES},
             "provenance": dict(self.provenance),
+            "bands": None if self.bands is None else {k: v for k, v in self.bands.items()},
         }
 
     @classmethod
@@ -449,7 +461,7 @@ class TerrainType:
                      for k, v in data["histograms"].items() if k in FEATURES}
             return cls(str(data["name"]), hists, float(data["peak_density_per_km2"]), float(data["rho"]),
                        float(data["min_prominence_m"]), str(data.get("isolation_basis", "peaks")),
-                       dict(data.get("provenance", {})))
+                       dict(data.get("provenance", {})), data.get("bands"))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, SchemaError):
                 raise
@@ -545,3 +557,63 @@ def estimate_rho(divide_tree: Any, min_prominence_m: float = 30.0, choices: tupl
         if score > best_score:
             best, best_score = rho, score
     return float(best)
+
+
+def _check_bands(bands: Mapping[str, Any], hists: Mapping[str, FeatureHistogram]) -> None:
+    try:
+        idx = [int(v) for v in bands["elevation_bins"]]
+        prom = np.asarray(bands["prominence"], float)
+        dom = np.asarray(bands["dominance"], float)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise SchemaError(f"malformed elevation bands: {exc}") from exc
+    k = len(idx) - 1
+    ok = (
+        k >= 1 and idx[0] == 0 and idx[-1] == hists["elevation"].n_bins and all(np.diff(idx) > 0)
+        and prom.shape == (k, hists["prominence"].n_bins) and dom.shape == (k, hists["dominance"].n_bins)
+        and np.all(prom >= 0) and np.all(dom >= 0) and np.all(prom.sum(axis=1) > 0) and np.all(dom.sum(axis=1) > 0)
+    )
+    if not ok:
+        raise SchemaError("elevation bands do not fit the elevation/prominence/dominance histograms "
+                          "(bin indices or count shapes); re-create the type with `orokit type`")
+
+
+def _elevation_bands(z: np.ndarray, prom: np.ndarray, dom: np.ndarray, hists: Mapping[str, FeatureHistogram],
+                     *, n_bands: int = 8, min_count: int = 30) -> dict[str, Any] | None:
+    """Prominence/dominance counts per elevation band (quantile groups of elevation bins)."""
+    he = hists["elevation"]
+    zb = np.clip(he.bin_index(z), 0, he.n_bins - 1)
+    per_bin = np.bincount(zb, minlength=he.n_bins)
+    k = int(min(n_bands, per_bin.sum() // max(min_count, 1)))
+    if k < 2:
+        return None
+    cum = np.cumsum(per_bin)
+    cuts = sorted({int(np.searchsorted(cum, per_bin.sum() * q / k, side="left")) + 1 for q in range(1, k)})
+    idx = [0] + [c for c in cuts if 0 < c < he.n_bins] + [he.n_bins]
+    idx = sorted(set(idx))
+    band = np.searchsorted(np.asarray(idx[1:-1]), zb, side="right")
+    ph, dh = hists["prominence"], hists["dominance"]
+    prom_c, dom_c = [], []
+    for b in range(len(idx) - 1):
+        m = band == b
+        pi, di = ph.bin_index(prom[m]), dh.bin_index(dom[m])
+        prom_c.append(np.bincount(pi[pi >= 0], minlength=ph.n_bins).astype(float).tolist())
+        dom_c.append(np.bincount(di[di >= 0], minlength=dh.n_bins).astype(float).tolist())
+    if any(sum(c) == 0 for c in prom_c) or any(sum(c) == 0 for c in dom_c):
+        return None
+    return {"elevation_bins": idx, "prominence": prom_c, "dominance": dom_c}
+
+
+def band_histograms(tt: TerrainType) -> tuple[np.ndarray, list[FeatureHistogram], list[FeatureHistogram]]:
+    """Elevation edges of the bands and per-band prominence and dominance histograms.
+
+    A type without bands gives one band with the marginal histograms.
+    """
+    he = tt.histograms["elevation"]
+    e = np.asarray(he.edges, float)
+    if tt.bands is None:
+        return np.array([e[0], e[-1]]), [tt.histograms["prominence"]], [tt.histograms["dominance"]]
+    idx = list(tt.bands["elevation_bins"])
+    ph, dh = tt.histograms["prominence"], tt.histograms["dominance"]
+    prom = [FeatureHistogram(ph.edges, tuple(float(c) for c in row), ph.open_last) for row in tt.bands["prominence"]]
+    dom = [FeatureHistogram(dh.edges, tuple(float(c) for c in row), dh.open_last) for row in tt.bands["dominance"]]
+    return e[idx], prom, dom

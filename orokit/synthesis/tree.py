@@ -62,6 +62,7 @@ def synthesize_divide_tree(
     saddle_placement: str = "targeted",
     grid_cells: int = 256,
     auto_elevation_m: float | None = 8000.0,
+    use_bands: bool = True,
     domain: Domain | None = None,
     rng: SeedLike = None,
 ) -> DivideTree:
@@ -91,6 +92,8 @@ def synthesize_divide_tree(
     auto_elevation_m : without ``control_elevation``, use a smooth random C_H with
         this correlation length (metres) following the elevation histogram, so peak
         elevations are spatially correlated as in real ranges (None: no C_H term).
+    use_bands : draw prominence/dominance targets per elevation band of the type
+        (when it has them), keeping prominence paired with elevation.
     rng : seed or Generator; the same seed gives the same tree.
 
     Returns
@@ -269,8 +272,7 @@ def synthesize_divide_tree(
     )
 
     t1 = time.perf_counter()
-    targets = SaddleTargets(ptype, [t.histograms["dominance"] for t in types],
-                            [t.histograms["prominence"] for t in types])
+    targets = _saddle_targets(types, ptype, z, use_bands)
     sz, ot_info = assign_saddle_elevations(z, px, py, a, b, sz, targets, movable=movable,
                                            max_iterations=max_ot_iterations, rng=rng)
     sz, below = enforce_min_prominence(z, a, b, sz, eps)
@@ -311,6 +313,28 @@ def synthesize_divide_tree(
     logger.info("synthesized %d peaks, %d ridges in %.2f s (OT rounds %d)", tree.n_peaks, a.size,
                 timings["total"], ot_info["iterations"])
     return tree
+
+
+def _saddle_targets(types, ptype: np.ndarray, z: np.ndarray, use_bands: bool):
+    """Target histograms per (type, elevation band) group."""
+    from orokit.synthesis.saddles import SaddleTargets
+    from orokit.synthesis.terrain_type import band_histograms
+
+    group = np.zeros(z.size, np.int64)
+    dom, prom, owner = [], [], []
+    for t, typ in enumerate(types):
+        if use_bands:
+            edges, ph, dh = band_histograms(typ)
+        else:
+            edges, ph, dh = (np.array([-np.inf, np.inf]), [typ.histograms["prominence"]],
+                             [typ.histograms["dominance"]])
+        mine = ptype == t
+        band = np.clip(np.searchsorted(edges[1:-1], z[mine], side="right"), 0, len(ph) - 1)
+        group[mine] = len(prom) + band
+        prom.extend(ph)
+        dom.extend(dh)
+        owner.extend([t] * len(ph))
+    return SaddleTargets(group, dom, prom, owner)
 
 
 def peaks_table(tree: DivideTree):

@@ -169,3 +169,23 @@ def test_rho_estimate_prefers_matching_exponent(peak_factory):
                                       np.column_stack([(x[a] + x[b]) / 2, (y[a] + y[b]) / 2, sz]),
                                       np.column_stack([a, b, np.arange(a.size)]))
         assert estimate_rho(tree, min_prominence_m=0.0) == rho
+
+
+def test_elevation_bands_partition_the_peaks(peak_table, small_type):
+    from orokit.synthesis.terrain_type import band_histograms
+
+    b = small_type.bands
+    assert b is not None and b["elevation_bins"][0] == 0
+    assert b["elevation_bins"][-1] == small_type.histograms["elevation"].n_bins
+    # band counts add up to the marginal histograms
+    assert np.allclose(np.sum(b["prominence"], axis=0), small_type.histograms["prominence"].counts)
+    assert np.allclose(np.sum(b["dominance"], axis=0), small_type.histograms["dominance"].counts)
+    edges, ph, dh = band_histograms(small_type)
+    assert len(edges) == len(ph) + 1 == len(dh) + 1 and np.all(np.diff(edges) > 0)
+    # hand-editing a paired histogram drops the joint statistics; other edits keep them
+    assert small_type.with_counts("prominence", small_type.histograms["prominence"].counts).bands is None
+    assert small_type.shifted("elevation", 100.0).bands == b
+    data = small_type.to_dict()
+    data["bands"]["elevation_bins"] = [0, 5]
+    with pytest.raises(SchemaError, match="bands"):
+        TerrainType.from_dict(data)
