@@ -138,7 +138,7 @@ def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTarget
     return sz
 
 
-def _max_bin_error(pz, a, b, sz, targets: SaddleTargets) -> tuple[float, float]:
+def max_bin_errors(pz, a, b, sz, targets: SaddleTargets) -> tuple[float, float]:
     """Worst max-bin error of dominance and prominence, pooled over each type's groups."""
     key = key_saddles(pz, a, b, sz)
     prom = np.where(key >= 0, pz - sz[np.maximum(key, 0)], pz)
@@ -207,7 +207,7 @@ def assign_saddle_elevations(
     ridge_len = np.maximum(np.hypot(px[a] - px[b], py[a] - py[b]), 1e-6)
     movable = np.ones(a.size, bool) if movable is None else np.asarray(movable, bool)
     best = sz.copy()
-    best_err = max(_max_bin_error(pz, a, b, sz, targets))
+    best_err = max(max_bin_errors(pz, a, b, sz, targets))
     history = []
     it = 0
     stale = 0
@@ -219,7 +219,7 @@ def assign_saddle_elevations(
                       keep_keys if it > restarts else 0)
         sz = _ot_step("prominence", pz, a, b, sz, hmax, ridge_len, movable, targets, rng, block_size,
                       keep_keys if it > restarts else 0)
-        errs = _max_bin_error(pz, a, b, sz, targets)
+        errs = max_bin_errors(pz, a, b, sz, targets)
         history.append([round(errs[0], 5), round(errs[1], 5)])
         logger.debug("saddle OT round %d: max bin error dominance %.4f, prominence %.4f", it, *errs)
         if max(errs) < best_err - tol:

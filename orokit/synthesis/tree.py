@@ -62,7 +62,7 @@ def synthesize_divide_tree(
     saddle_placement: str = "targeted",
     grid_cells: int = 256,
     auto_elevation_m: float | None = 8000.0,
-    use_bands: bool = True,
+    use_bands: bool | str = "auto",
     domain: Domain | None = None,
     rng: SeedLike = None,
 ) -> DivideTree:
@@ -93,7 +93,8 @@ def synthesize_divide_tree(
         this correlation length (metres) following the elevation histogram, so peak
         elevations are spatially correlated as in real ranges (None: no C_H term).
     use_bands : draw prominence/dominance targets per elevation band of the type
-        (when it has them), keeping prominence paired with elevation.
+        (True), from its marginal histograms (False), or "auto": run both and keep the
+        saddles whose dominance and prominence histograms match the type better.
     rng : seed or Generator; the same seed gives the same tree.
 
     Returns
@@ -142,6 +143,8 @@ def synthesize_divide_tree(
     types = [terrain_type] if isinstance(terrain_type, TerrainType) else list(terrain_type)
     if not types or not all(isinstance(t, TerrainType) for t in types):
         raise InputError("terrain_type must be a TerrainType or a non-empty list of them")
+    if use_bands not in ("auto", True, False):
+        raise InputError(f"use_bands must be 'auto', True or False, got {use_bands!r}")
     if saddle_placement not in ("targeted", "paper"):
         raise InputError(f"saddle_placement must be 'targeted' or 'paper', got {saddle_placement!r}")
     if domain is None:
@@ -272,10 +275,22 @@ def synthesize_divide_tree(
     )
 
     t1 = time.perf_counter()
-    targets = _saddle_targets(types, ptype, z, use_bands)
-    sz, ot_info = assign_saddle_elevations(z, px, py, a, b, sz, targets, movable=movable,
-                                           max_iterations=max_ot_iterations, rng=rng)
-    sz, below = enforce_min_prominence(z, a, b, sz, eps)
+    from orokit.synthesis.saddles import max_bin_errors
+
+    marginal = _saddle_targets(types, ptype, z, False)
+    has_bands = any(t.bands is not None for t in types)
+    modes = {"auto": [False, True] if has_bands else [False], True: [True], False: [False]}[use_bands]
+    sz0 = sz
+    best = None
+    for mode in modes:  # "auto": keep whichever target set matches the type's marginals better
+        cand, info = assign_saddle_elevations(z, px, py, a, b, sz0, _saddle_targets(types, ptype, z, mode),
+                                              movable=movable, max_iterations=max_ot_iterations, rng=rng)
+        cand, below_c = enforce_min_prominence(z, a, b, cand, eps)
+        score = max(max_bin_errors(z, a, b, cand, marginal))
+        logger.debug("saddle targets %s: worst max-bin error %.4f", "per band" if mode else "marginal", score)
+        if best is None or score < best[0]:
+            best = (score, cand, info, below_c, mode)
+    _, sz, ot_info, below, band_mode = best
     timings["saddle_elevations"] = time.perf_counter() - t1
 
     # ---- saddle positions
@@ -306,6 +321,7 @@ def synthesize_divide_tree(
         "ot_errors": ot_info["errors"],
         "peaks_below_eps": int(below),
         "saddle_placement": saddle_placement,
+        "saddle_targets": "elevation bands" if band_mode else "marginal",
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
         "isolation": "nearest higher peak of the tree",
     }
