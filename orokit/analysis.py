@@ -169,7 +169,7 @@ def analyze(
         iso = None
         if isolation and core.n_kept:
             iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform, crs=crs,
-                                  compute=get_compute(scheduler))
+                                  compute=get_compute(scheduler), chunk_stats=getattr(core, "chunk_stats", None))
         t_iso = time.perf_counter()
         if client is not None:
             client.close()

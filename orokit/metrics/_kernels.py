@@ -192,9 +192,23 @@ def _window_scan(block, pr, pc, thresh, cutoff, geo, dx, dy, lat0, dlat, dlon, r
     return best, n
 
 
+@njit(cache=True, nogil=True)
+def block_pyramid(block):
+    """(zz, pyramid...) of a block: NaN replaced by -inf, and its block-maximum pyramid."""
+    zz = np.where(np.isnan(block), -np.inf, block)
+    vals, offs, hs, ws = build_pyramid(zz)
+    return zz, vals, offs, hs, ws
+
+
+@njit(cache=True, nogil=True)
+def nan_pyramid(block):
+    """Pyramid of "holds a NaN" (1.0) of a block."""
+    return build_pyramid(np.where(np.isnan(block), 1.0, 0.0))
+
+
 @njit(cache=True, parallel=True)
-def nearest_in_block(block, prow, pcol, pz, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, ncand):
-    """Nearest cell of ``block`` strictly higher than ``pz`` for every query point.
+def nearest_query(zz, vals, offs, hs, ws, prow, pcol, pz, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, ncand):
+    """Nearest cell strictly higher than ``pz`` for every query, on a block's pyramid.
 
     Query cells ``(prow, pcol)`` are relative to the block's first cell and may lie
     outside it (chunked isolation). ``lat0`` is the latitude (radians) of the block's
@@ -203,9 +217,7 @@ def nearest_in_block(block, prow, pcol, pz, cutoff, geo, dx, dy, lat0, dlat, dlo
     ncand flat indices in the block, -1 padded: every cell within ``slack`` of the
     best, for an exact check by the caller). Queries run in parallel threads.
     """
-    zz = np.where(np.isnan(block), -np.inf, block)
-    vals, offs, hs, ws = build_pyramid(zz)
-    H, W = block.shape
+    H, W = zz.shape
     n = prow.size
     best = np.full(n, np.inf)
     cand = np.full((n, ncand), -1, np.int64)
@@ -227,10 +239,8 @@ def nearest_in_block(block, prow, pcol, pz, cutoff, geo, dx, dy, lat0, dlat, dlo
 
 
 @njit(cache=True, nogil=True)
-def nearest_nan_in_block(block, prow, pcol, cutoff, geo, dx, dy, lat0, dlat, dlon):
-    """Distance from each query cell to the nearest NaN cell of ``block`` (inf if none)."""
-    mask = np.where(np.isnan(block), 1.0, 0.0)
-    vals, offs, hs, ws = build_pyramid(mask)
+def nearest_nan_query(vals, offs, hs, ws, prow, pcol, cutoff, geo, dx, dy, lat0, dlat, dlon):
+    """Distance from each query cell to the nearest NaN cell (inf if none), on a NaN pyramid."""
     n = prow.size
     out = np.full(n, np.inf)
     if vals[offs[hs.size - 1]] < 0.5:
@@ -241,6 +251,16 @@ def nearest_nan_in_block(block, prow, pcol, cutoff, geo, dx, dy, lat0, dlat, dlo
                         0.0, buf, 1)
         out[i] = d
     return out
+
+
+def nearest_in_block(block, prow, pcol, pz, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, ncand):
+    """:func:`nearest_query` on a block (pyramid built here)."""
+    return nearest_query(*block_pyramid(block), prow, pcol, pz, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, ncand)
+
+
+def nearest_nan_in_block(block, prow, pcol, cutoff, geo, dx, dy, lat0, dlat, dlon):
+    """:func:`nearest_nan_query` on a block (pyramid built here)."""
+    return nearest_nan_query(*nan_pyramid(block), prow, pcol, cutoff, geo, dx, dy, lat0, dlat, dlon)
 
 
 @njit(cache=True, nogil=True)

@@ -143,16 +143,28 @@ def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", sch
 
     root = reduce(0, len(rb) - 1, 0, len(cb) - 1)
     final = dask.delayed(finalize_summary)(root, min_prominence=float(min_prominence), outside=outside)
+    # per-chunk maximum and "has NaN" for the isolation search, from the same reads
+    raw = data.to_delayed()
+    stats = dask.delayed(np.array)(
+        [[dask.delayed(chunk_stats)(raw[i, j]) for j in range(len(cb) - 1)] for i in range(len(rb) - 1)]
+    )
     compute = get_compute(scheduler)
     logger.info("tiled analysis of %dx%d cells in %d chunks", H, W, (len(rb) - 1) * (len(cb) - 1))
     if progress and (scheduler is None or isinstance(scheduler, str) and "://" not in scheduler):
         from dask.diagnostics import ProgressBar
 
         with ProgressBar():
-            (result,) = compute([final])
+            result, st = compute([final, stats])
     else:
-        (result,) = compute([final])
+        result, st = compute([final, stats])
+    result.chunk_stats = st  # (nby, nbx, 2): max (-inf if empty), has NaN
     return result
+
+
+def chunk_stats(block: np.ndarray) -> tuple[float, float]:
+    """Maximum of a chunk (-inf when all NaN) and 1.0 if it holds a NaN."""
+    valid = ~np.isnan(block)
+    return (float(block[valid].max()) if valid.any() else -np.inf), float((~valid).any())
 
 
 def _h(text: str) -> str:

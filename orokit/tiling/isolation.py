@@ -43,17 +43,51 @@ def _chunk_bounds(rows, cols, rb, cb, metric: GridMetric) -> np.ndarray:
     return 2 * EARTH_RADIUS_M * np.arcsin(np.minimum(1.0, np.sqrt(s)))
 
 
-def _block_stats(block: np.ndarray) -> tuple[float, bool]:
-    valid = ~np.isnan(block)
-    return (float(block[valid].max()) if valid.any() else -np.inf), bool((~valid).any())
+class _BlockCache:
+    """Loaded chunks, kept within a memory budget (peaks are processed chunk by chunk
+    in raster order, so neighbouring chunks are usually still here); the search
+    pyramids of the few most recent chunks are kept too."""
+
+    def __init__(self, blocks, nbx: int, compute, budget_bytes: int = 256 * 2**20, pyramids: int = 4):
+        self.blocks, self.nbx, self.compute = blocks, nbx, compute
+        self.budget, self.npyr = budget_bytes, pyramids
+        self.raw: dict[int, np.ndarray] = {}
+        self.pyr: dict[int, dict] = {}
+        self.loads = 0
+
+    def get_many(self, ks) -> list[dict]:
+        """Per chunk: {"shape", "pyr": block pyramid, "nan": NaN pyramid}."""
+        missing = [k for k in ks if k not in self.raw]
+        if missing:
+            arrays = self.compute([self.blocks[k // self.nbx, k % self.nbx] for k in missing])
+            self.loads += len(missing)
+            for k, a in zip(missing, arrays):
+                self.raw[k] = np.ascontiguousarray(a)
+        out = []
+        for k in ks:
+            a = self.raw.pop(k)
+            self.raw[k] = a  # most recent last
+            if k in self.pyr:
+                entry = self.pyr.pop(k)
+            else:
+                entry = {"shape": a.shape, "pyr": _mk.block_pyramid(a), "nan": _mk.nan_pyramid(a)}
+            self.pyr[k] = entry
+            out.append(entry)
+        while len(self.pyr) > max(self.npyr, len(ks)):
+            self.pyr.pop(next(iter(self.pyr)))
+        while len(self.raw) > len(ks) and sum(a.nbytes for a in self.raw.values()) > self.budget:
+            self.raw.pop(next(iter(self.raw)))
+        return out
 
 
-def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None) -> pd.DataFrame:
+def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk_stats=None) -> pd.DataFrame:
     """Isolation of peaks at (rows, cols) with elevations pz on a dask array.
 
     Same result as :func:`orokit.metrics.isolation.isolation` on the whole array.
     ``compute`` is a callable that computes a list of dask objects (defaults to
-    ``dask.compute``), so a distributed client can be used.
+    ``dask.compute``), so a distributed client can be used. ``chunk_stats`` (nby, nbx, 2)
+    holds each chunk's maximum and NaN flag when already known (the tiled engine
+    computes them while reading the chunks).
     """
     import dask
 
@@ -67,31 +101,39 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None) -> pd
     cb = np.concatenate([[0], np.cumsum(data.chunks[1])])
     nby, nbx = len(rb) - 1, len(cb) - 1
     blocks = data.to_delayed()
-    stats = compute([dask.delayed(_block_stats)(blocks[i, j]) for i in range(nby) for j in range(nbx)])
-    cmax = np.array([s[0] for s in stats])
-    cnan = np.array([s[1] for s in stats])
+    if chunk_stats is None:
+        from orokit.tiling.engine import chunk_stats as _stats
+
+        (chunk_stats,) = compute([dask.delayed(np.array)(
+            [[dask.delayed(_stats)(blocks[i, j]) for j in range(nbx)] for i in range(nby)])])
+    chunk_stats = np.asarray(chunk_stats, dtype=float).reshape(nby * nbx, 2)
+    cmax = chunk_stats[:, 0]
+    cnan = chunk_stats[:, 1] > 0.5
     n = rows.size
     best = np.full(n, np.inf)
     cand = np.full((n, metric.ncand), -1, np.int64)
     ncand = np.zeros(n, np.int64)
     edge = _mk.outside_distance(rows, cols, H, W, *metric.args())
-    # batches of peaks sorted by chunk so each batch touches few chunks
-    ci = np.searchsorted(rb, rows, side="right") - 1
-    cj = np.searchsorted(cb, cols, side="right") - 1
-    order = np.lexsort((cols, rows, cj, ci))
+    cache = _BlockCache(blocks, nbx, compute)
+    # peaks grouped by their own chunk, chunks in raster order
+    home = (np.searchsorted(rb, rows, side="right") - 1) * nbx + np.searchsorted(cb, cols, side="right") - 1
+    order = np.lexsort((cols, rows, home))
+    bounds = np.flatnonzero(np.diff(home[order])) + 1
     slack = 1.0 + metric.slack
-    for start in range(0, n, _BATCH):
-        idx = order[start:start + _BATCH]
-        lb = _chunk_bounds(rows[idx], cols[idx], rb, cb, metric)
-        lb_nan = np.where(cnan[None, :], lb, np.inf)
-        lb = np.where(cmax[None, :] > pz[idx, None], lb, np.inf)
-        _visit(lb, idx, blocks, rb, cb, nbx, metric, compute, best, cand, ncand, pz, rows, cols, W, slack)
-        # nearest NaN cell, only where it could be closer than the edge and the target
-        _visit_nan(lb_nan, idx, blocks, rb, cb, nbx, metric, compute, best, edge, rows, cols)
+    for group in np.split(order, bounds):
+        for start in range(0, group.size, _BATCH):
+            idx = group[start:start + _BATCH]
+            lb = _chunk_bounds(rows[idx], cols[idx], rb, cb, metric)
+            lb_nan = np.where(cnan[None, :], lb, np.inf)
+            lb = np.where(cmax[None, :] > pz[idx, None], lb, np.inf)
+            _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, pz, rows, cols, W, slack)
+            # nearest NaN cell, only where it could be closer than the edge and the target
+            _visit_nan(lb_nan, idx, cache, rb, cb, nbx, metric, best, edge, rows, cols)
+    logger.info("isolation of %d peaks: %d chunk loads for %d chunks", n, cache.loads, nby * nbx)
     return finish_isolation(metric, rows, cols, best, cand, W, edge)
 
 
-def _visit(lb, idx, blocks, rb, cb, nbx, metric, compute, best, cand, ncand, pz, rows, cols, W, slack):
+def _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, pz, rows, cols, W, slack):
     while True:
         nxt = np.argmin(lb, axis=1)
         val = lb[np.arange(idx.size), nxt]
@@ -99,17 +141,16 @@ def _visit(lb, idx, blocks, rb, cb, nbx, metric, compute, best, cand, ncand, pz,
         if not active.any():
             return
         chunks = np.unique(nxt[active])
-        loaded = compute([blocks[k // nbx, k % nbx] for k in chunks])
-        for k, block in zip(chunks, loaded):
+        for k, block in zip(chunks, cache.get_many(list(chunks))):
             sel = np.flatnonzero(active & (nxt == k))
             p = idx[sel]
             i, j = k // nbx, k % nbx
             r0, c0 = rb[i], cb[j]
-            b, cl = _mk.nearest_in_block(
-                np.ascontiguousarray(block), rows[p] - r0, cols[p] - c0, pz[p], best[p] * slack,
+            b, cl = _mk.nearest_query(
+                *block["pyr"], rows[p] - r0, cols[p] - c0, pz[p], best[p] * slack,
                 *metric.args(r0), metric.slack, metric.ncand,
             )
-            bw = block.shape[1]
+            bw = block["shape"][1]
             for t, q in enumerate(p):
                 found = cl[t][cl[t] >= 0]
                 if found.size:
@@ -123,7 +164,7 @@ def _visit(lb, idx, blocks, rb, cb, nbx, metric, compute, best, cand, ncand, pz,
             lb[sel, k] = np.inf
 
 
-def _visit_nan(lb, idx, blocks, rb, cb, nbx, metric, compute, best, edge, rows, cols):
+def _visit_nan(lb, idx, cache, rb, cb, nbx, metric, best, edge, rows, cols):
     while True:
         nxt = np.argmin(lb, axis=1)
         val = lb[np.arange(idx.size), nxt]
@@ -132,14 +173,12 @@ def _visit_nan(lb, idx, blocks, rb, cb, nbx, metric, compute, best, edge, rows, 
         if not active.any():
             return
         chunks = np.unique(nxt[active])
-        loaded = compute([blocks[k // nbx, k % nbx] for k in chunks])
-        for k, block in zip(chunks, loaded):
+        for k, block in zip(chunks, cache.get_many(list(chunks))):
             sel = np.flatnonzero(active & (nxt == k))
             p = idx[sel]
             r0, c0 = rb[k // nbx], cb[k % nbx]
-            d = _mk.nearest_nan_in_block(
-                np.ascontiguousarray(block), rows[p] - r0, cols[p] - c0, np.minimum(edge[p], best[p]),
-                *metric.args(r0),
+            d = _mk.nearest_nan_query(
+                *block["nan"], rows[p] - r0, cols[p] - c0, np.minimum(edge[p], best[p]), *metric.args(r0),
             )
             edge[p] = np.minimum(edge[p], d)
             lb[sel, k] = np.inf
