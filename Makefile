@@ -41,8 +41,7 @@ DATA_STAMP := $(STAMPS)/data-verified
 SUMMARY_SRC := orokit/io/dem.py orokit/data/fetch.py orokit/reports/dem_summary.py orokit/cli/report_dataset.py
 DATASET_SUMMARIES := $(DATASETS:%=$(REPORTS)/datasets/%/summary.md)
 
-# stage: classification (issue 6). Reads the analysis folders reports/analysis/<name>/;
-# the pattern rule for them below is a stand-in until the analysis stage owns it.
+# stage: classification (issue 6). Reads the analysis folders reports/analysis/<name>/.
 ANALYSIS_JSONS := $(DATASETS:%=$(REPORTS)/analysis/%/analysis.json)
 CLASSIFY_SRC := $(wildcard orokit/classify/*.py orokit/sampling/*.py orokit/metrics/disk.py) \
                 orokit/reports/classification.py orokit/cli/report.py
@@ -91,9 +90,12 @@ $(REPORTS)/datasets/%/summary.md: $(DATA_STAMP) $(SUMMARY_SRC) | $(INSTALLED)
 $(REPORTS)/README.md: $(DATASET_SUMMARIES) orokit/cli/report_index.py | $(INSTALLED)
 	$(OROKIT) -q report-index $(patsubst %/summary.md,%/summary.json,$(DATASET_SUMMARIES)) -o $@ --overwrite
 
-$(REPORTS)/analysis/%/analysis.json: $(DATA_STAMP) | $(INSTALLED)
-	$(OROKIT) -q analyze "$$($(OROKIT) data path $*)" -o $(@D) --z-units ft \
-	  --cell-size $(if $(filter pyrenees,$*),30.9,92.6) --min-prominence 30 --overwrite --no-progress
+# stage: exact analysis (issues 4, 5) of each manifest DEM at eps = 30 m (units and cell size from
+# the manifest); analysis.json is written last.
+ANALYSIS_SRC := orokit/analysis.py $(wildcard orokit/topology/*.py orokit/metrics/_kernels.py orokit/metrics/isolation.py) \
+                orokit/io/analysis_io.py orokit/cli/analyze.py
+$(REPORTS)/analysis/%/analysis.json: $(DATA_STAMP) $(ANALYSIS_SRC) | $(INSTALLED)
+	$(OROKIT) -q analyze $* -o $(@D) --min-prominence 30 --overwrite --no-progress
 
 $(CLASSIFICATION_README): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
 	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(@D) --radius 10km --radius 5km --radius 15km \

@@ -8,7 +8,7 @@ import click
 
 
 @click.command()
-@click.argument("dem", type=click.Path(exists=True, dir_okay=True, path_type=Path))
+@click.argument("dem")
 @click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output folder: peaks.csv, peaks.parquet, saddles.parquet, dividetree.gpkg, analysis.json.")
 @click.option("--min-prominence", default=30.0, show_default=True, type=float,
@@ -30,11 +30,14 @@ import click
               help="Folder for chunk summaries; rerunning with it reuses the finished chunks.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing analysis in OUTPUT.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
-def analyze(dem: Path, outdir: Path, min_prominence: float, z_units: str | None, cell_size: float | None,
+def analyze(dem: str, outdir: Path, min_prominence: float, z_units: str | None, cell_size: float | None,
             outside: str, no_isolation: bool, chunks: int | None, scheduler: str | None,
             checkpoint: Path | None, overwrite: bool, progress: bool) -> None:
-    """Analyse DEM (any GDAL raster; PNG needs --z-units and --cell-size) into OUTPUT.
+    """Analyse DEM into OUTPUT.
 
+    DEM is any raster GDAL reads (GeoTIFF, SRTM .hgt, VRT, ASCII grid, PNG with
+    --z-units and --cell-size), a directory of tiles, or the name of a DEM of the
+    datasets manifest (`orokit data list`; units and cell size come from it).
     Row/col are 0-based on the input grid with row 0 at the top; all elevations,
     prominences and distances are in metres.
     """
@@ -48,7 +51,16 @@ def analyze(dem: Path, outdir: Path, min_prominence: float, z_units: str | None,
         raise click.BadParameter(f"must be a positive number of cells, got {chunks}", param_hint="--chunks")
     if (scheduler or checkpoint) and chunks is None:
         raise click.UsageError("--scheduler and --checkpoint need --chunks N")
-    da = read_dem(dem, z_units=z_units, cell_size=cell_size, chunks=chunks)
+    if Path(dem).exists():
+        da = read_dem(dem, z_units=z_units, cell_size=cell_size, chunks=chunks)
+    else:
+        from orokit.data import load_manifest, open_dataset_dem
+
+        names = [d.name for d in load_manifest().dems()]
+        if dem not in names:
+            raise click.BadParameter(f"{dem!r} is neither a file nor a DEM of the manifest ({', '.join(names)})",
+                                     param_hint="DEM")
+        da = open_dataset_dem(dem, chunks=chunks)
     result = run(da, min_prominence=min_prominence, outside=outside, isolation=not no_isolation,
                  progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint)
     result.write(outdir, overwrite=True)
