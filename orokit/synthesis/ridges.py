@@ -96,6 +96,8 @@ def delaunay_mst(
 
 
 def _min_duplicates(i: np.ndarray, j: np.ndarray, w: np.ndarray, n: int):
+    if i.size == 0:
+        return coo_matrix((n, n)).tocsr()
     key = i * n + j
     order = np.lexsort((w, key))
     key, i, j, w = key[order], i[order], j[order], w[order]

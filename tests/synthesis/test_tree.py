@@ -214,3 +214,23 @@ def test_orometry_of_tiny_tree():
     assert o["isolation_peak"].tolist() == [2, 2, -1]
     assert o["saddle_distance"].tolist()[:2] == [1450.0, 500.0]
     assert o["saddle_direction"].tolist()[:2] == [0.0, 180.0]
+
+
+from hypothesis import example, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=12, deadline=None)
+@given(n=st.integers(2, 120), seed=st.integers(0, 2**31), rho=st.sampled_from([0.0, 1.0, 2.0]),
+       passes=st.integers(1, 5), scale=st.floats(0.3, 3.0))
+@example(n=2, seed=0, rho=0.0, passes=2, scale=1.0)  # a first pass of one peak has no ridge
+def test_any_synthesis_is_a_valid_tree(small_type, n, seed, rho, passes, scale):
+    t = small_type.with_rho(rho).scaled("prominence", scale)
+    tree = synthesize_divide_tree(t, size_m=SIZE, n_peaks=n, n_passes=passes, rng=seed)
+    tree.validate()
+    assert tree.n_peaks == n and len(tree.edges) == n - 1 and _components(tree) == 1
+    table = tree.prominence_table()
+    eps = t.min_prominence_m
+    assert (table.loc[table["key_saddle"] >= 0, "prominence"] >= eps - 1e-9).all()
+    x, y = tree.peaks["x"].to_numpy(), tree.peaks["y"].to_numpy()
+    assert ((x >= 0) & (x <= SIZE) & (y >= 0) & (y <= SIZE)).all()
