@@ -140,3 +140,21 @@ def test_synthesis_report_table(tmp_path, type_file):
     prom = next(f for f in meta["fidelity"] if f["feature"] == "prominence")["max_bin_error"]
     assert f"{prom:.4f}" in text
     assert CliRunner().invoke(cli, ["synthesis-report", *dirs, "-o", str(md)]).exit_code != 0
+
+
+def test_type_from_dem_file(tmp_path, make_dem):
+    rng = np.random.default_rng(1)
+    yy, xx = np.mgrid[0:80, 0:80]
+    z = np.full((80, 80), 200.0)
+    for _ in range(50):
+        cy, cx, h, w = rng.uniform(0, 80), rng.uniform(0, 80), rng.uniform(50, 300), rng.uniform(2, 5)
+        z += h * np.exp(-((yy - cy) ** 2 + (xx - cx) ** 2) / (2 * w**2))
+    tif = tmp_path / "dem.tif"
+    make_dem(z.astype("float32"), res=60.0).rio.to_raster(tif)
+    out = tmp_path / "t.json"
+    res = CliRunner().invoke(cli, ["type", str(tif), "-o", str(out), "--shift-elevation", "1000"])
+    assert res.exit_code == 0, res.output
+    t = load_terrain_type(out)
+    assert t.name == "dem"
+    assert t.histograms["elevation"].edges[0] >= 1000.0
+    assert t.provenance["area_km2"] == pytest.approx(80 * 80 * 0.06**2, rel=1e-6)
