@@ -300,8 +300,12 @@ def test_missing_empty_corrupt_files(tmp_path):
     junk.write_bytes(b"this is not a raster at all" * 10)
     with pytest.raises(InputError, match="junk.tif"):
         read_dem(junk)
-    with pytest.raises(InputError, match="directory"):
+    # a directory is read as a mosaic of its tiles: corrupt tiles are named, empty folders refused
+    with pytest.raises(InputError, match="cannot read tile"):
         read_dem(tmp_path)
+    (tmp_path / "none").mkdir()
+    with pytest.raises(InputError, match="no raster tiles"):
+        read_dem(tmp_path / "none")
 
 
 def test_truncated_geotiff(tmp_path):
