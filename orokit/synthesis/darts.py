@@ -93,7 +93,7 @@ def place_peaks(
     rho: np.ndarray,
     *,
     n_passes: int = 4,
-    n_candidates: int = 48,
+    n_candidates: int = 96,
     ridge_floor: float = 0.15,
     floor_w: float = 0.05,
     forced: tuple[np.ndarray, np.ndarray] | None = None,

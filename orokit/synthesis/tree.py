@@ -57,7 +57,7 @@ def synthesize_divide_tree(
     fragment: DivideTree | None = None,
     fragment_offset: tuple[float, float] = (0.0, 0.0),
     n_passes: int = 4,
-    n_candidates: int = 48,
+    n_candidates: int = 96,
     max_ot_iterations: int = 16,
     saddle_placement: str = "targeted",
     grid_cells: int = 256,
