@@ -47,7 +47,8 @@ CLASSIFY_SRC := $(wildcard orokit/classify/*.py orokit/sampling/*.py orokit/metr
                 orokit/reports/classification.py orokit/cli/report.py
 CLASSIFICATION_README := $(REPORTS)/classification/README.md
 
-REPORT_OUTPUTS := $(DATASET_SUMMARIES) $(REPORTS)/README.md $(CLASSIFICATION_README)
+ANALYSIS_README := $(REPORTS)/analysis/README.md
+REPORT_OUTPUTS := $(DATASET_SUMMARIES) $(REPORTS)/README.md $(ANALYSIS_README) $(CLASSIFICATION_README)
 
 # stage: Divide Tree synthesis (issue 7): a terrain type per region (from its analysis), a
 # 90 x 90 km synthesized tree per type (seed 0), and the fidelity table reports/synthesis/README.md.
@@ -57,7 +58,7 @@ SYNTH_TREES := $(DATASETS:%=$(REPORTS)/synthesis/trees/%/synthesis.json)
 SYNTHESIS_README := $(REPORTS)/synthesis/README.md
 REPORT_OUTPUTS += $(SYNTH_TYPES) $(SYNTHESIS_README)
 
-.PHONY: report test data venv clean-reports help classification synthesis
+.PHONY: report test data venv clean-reports help analysis classification synthesis
 
 report: $(REPORT_OUTPUTS)  ## main pipeline: fetch/verify data, per-dataset summaries, index
 
@@ -97,6 +98,11 @@ ANALYSIS_SRC := orokit/analysis.py $(wildcard orokit/topology/*.py orokit/metric
 $(REPORTS)/analysis/%/analysis.json: $(DATA_STAMP) $(ANALYSIS_SRC) | $(INSTALLED)
 	$(OROKIT) -q analyze $* -o $(@D) --min-prominence 30 --overwrite --no-progress
 
+$(ANALYSIS_README): $(ANALYSIS_JSONS) orokit/reports/analysis_report.py orokit/validate/reference.py | $(INSTALLED)
+	$(OROKIT) -q analysis-report $(ANALYSIS_JSONS:%/analysis.json=%) -o $@ --overwrite
+
+analysis: $(ANALYSIS_README)  ## exact analysis of every DEM, table + Divide Tree figures
+
 $(CLASSIFICATION_README): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
 	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(@D) --radius 10km --radius 5km --radius 15km \
 	  --runs 100 --feature-runs 20 --model models/regions-10km.skops --overwrite --no-progress
@@ -114,6 +120,28 @@ $(SYNTHESIS_README): $(SYNTH_TREES) orokit/cli/synthesis_report.py | $(INSTALLED
 	$(OROKIT) -q synthesis-report $(SYNTH_TREES:%/synthesis.json=%) -o $@ --overwrite
 
 synthesis: $(SYNTHESIS_README)  ## terrain types per region, synthesized 90 km trees, fidelity table
+
+# stage: round trip (issue 8). For every region: a synthetic twin of the real DEM (same size and
+# cell size, tree + eroded raster from the region's type, seed 0), its re-analysis and classification
+# by the region model (validation.json), then the table + side-by-side hillshades (README.md).
+ROUNDTRIP_SRC := $(wildcard orokit/raster/*.py orokit/validate/*.py) orokit/cli/synthesize.py orokit/cli/render.py
+ROUNDTRIP_MODEL := models/regions-10km.skops
+ROUNDTRIP_VALIDATIONS := $(DATASETS:%=$(REPORTS)/roundtrip/%/validation.json)
+ROUNDTRIP_README := $(REPORTS)/roundtrip/README.md
+REPORT_OUTPUTS += $(ROUNDTRIP_README)
+
+# hillshade.png is the last of the files synthesize writes
+$(REPORTS)/roundtrip/%/hillshade.png: $(REPORTS)/synthesis/types/%.json $(DATA_STAMP) $(SYNTH_SRC) $(ROUNDTRIP_SRC) | $(INSTALLED)
+	$(OROKIT) -q synthesize --type $< --like $* --seed 0 -o $(@D) --overwrite --no-progress
+
+$(REPORTS)/roundtrip/%/validation.json: $(REPORTS)/roundtrip/%/hillshade.png $(CLASSIFICATION_README) orokit/cli/validate.py | $(INSTALLED)
+	$(OROKIT) -q validate $(@D) --model $(ROUNDTRIP_MODEL) --no-append
+
+$(ROUNDTRIP_README): $(ROUNDTRIP_VALIDATIONS) orokit/reports/roundtrip.py orokit/cli/roundtrip_report.py | $(INSTALLED)
+	$(OROKIT) -q roundtrip-report $(ROUNDTRIP_VALIDATIONS:%/validation.json=%) --model $(ROUNDTRIP_MODEL) \
+	  --classification $(REPORTS)/classification/tables/per_class_10km.csv -o $@ --overwrite --no-progress
+
+roundtrip: $(ROUNDTRIP_README)  ## synthetic twins of every region: recovered peaks, histogram errors, reclassification
 
 clean-reports:  ## delete generated reports (keeps data and .venv)
 	rm -rf $(REPORTS)/datasets $(REPORTS)/README.md

@@ -25,14 +25,7 @@ from scipy import ndimage
 FT = 0.3048
 
 
-def near_share(points_rc: np.ndarray, targets_rc: np.ndarray, shape: tuple[int, int]) -> float:
-    """Share of ``points_rc`` within Chebyshev distance 1 of a cell of ``targets_rc``."""
-    if len(points_rc) == 0:
-        return float("nan")
-    occ = np.zeros(shape, dtype=bool)
-    occ[targets_rc[:, 0], targets_rc[:, 1]] = True
-    near = ndimage.binary_dilation(occ, structure=np.ones((3, 3), dtype=bool))
-    return float(near[points_rc[:, 0], points_rc[:, 1]].mean())
+from orokit.validate.reference import near_share  # noqa: E402
 
 
 def compare(png: Path, txt: Path, cell_size: float) -> dict[str, float]:

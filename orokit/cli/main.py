@@ -19,6 +19,7 @@ COMMANDS: dict[str, str] = {
     "report-dataset": "orokit.cli.report_dataset:report_dataset",
     "report-index": "orokit.cli.report_index:report_index",
     "analyze": "orokit.cli.analyze:analyze",
+    "analysis-report": "orokit.cli.analysis_report:analysis_report",
     "features": "orokit.cli.features:features",
     "train": "orokit.cli.train:train",
     "classify": "orokit.cli.classify:classify",
@@ -29,6 +30,7 @@ COMMANDS: dict[str, str] = {
     "render": "orokit.cli.render:render",
     "synthesize": "orokit.cli.synthesize:synthesize",
     "validate": "orokit.cli.validate:validate",
+    "roundtrip-report": "orokit.cli.roundtrip_report:roundtrip_report",
 }
 
 
