@@ -21,7 +21,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orokit.tiling import _kernels as _tk
 from orokit.topology import _kernels as _k
 from orokit.topology.engine import Orometry, finalize_graph
 
@@ -120,7 +119,7 @@ def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
     core = np.ascontiguousarray(zh[1:-1, 1:-1])
     h, w = core.shape
     region = (row0, row0 + h, col0, col0 + w)
-    ptr, border = _tk.steepest_ascent_halo(zh)
+    ptr, border = _k.steepest_ascent(zh)
     label, max_cell = _k.label_basins(ptr)
     npk = max_cell.size
     empty_i = np.empty(0, np.int64)

@@ -28,37 +28,45 @@ def above(za, ka, zb, kb):
 
 
 @njit(cache=True, nogil=True)
-def steepest_ascent(z):
+def steepest_ascent(zh):
     """Pointer of every cell to its highest 8-neighbour, and border flags.
 
-    Returns ``ptr`` (flat index of the highest neighbour if it is above the cell,
-    the cell itself for a local maximum of the total order, -1 for NaN cells) and
-    ``border`` (True for valid cells on the raster edge or next to a NaN cell).
+    ``zh`` is the raster (or a chunk of it) with a one-cell halo all round: NaN
+    outside the raster, neighbouring values around a chunk. Pointers only follow
+    cells of the core ``zh[1:-1, 1:-1]``; the halo is read only to flag "border"
+    cells (next to a NaN cell, so raster-edge cells are border cells).
+
+    Returns ``ptr`` (flat core index of the highest neighbour if it is above the
+    cell, the cell itself for a local maximum of the total order, -1 for NaN cells)
+    and ``border``. Tie-break keys are the core's raster order, which orders cells
+    exactly as the whole raster's order does.
     """
-    H, W = z.shape
-    n = H * W
+    Hh, Wh = zh.shape
+    h = Hh - 2
+    w = Wh - 2
+    n = h * w
     ptr = np.empty(n, np.int64)
     border = np.zeros(n, np.bool_)
-    for r in range(H):
-        for c in range(W):
-            i = r * W + c
-            zi = z[r, c]
+    for r in range(h):
+        for c in range(w):
+            i = r * w + c
+            zi = zh[r + 1, c + 1]
             if zi != zi:
                 ptr[i] = -1
                 continue
             best = i
             bz = zi
-            isb = r == 0 or r == H - 1 or c == 0 or c == W - 1
+            isb = False
             for d in _NEIGHBOURS_8:
                 rr = r + d[0]
                 cc = c + d[1]
-                if rr < 0 or rr >= H or cc < 0 or cc >= W:
-                    continue
-                zn = z[rr, cc]
+                zn = zh[rr + 1, cc + 1]
                 if zn != zn:
                     isb = True
                     continue
-                j = rr * W + cc
+                if rr < 0 or rr >= h or cc < 0 or cc >= w:
+                    continue
+                j = rr * w + cc
                 if zn > bz or (zn == bz and j < best):
                     best = j
                     bz = zn

@@ -63,7 +63,7 @@ def orometry(z: np.ndarray, *, min_prominence: float, outside: str = "unknown") 
     if np.isinf(z).any():
         raise InputError("the DEM contains infinite values; mark nodata as NaN")
     zf = z.ravel()
-    ptr, border = _kernels.steepest_ascent(z)
+    ptr, border = _kernels.steepest_ascent(np.pad(z, 1, constant_values=np.nan))
     label, max_cell = _kernels.label_basins(ptr)
     del ptr
     n_max = int(max_cell.size)
