@@ -183,7 +183,9 @@ def _fit_score(X: NDArray, y: NDArray, tr: NDArray, va: NDArray, cols: NDArray |
     from sklearn.ensemble import RandomForestClassifier
     from sklearn.metrics import confusion_matrix
 
-    if len(va) == 0 or len(np.unique(y[tr])) < 2:  # spatial split left no usable training set
+    # a spatial split can leave a region with no training disk far enough from its held-out strip:
+    # that run cannot test the region (its disks could only be misclassified), so it is not counted
+    if len(va) == 0 or len(np.unique(y[tr])) < 2 or not np.isin(np.unique(y[va]), y[tr]).all():
         return float("nan"), np.zeros((len(classes), len(classes)), dtype=np.int64)
     Xs = X if cols is None else X[:, cols]
     rf = RandomForestClassifier(n_estimators=n_estimators, n_jobs=1, random_state=seed)

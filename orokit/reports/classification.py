@@ -209,9 +209,14 @@ def _readme(t2: pd.DataFrame, evals: Mapping[float, Mapping[str, Any]], meta: di
                      f"(median {100 * rnd.median_accuracy:.1f} %)")
         if "spatial" in e:
             sp = e["spatial"]
-            s.append(f"; spatially held-out strip (training disks > {sp.params['buffer_m'] / 1000:g} km from "
-                     f"validation disks) **{100 * sp.mean_accuracy:.1f} %** (median "
-                     f"{100 * sp.median_accuracy:.1f} %)")
+            if np.isfinite(sp.mean_accuracy):
+                s.append(f"; spatially held-out strip (training disks > {sp.params['buffer_m'] / 1000:g} km from "
+                         f"validation disks) **{100 * sp.mean_accuracy:.1f} %** (median "
+                         f"{100 * sp.median_accuracy:.1f} %)")
+            else:
+                s.append(f"; spatially held-out strip: **not measurable** (no run left every region a training "
+                         f"disk > {sp.params['buffer_m'] / 1000:g} km from its held-out disks: the crops are too "
+                         f"small for this radius)")
         base = e.get("random") or e.get("spatial")
         s.append(f"; {len(base.classes)} regions, {base.params['n_disks']} disks")
         if base.params.get("dropped_classes"):
@@ -222,7 +227,8 @@ def _readme(t2: pd.DataFrame, evals: Mapping[float, Mapping[str, Any]], meta: di
         if "spatial" in e:
             n0 = int(np.sum(~np.isfinite(e["spatial"].accuracies)))
             if n0:
-                s.append(f"; {n0} spatial runs had no training disk left (not counted)")
+                s.append(f"; {n0} of {len(e['spatial'].accuracies)} spatial runs left a region without a "
+                         f"training disk and are not counted")
         lines.append(" ".join(s) + ".")
         worst = sorted(base.per_class.items(), key=lambda kv: kv[1])[:3]
         lines.append("  Lowest per-region accuracy (random split): " +
