@@ -52,6 +52,12 @@ def analyze(dem: str, outdir: Path, min_prominence: float, z_units: str | None, 
     if (scheduler or checkpoint) and chunks is None:
         raise click.UsageError("--scheduler and --checkpoint need --chunks N")
     if Path(dem).exists():
+        if chunks is None and not Path(dem).is_dir():
+            from orokit.analysis import plan_chunks
+
+            chunks = plan_chunks(dem)
+            if chunks is not None:
+                click.echo(f"{dem} is too large for memory: analysing in {chunks} x {chunks} chunks", err=True)
         da = read_dem(dem, z_units=z_units, cell_size=cell_size, chunks=chunks)
     else:
         from orokit.data import load_manifest, open_dataset_dem

@@ -25,14 +25,27 @@ ANALYSIS_FILES = ("peaks.csv", "peaks.parquet", "saddles.parquet", "dividetree.g
 
 
 def write_analysis(result, outdir: PathLike, *, overwrite: bool = True) -> Path:
-    """Write an :class:`~orokit.analysis.AnalysisResult` into ``outdir``."""
-    from orokit.analysis import analysis_json
-    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+    """Write an :class:`~orokit.analysis.AnalysisResult` into ``outdir``.
+
+    A lock file keeps two processes from writing the same folder at once.
+    """
+    from filelock import FileLock, Timeout
 
     out = Path(outdir)
     if (out / "analysis.json").exists() and not overwrite:
         raise InputError(f"{out} already holds an analysis; pass overwrite=True (CLI: --overwrite)")
     out.mkdir(parents=True, exist_ok=True)
+    try:
+        with FileLock(str(out / ".orokit.lock"), timeout=0):
+            return _write(result, out)
+    except Timeout:
+        raise InputError(f"another orokit process is writing to {out}; wait for it or choose another folder") from None
+
+
+def _write(result, out: Path) -> Path:
+    from orokit.analysis import analysis_json
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+
     (out / "analysis.json").unlink(missing_ok=True)
     peaks = result.peaks
     with atomic_path(out / "peaks.csv") as tmp:

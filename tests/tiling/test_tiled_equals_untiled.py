@@ -159,3 +159,43 @@ def test_checkpoint_resume_and_mismatch(make_dem, tmp_path):
     assert len(sorted(ck.glob("chunk_*.npz"))) == 12
     with pytest.raises(TilingError, match="another run"):
         orokit.analyze(dem, min_prominence=2.0, chunks=20, checkpoint=ck)
+
+
+def test_large_rasters_are_planned_chunked(tmp_path, monkeypatch):
+    """A raster too large for the free memory is analysed chunk by chunk automatically."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    import orokit.analysis as an
+
+    rng = np.random.default_rng(0)
+    z = rng.normal(size=(300, 200)).cumsum(0).cumsum(1).astype("float32")
+    p = tmp_path / "dem.tif"
+    with rasterio.open(p, "w", driver="GTiff", width=200, height=300, count=1, dtype="float32", crs="EPSG:32633",
+                       transform=from_origin(500000, 4000000, 30, 30)) as ds:
+        ds.write(z, 1)
+    assert an.plan_chunks(p) is None
+    monkeypatch.setattr(an, "available_memory", lambda: 1_000_000)  # pretend 1 MB is free
+    monkeypatch.setattr(an, "AUTO_CHUNK", 128)
+    assert an.plan_chunks(p) == 128
+    chunked = orokit.analyze(str(p), min_prominence=5)
+    assert chunked.attrs["engine"] == "tiled"
+    monkeypatch.undo()
+    in_memory = orokit.analyze(str(p), min_prominence=5)
+    assert in_memory.attrs["engine"] == "in-memory"
+    _assert_same_tables(in_memory, chunked)
+
+
+def test_concurrent_writers_are_refused(make_dem, tmp_path):
+    from filelock import FileLock
+
+    from orokit.errors import InputError
+
+    r = orokit.analyze(make_dem(np.arange(30.0).reshape(5, 6) % 7), min_prominence=0)
+    out = tmp_path / "out"
+    out.mkdir()
+    with FileLock(str(out / ".orokit.lock")):
+        with pytest.raises(InputError, match="another orokit process"):
+            r.write(out)
+    r.write(out)
+    assert (out / "analysis.json").exists()
