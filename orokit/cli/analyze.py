@@ -30,7 +30,8 @@ import click
               help="Folder for chunk summaries; rerunning with it reuses the finished chunks.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing analysis in OUTPUT.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
-def analyze(dem: str, outdir: Path, min_prominence: float, z_units: str | None, cell_size: float | None,
+@click.pass_context
+def analyze(ctx: click.Context, dem: str, outdir: Path, min_prominence: float, z_units: str | None, cell_size: float | None,
             outside: str, no_isolation: bool, chunks: int | None, scheduler: str | None,
             checkpoint: Path | None, overwrite: bool, progress: bool) -> None:
     """Analyse DEM into OUTPUT.
@@ -71,6 +72,8 @@ def analyze(dem: str, outdir: Path, min_prominence: float, z_units: str | None, 
                  progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint)
     result.write(outdir, overwrite=True)
     n = len(result.peaks)
+    if (ctx.find_root().obj or {}).get("quiet"):
+        return
     click.echo(
         f"{n} peaks with prominence >= {min_prominence:g} m, {len(result.saddles)} saddles, "
         f"{da.shape[0]}x{da.shape[1]} cells in {time.perf_counter() - t0:.2f} s -> {outdir}"
