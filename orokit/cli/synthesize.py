@@ -9,11 +9,39 @@ import click
 TERRAIN_FILES = ("dem.tif", "hillshade.png")
 
 
+def like_domain(like: str, *, cell_size: float | None = None) -> tuple[float, float, float]:
+    """Width, height and cell size (metres) of a DEM file or of a manifest dataset."""
+    from orokit.io.dem import read_dem
+
+    if Path(like).exists():
+        dem = read_dem(str(like), z_units="m", cell_size=cell_size)
+    else:
+        from orokit.data import open_dataset_dem
+        from orokit.errors import DataError
+
+        try:
+            dem = open_dataset_dem(like)
+        except (DataError, KeyError) as exc:
+            raise click.BadParameter(f"{like!r} is neither a file nor a dataset of the manifest ({exc})",
+                                     param_hint="--like") from None
+    if dem.rio.crs is not None and dem.rio.crs.is_geographic:
+        raise click.BadParameter(f"{like} is in a geographic CRS; give --size and --resolution in metres",
+                                 param_hint="--like")
+    t = dem.rio.transform()
+    ny, nx = dem.shape
+    res = abs(float(t.a))
+    return nx * res, ny * abs(float(t.e)), res
+
+
 @click.command(name="synthesize")
 @click.option("--type", "type_file", required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Terrain type JSON (from `orokit type`).")
 @click.option("--size", default="90km", show_default=True, help="Domain size: 90km, 90000m, 90x60km.")
-@click.option("--resolution", default="30m", show_default=True, help="Cell size of the raster.")
+@click.option("--resolution", default=None, help="Cell size of the raster [default: 30m, or that of --like].")
+@click.option("--like", default=None,
+              help="A DEM file or a dataset name of the manifest: the domain gets its size (and cell size unless "
+                   "--resolution is given), e.g. a synthetic twin of a real DEM.")
+@click.option("--cell-size", type=float, default=None, help="Cell size (m) of a --like file without georeferencing.")
 @click.option("--n-peaks", type=int, default=None, help="Number of peaks (default: type density x area).")
 @click.option("--erosion/--no-erosion", default=True, show_default=True, help="Multi-scale constrained erosion.")
 @click.option("--seed", type=int, default=None, help="Random seed (tree and raster).")
@@ -23,8 +51,10 @@ TERRAIN_FILES = ("dem.tif", "hillshade.png")
               help="Output folder: dividetree.gpkg/.txt, peaks.csv, synthesis.json, dem.tif, hillshade.png.")
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs in OUTPUT.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
-def synthesize(type_file, size, resolution, n_peaks, erosion, seed, crs, write_tin, outdir, overwrite, progress) -> None:
+def synthesize(type_file, size, resolution, like, cell_size, n_peaks, erosion, seed, crs, write_tin, outdir, overwrite,
+               progress) -> None:
     """Synthesize a Divide Tree following a terrain type and render it to a raster."""
+    import json
     import time
 
     import numpy as np
@@ -40,8 +70,12 @@ def synthesize(type_file, size, resolution, n_peaks, erosion, seed, crs, write_t
     existing = [f for f in SYNTHESIS_FILES + TERRAIN_FILES + ("tin.ply",) if (outdir / f).exists()]
     if existing and not overwrite:
         raise click.UsageError(f"{outdir} already holds {', '.join(existing)}; pass --overwrite to replace them")
-    w, h = parse_size(size)
-    res = parse_length(resolution)
+    if like is not None:
+        w, h, like_res = like_domain(like, cell_size=cell_size)
+        res = parse_length(resolution) if resolution is not None else like_res
+    else:
+        w, h = parse_size(size)
+        res = parse_length(resolution or "30m")
     make_grid((0.0, 0.0, w, h), res)  # resolution errors before the synthesis
     ttype = load_terrain_type(type_file)
     rng = np.random.default_rng(seed)
@@ -60,7 +94,8 @@ def synthesize(type_file, size, resolution, n_peaks, erosion, seed, crs, write_t
     if bar is not None:
         bar.update(1)
     outdir.mkdir(parents=True, exist_ok=True)
-    extra = {"seed": seed, "types": [str(type_file)], "resolution_m": res, "erosion": bool(erosion),
+    extra = {"seed": seed, "types": [str(type_file)], "resolution_m": res, "erosion": bool(erosion), "like": like,
+             "render_timings_s": json.loads(dem.attrs.get("timings", "{}")),
              "fidelity": compare_to_type(tree, ttype).reset_index().to_dict(orient="records")}
     write_synthesis(tree, outdir, extra=extra)
     write_outputs(dem, outdir / "dem.tif", preview=outdir / "hillshade.png",

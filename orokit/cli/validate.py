@@ -33,8 +33,10 @@ def append_row(table: Path, row: dict) -> None:
 @click.option("--min-prominence", type=float, default=30.0, show_default=True, help="eps (m) of the re-analysis.")
 @click.option("--reports", "reports_dir", type=click.Path(file_okay=False, path_type=Path), default=Path("reports"),
               show_default=True, help="Folder of roundtrip.csv (one row appended per run).")
+@click.option("--append/--no-append", default=True, show_default=True,
+              help="Append the run's row to REPORTS/roundtrip.csv (--no-append: only OUT/validation.json).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the disk placement.")
-def validate(out, model_path, tree_path, type_file, label, min_prominence, reports_dir, seed) -> None:
+def validate(out, model_path, tree_path, type_file, label, min_prominence, reports_dir, append, seed) -> None:
     """Re-analyse OUT (a synthesize folder or a raster), compare it with its Divide Tree, classify it."""
     import json
 
@@ -69,7 +71,8 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, repor
                    expected_label=label, rng=seed)
     row = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "raster": str(raster),
            "tree": str(tree_path), "model": str(model_path) if model_path else "", **rt.summary()}
-    append_row(reports_dir / "roundtrip.csv", row)
+    if append:
+        append_row(reports_dir / "roundtrip.csv", row)
     if folder is not None:
         write_text_atomic(folder / "validation.json", summary_json(rt))
     s = rt.summary()
@@ -81,4 +84,4 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, repor
         msg += f"; classified as {s['predicted']}"
         if "disk_accuracy" in s:
             msg += f" ({100 * s['disk_accuracy']:.0f} % of {s['n_disks']} disks right)"
-    click.echo(msg + f" -> {reports_dir / 'roundtrip.csv'}")
+    click.echo(msg + (f" -> {reports_dir / 'roundtrip.csv'}" if append else ""))

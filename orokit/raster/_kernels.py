@@ -172,56 +172,6 @@ def reconstruct_from_markers(indptr: np.ndarray, indices: np.ndarray, h: np.ndar
 
 
 @njit(cache=True)
-def reconstruct_raster(z: np.ndarray, marker_r: np.ndarray, marker_c: np.ndarray, step: float) -> np.ndarray:
-    """Lower every 8-connected hill of ``z`` that holds no marker cell (peak cutting).
-
-    A cell keeps ``min(z, b - step * k)`` where ``b`` is the bottleneck height of its
-    best path from a marker and ``k`` the number of cells on that path since the last
-    strictly lower cell, so every cell has a strictly ascending path to a marker and the
-    only local maxima left are the markers (NaN cells are left alone). The dual of
-    priority-flood depression filling (numba: priority queue).
-    """
-    ny, nx = z.shape
-    out = np.full((ny, nx), -np.inf, np.float32)
-    done = np.zeros((ny, nx), np.bool_)
-    heap = [(np.float32(0.0), np.int64(0))]
-    heap.pop()
-    for k in range(marker_r.size):
-        i, j = marker_r[k], marker_c[k]
-        if 0 <= i < ny and 0 <= j < nx and np.isfinite(z[i, j]):
-            out[i, j] = z[i, j]
-            heapq.heappush(heap, (-z[i, j], np.int64(i * nx + j)))
-    while heap:
-        negz, v = heapq.heappop(heap)
-        i = v // nx
-        j = v - i * nx
-        if done[i, j]:
-            continue
-        done[i, j] = True
-        zv = -negz
-        for di in range(-1, 2):
-            ii = i + di
-            if ii < 0 or ii >= ny:
-                continue
-            for dj in range(-1, 2):
-                jj = j + dj
-                if jj < 0 or jj >= nx or done[ii, jj]:
-                    continue
-                h = z[ii, jj]
-                if not np.isfinite(h):
-                    continue
-                cand = h if h < zv else zv - np.float32(step)
-                if cand > out[ii, jj]:
-                    out[ii, jj] = cand
-                    heapq.heappush(heap, (-cand, np.int64(ii * nx + jj)))
-    for i in range(ny):
-        for j in range(nx):
-            if not done[i, j]:
-                out[i, j] = z[i, j]
-    return out
-
-
-@njit(cache=True)
 def carve_saddles(z: np.ndarray, x0: float, y0: float, res: float, sx: np.ndarray, sy: np.ndarray,
                   sz: np.ndarray, nxv: np.ndarray, nyv: np.ndarray, max_len: float, drop: float,
                   label: np.ndarray) -> int:
@@ -267,3 +217,188 @@ def carve_saddles(z: np.ndarray, x0: float, y0: float, res: float, sx: np.ndarra
                 z[i, j] = target
                 count += 1
     return count
+
+
+@njit(cache=True)
+def reconstruct_masked(z: np.ndarray, mask: np.ndarray, step: float) -> int:
+    """Lower the hills inside ``mask`` that hold no marker (peak cutting, in place).
+
+    Cells outside ``mask`` keep their elevation and seed the flood at their height; a
+    masked cell becomes ``min(z, b - step * k)`` with ``b`` the bottleneck height of its
+    best path from an unmasked cell, so masked hills are cut down to their pass and get a
+    strictly ascending path out. Used with ``mask`` = basins of spurious maxima, whose
+    outside already ascends to a marker. Returns the number of lowered cells (numba:
+    priority queue).
+    """
+    ny, nx = z.shape
+    heap = [(np.float32(0.0), np.int64(0))]
+    heap.pop()
+    best = np.full((ny, nx), -np.inf, np.float32)
+    for i in range(ny):
+        for j in range(nx):
+            if not mask[i, j]:
+                continue
+            for di in range(-1, 2):
+                ii = i + di
+                if ii < 0 or ii >= ny:
+                    continue
+                for dj in range(-1, 2):
+                    jj = j + dj
+                    if jj < 0 or jj >= nx or mask[ii, jj]:
+                        continue
+                    h = z[ii, jj]
+                    if np.isfinite(h) and h > best[ii, jj]:
+                        best[ii, jj] = h
+                        heapq.heappush(heap, (-h, np.int64(ii * nx + jj)))
+    done = ~mask
+    count = 0
+    while heap:
+        negz, v = heapq.heappop(heap)
+        i = v // nx
+        j = v - i * nx
+        if mask[i, j]:
+            if done[i, j]:
+                continue
+            done[i, j] = True
+            if best[i, j] < z[i, j]:
+                z[i, j] = best[i, j]
+                count += 1
+        zv = -negz
+        for di in range(-1, 2):
+            ii = i + di
+            if ii < 0 or ii >= ny:
+                continue
+            for dj in range(-1, 2):
+                jj = j + dj
+                if jj < 0 or jj >= nx or done[ii, jj]:
+                    continue
+                h = z[ii, jj]
+                if not np.isfinite(h):
+                    continue
+                cand = h if h < zv else zv - np.float32(step)
+                if cand > best[ii, jj]:
+                    best[ii, jj] = cand
+                    heapq.heappush(heap, (-cand, np.int64(ii * nx + jj)))
+    return count
+
+
+@njit(cache=True)
+def merge_tree(n: int, ea: np.ndarray, eb: np.ndarray, ez: np.ndarray):
+    """Kruskal merge tree of a Divide Tree: ``parent``, ``height`` and ``depth`` of its
+    ``2n - 1`` nodes (leaves 0..n-1 are the peaks; an inner node is the saddle where two
+    components join). The bottleneck between two peaks is the height of their lowest
+    common ancestor (numba: union-find)."""
+    m = ea.size
+    parent = np.full(n + m, -1, np.int64)
+    height = np.full(n + m, np.inf)
+    comp = np.arange(n)  # union-find over peaks
+    top = np.arange(n)  # merge-tree node of each component root
+    order = np.argsort(-ez, kind="mergesort")
+    nxt = n
+    for k in order:
+        a = ea[k]
+        while comp[a] != a:
+            comp[a] = comp[comp[a]]
+            a = comp[a]
+        b = eb[k]
+        while comp[b] != b:
+            comp[b] = comp[comp[b]]
+            b = comp[b]
+        if a == b:
+            continue
+        parent[top[a]] = nxt
+        parent[top[b]] = nxt
+        height[nxt] = ez[k]
+        comp[b] = a
+        top[a] = nxt
+        nxt += 1
+    depth = np.zeros(n + m, np.int64)
+    for v in range(nxt - 1, -1, -1):  # parents have larger ids
+        if parent[v] >= 0:
+            depth[v] = depth[parent[v]] + 1
+    return parent[:nxt], height[:nxt], depth[:nxt]
+
+
+@njit(cache=True)
+def bottlenecks(parent: np.ndarray, height: np.ndarray, depth: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Bottleneck (lowest saddle on the tree path) of peak pairs ``(a, b)``; -inf when the
+    peaks are in different trees (numba: lowest-common-ancestor walks)."""
+    out = np.empty(a.size)
+    for k in range(a.size):
+        u = a[k]
+        v = b[k]
+        while depth[u] > depth[v]:
+            u = parent[u]
+        while depth[v] > depth[u]:
+            v = parent[v]
+        while u != v and u >= 0 and v >= 0:
+            u = parent[u]
+            v = parent[v]
+        out[k] = height[u] if (u == v and u >= 0) else -np.inf
+    return out
+
+
+@njit(cache=True)
+def basin_labels(z: np.ndarray):
+    """Basins of steepest ascent: ``(label, peak_cell)``.
+
+    Every cell points to its highest 8-neighbour in the strict total order (elevation,
+    then the lower flat index wins ties) when that neighbour is above it; chains end at
+    maxima, numbered 0..k-1 in raster order (``peak_cell``: their flat indices). ``label``
+    is the flat array of basin ids (-1 for NaN cells). numba: chain following.
+    """
+    ny, nx = z.shape
+    n = ny * nx
+    ptr = np.empty(n, np.int64)
+    for r in range(ny):
+        for c in range(nx):
+            i = r * nx + c
+            zi = z[r, c]
+            if not np.isfinite(zi):
+                ptr[i] = -1
+                continue
+            best = i
+            bz = zi
+            for dr in range(-1, 2):
+                rr = r + dr
+                if rr < 0 or rr >= ny:
+                    continue
+                for dc in range(-1, 2):
+                    cc = c + dc
+                    if cc < 0 or cc >= nx or (dr == 0 and dc == 0):
+                        continue
+                    zn = z[rr, cc]
+                    if not np.isfinite(zn):
+                        continue
+                    j = rr * nx + cc
+                    if zn > bz or (zn == bz and j < best):
+                        best = j
+                        bz = zn
+            ptr[i] = best
+    label = np.full(n, -1, np.int64)
+    k = 0
+    for i in range(n):
+        if ptr[i] == i:
+            label[i] = k
+            k += 1
+    peak_cell = np.empty(k, np.int64)
+    for i in range(n):
+        if ptr[i] == i:
+            peak_cell[label[i]] = i
+    stack = np.empty(1024, np.int64)
+    for i in range(n):
+        if label[i] >= 0 or ptr[i] < 0:
+            continue
+        top = 0
+        j = i
+        while label[j] < 0:
+            if top == stack.size:
+                bigger = np.empty(stack.size * 2, np.int64)
+                bigger[:top] = stack[:top]
+                stack = bigger
+            stack[top] = j
+            top += 1
+            j = ptr[j]
+        for t in range(top):
+            label[stack[t]] = label[j]
+    return label, peak_cell

@@ -48,7 +48,8 @@ def sample_elevation(
     With ``ridge_slope`` (one value per ridge point), ``h`` is also capped by the cone
     envelope ``max_q h(q) - s_q |p - q|`` over the ``k_neighbours`` nearest ridge points
     (orokit): flanks then fall faster than the ridge rises, so the ground beside a
-    saddle stays below it and the saddle stays the highest pass.
+    saddle stays below it and the saddle stays the highest pass; the nearest river bed
+    ``h(r)`` is the floor (no pit below the drainage).
     Returns ``(h, d_ridge, d_river)``.
     """
     tree = cKDTree(ridge_xy)
@@ -60,7 +61,10 @@ def sample_elevation(
     alpha = np.clip(dT / denom, 0.0, 1.0)
     h = np.where(dR < w, hr, (1.0 - alpha) * hq + alpha * hr)
     if ridge_slope is not None:
-        h = np.minimum(h, flank_envelope(points, ridge_xy, ridge_z, ridge_slope, k_neighbours=k_neighbours, tree=tree))
+        env = flank_envelope(points, ridge_xy, ridge_z, ridge_slope, k_neighbours=k_neighbours, tree=tree)
+        # the cones only cap; far from every ridge they would dig pits far below the rivers, so
+        # the nearest river bed is the floor
+        h = np.maximum(np.minimum(h, env), np.minimum(hr, h))
     return h, dT, dR
 
 

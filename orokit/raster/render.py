@@ -89,6 +89,7 @@ class TerrainSkeleton:
     n_peaks: int
     timings: dict[str, float] = field(default_factory=dict)
     piece_saddle: np.ndarray | None = None  # saddle (0..m-1) of each straight ridge piece
+    edges: np.ndarray | None = None  # (m, 3) peak_a, peak_b, saddle (0..m-1, rows of node_xyz after the peaks)
 
 
 def _tree_arrays(tree) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -143,8 +144,41 @@ def tree_extent(tree, *, pad_m: float | None = None) -> tuple[float, float, floa
     return (float(xmin - pad), float(ymin - pad), float(xmax + pad), float(ymax + pad))
 
 
+def separate_saddles(p: np.ndarray, s: np.ndarray, e: np.ndarray, clearance_m: float) -> np.ndarray:
+    """Saddle positions moved along their ridge so each is ``clearance_m`` from both peaks.
+
+    A saddle closer than ``clearance_m`` to one of its two peaks (e.g. in the same raster
+    cell, where it would overwrite the peak) slides along the straight peak-peak line,
+    keeping its sideways offset, to ``clearance_m`` from the nearer end, or to the middle
+    when the ridge is shorter than twice that. Elevations (hence the orometry) are kept.
+    """
+    s = s.copy()
+    if clearance_m <= 0 or not e.size:
+        return s
+    pa, pb, ps = p[e[:, 0], :2], p[e[:, 1], :2], s[e[:, 2], :2]
+    d = pb - pa
+    length = np.hypot(d[:, 0], d[:, 1])
+    close = (np.hypot(*(ps - pa).T) < clearance_m) | (np.hypot(*(ps - pb).T) < clearance_m)
+    close &= length > 0
+    if not close.any():
+        return s
+    u = d[close] / length[close, None]
+    rel = ps[close] - pa[close]
+    t = rel[:, 0] * u[:, 0] + rel[:, 1] * u[:, 1]
+    side = rel - t[:, None] * u
+    L = length[close]
+    lo = np.minimum(clearance_m, 0.5 * L)
+    t = np.clip(t, lo, L - lo)
+    # the sideways offset may not bring the saddle back within the clearance
+    side *= np.clip(np.minimum(t, L - t) / np.maximum(np.hypot(side[:, 0], side[:, 1]), 1e-9), 0.0, 1.0)[:, None] * 0.5
+    s[e[close, 2], :2] = pa[close] + t[:, None] * u + side
+    logger.debug("moved %d saddles away from their peaks (clearance %.0f m)", int(close.sum()), clearance_m)
+    return s
+
+
 def build_skeleton(
-    tree, *, extent: tuple[float, float, float, float], params: RenderParams = RenderParams(), rng: SeedLike = None
+    tree, *, extent: tuple[float, float, float, float], params: RenderParams = RenderParams(),
+    saddle_clearance_m: float = 0.0, rng: SeedLike = None
 ) -> TerrainSkeleton:
     """Rivers, refined ridges and rivers, Poisson samples with elevations and the TIN.
 
@@ -156,11 +190,15 @@ def build_skeleton(
        those closer than ``lam / 2`` to a ridge or river; each gets its elevation from
        the nearest ridge and river points with valley width ``w ~ A^0.4``.
     4. Constrained Delaunay TIN of all points keeping ridge and river pieces.
+
+    Saddles closer than ``saddle_clearance_m`` to one of their peaks are first moved
+    along their ridge (:func:`separate_saddles`; ``render_elevation`` uses 1.5 cells).
     """
     rng = np.random.default_rng(rng)
     t = {}
     t0 = time.perf_counter()
     p, s, e = _tree_arrays(tree)
+    s = separate_saddles(p, s, e, saddle_clearance_m)
     n = p.shape[0]
     nodes = np.concatenate([p, s])
     lam = float(params.lam)
@@ -234,7 +272,7 @@ def build_skeleton(
     t["tin"] = time.perf_counter() - t0
     logger.info("skeleton: %d ridge pts, %d river pts, %d samples, %d triangles",
                 nr, nv, pts.shape[0], tin.n_triangles)
-    return TerrainSkeleton(ridge_lines, river_lines, rivers, tin, extent, nodes, n, t, ridges.node1 - n)
+    return TerrainSkeleton(ridge_lines, river_lines, rivers, tin, extent, nodes, n, t, ridges.node1 - n, e)
 
 
 def render_elevation(
@@ -305,7 +343,7 @@ def render_elevation(
         warnings.warn(f"{int((~inside).sum())} of {inside.size} peaks lie outside the extent and are cut off",
                       OrokitWarning, stacklevel=2)
 
-    skel = build_skeleton(divide_tree, extent=ext, params=params, rng=rng)
+    skel = build_skeleton(divide_tree, extent=ext, params=params, saddle_clearance_m=1.5 * grid.res, rng=rng)
     timings = dict(skel.timings)
 
     t0 = time.perf_counter()
@@ -398,16 +436,18 @@ def _saddle_normals(skel: TerrainSkeleton) -> tuple[np.ndarray, np.ndarray]:
 
 
 def enforce_orometry(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, label: np.ndarray | None = None,
-                     drop_m: float = 0.5, trench_m: float = 3000.0) -> np.ndarray:
+                     drop_m: float = 0.5, trench_m: float = 3000.0, max_rounds: int = 6) -> np.ndarray:
     """Make the raster's orometry that of the tree (in place).
 
     1. A trench perpendicular to the ridge through every saddle, just below it, until the
        ground is lower (no path beside a saddle crosses the ridge above it); a trench
        stops at a cell of another ridge (``label``: tree edge id of burnt ridge cells).
-    2. Peak cutting: every hill without a tree peak is lowered until it has a strictly
-       ascending path (1 mm per cell) to a tree peak, so the tree's peaks are the only
-       local maxima.
-    3. Peak and saddle cells get their exact elevations.
+    2. Peak and saddle cells get their exact elevations.
+    3. Rounds of basin checks (:func:`cap_basins`): hills without a tree peak are cut
+       down to their pass with a strictly ascending path (1 mm per cell) to a tree peak,
+       and every pass between the basins of two tree peaks that is higher than the
+       tree's bottleneck between them (the lowest saddle on the tree path) is lowered
+       ``drop_m`` below it, so the raster's Divide Tree is the tree.
     """
     n = skel.n_peaks
     nodes = skel.node_xyz
@@ -419,10 +459,106 @@ def enforce_orometry(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, label:
                                np.ascontiguousarray(s[:, 2]), nxv, nyv, float(trench_m), float(drop_m),
                                label if label is not None else np.full(z.shape, -1, np.int32))
     set_cells(z, grid, nodes[:, :2], nodes[:, 2])
-    row, col, ok = grid.cell_of(nodes[:n, :2])
-    z[...] = _kernels.reconstruct_raster(z, row[ok], col[ok], 1e-3)
+    # ridge cells may be lowered down to their own saddle, peak and saddle cells never
+    floor = np.full(z.shape, -np.inf, np.float32)
+    if label is not None and nodes.shape[0] > n:
+        on = label >= 0
+        floor[on] = nodes[n + label[on], 2]
+    row, col, ok = grid.cell_of(nodes[:, :2])
+    floor[row[ok], col[ok]] = np.inf
+    cap_basins(z, grid, skel, floor=floor, drop_m=drop_m, max_rounds=max_rounds)
     set_cells(z, grid, nodes[:, :2], nodes[:, 2])
     return z
+
+
+def _border_pairs(owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Flat indices ``(a, b)`` of 8-adjacent cells whose ``owner`` differs (both >= 0)."""
+    ny, nx = owner.shape
+    ia, ib = [], []
+    idx = np.arange(ny * nx, dtype=np.int64).reshape(ny, nx)
+    for dr, dc in ((0, 1), (1, -1), (1, 0), (1, 1)):
+        a = (slice(0, ny - dr), slice(max(0, -dc), nx - max(0, dc)))
+        b = (slice(dr, ny), slice(max(0, dc), nx - max(0, -dc)))
+        oa, ob = owner[a], owner[b]
+        m = (oa != ob) & (oa >= 0) & (ob >= 0)
+        ia.append(idx[a][m])
+        ib.append(idx[b][m])
+    return np.concatenate(ia), np.concatenate(ib)
+
+
+def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.ndarray, drop_m: float = 0.5,
+               max_rounds: int = 6) -> dict[str, int]:
+    """Rounds of spurious-hill cutting and pass capping on the raster's own basins (in place).
+
+    Each round labels the basins of steepest ascent (same total order as the orometry
+    engine); basins whose maximum is not a tree peak are cut down (flooded from their
+    outside with a 1 mm per cell ascent); then every pair of 8-adjacent cells in the
+    basins of two tree peaks whose pass (the lower of the two) is above the tree's
+    bottleneck between the peaks (lowest saddle on the tree path) is lowered ``drop_m``
+    below it: the lower cell, or the higher one when the target is below the lower
+    cell's ``floor`` (a ridge cell's own saddle elevation, +inf at peaks and saddles). Stops when a round changes nothing. Returns counters
+    (rounds, cells cut, cells capped, border pairs left above their bottleneck).
+    """
+    n = skel.n_peaks
+    nodes = skel.node_xyz
+    e = skel.edges if skel.edges is not None else np.empty((0, 3), np.int64)
+    parent, height, depth = _kernels.merge_tree(
+        n, e[:, 0].astype(np.int64), e[:, 1].astype(np.int64),
+        nodes[n + e[:, 2], 2].astype(np.float64) if e.size else np.empty(0))
+    row, col, ok = grid.cell_of(nodes[:n, :2])
+    pid = np.flatnonzero(ok)
+    pid = pid[np.argsort(nodes[pid, 2], kind="stable")]  # the highest peak of a shared cell wins
+    cells = row[pid] * grid.nx + col[pid]
+    order = np.argsort(cells, kind="stable")
+    cells, pid = cells[order], pid[order]
+    last = np.r_[cells[1:] != cells[:-1], True] if cells.size else np.zeros(0, bool)
+    cells, pid = cells[last], pid[last]
+    zf = z.reshape(-1)
+    ff = floor.reshape(-1)
+    stats = {"rounds": 0, "cut": 0, "capped": 0, "left": 0}
+
+    def owners() -> np.ndarray:
+        lab, peak_cell = _kernels.basin_labels(z)
+        k = np.searchsorted(cells, peak_cell)
+        k = np.minimum(k, max(cells.size - 1, 0))
+        tid = np.where((cells.size > 0) & (cells[k] == peak_cell), pid[k] if cells.size else -1, -1)
+        return np.where(lab >= 0, tid[np.maximum(lab, 0)], -2).reshape(z.shape)
+
+    for _ in range(max_rounds):
+        stats["rounds"] += 1
+        own = owners()
+        cut = 0
+        spurious = own == -1
+        spurious.reshape(-1)[cells] = False  # tree peaks seed the flood, never lowered
+        if spurious.any():
+            cut = _kernels.reconstruct_masked(z, spurious, 1e-3)
+            stats["cut"] += cut
+            own = owners()
+        ia, ib = _border_pairs(own)
+        ta, tb = own.reshape(-1)[ia], own.reshape(-1)[ib]
+        lo, hi = np.minimum(ta, tb), np.maximum(ta, tb)
+        keys, inv = np.unique(lo * n + hi, return_inverse=True)
+        bn = _kernels.bottlenecks(parent, height, depth, keys // n, keys % n)[inv.ravel()]
+        za, zb = zf[ia].astype(np.float64), zf[ib].astype(np.float64)
+        viol = np.minimum(za, zb) > bn + 1e-3
+        stats["left"] = int(viol.sum())
+        if not viol.any():
+            break
+        ia, ib, za, zb, target = ia[viol], ib[viol], za[viol], zb[viol], bn[viol] - drop_m
+        low = np.where(za <= zb, ia, ib)
+        high = np.where(za <= zb, ib, ia)
+        # a cell may go down to max(target, its floor) if that floor is not above the bottleneck
+        # (ridge cells of the saddle itself end at the saddle's height: a tie, not a bypass)
+        lim = (bn[viol] + 1e-4).astype(zf.dtype)
+        pick = np.where(ff[low] <= lim, low, np.where(ff[high] <= lim, high, -1))
+        keep = pick >= 0
+        pick = pick[keep]
+        np.minimum.at(zf, pick, np.maximum(target[keep].astype(zf.dtype), ff[pick]))
+        stats["capped"] += int(keep.sum())
+        if not keep.any() and cut == 0:
+            break
+    logger.debug("basin capping: %s", stats)
+    return stats
 
 
 # ----------------------------------------------------------------------------- writers

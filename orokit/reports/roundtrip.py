@@ -1,0 +1,183 @@
+"""Round-trip report: synthetic twins of real DEMs, re-analysed and classified (paper §7.1, Fig. 17).
+
+Each region folder is the output of ``orokit synthesize --like REGION`` followed by
+``orokit validate --model``: ``synthesis.json``, ``dem.tif`` and ``validation.json``.
+:func:`roundtrip_rows` gathers one table row per region, next to the accuracy of the
+region's real disks from the classification report; :func:`write_twin_png` draws the
+real DEM and its synthetic twin side by side.
+"""
+from __future__ import annotations
+
+import io
+import json
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from orokit._typing import PathLike
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["roundtrip_rows", "render_roundtrip_markdown", "write_twin_png", "real_dem_of"]
+
+#: per-region accuracy of the paper's synthetic terrains (Argudo et al. 2019, §7.1)
+PAPER_SYNTHETIC_ACCURACY = {"sahara": 100, "appalachians": 100, "karakoram": 100, "himalaya": 99, "norway": 89}
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def real_dem_of(folder: PathLike):
+    """The real DEM a twin folder was synthesized ``--like`` (a manifest dataset), or None."""
+    folder = Path(folder)
+    meta = _read_json(folder / "synthesis.json") if (folder / "synthesis.json").is_file() else {}
+    like = meta.get("like") or folder.name
+    if Path(str(like)).is_file():
+        from orokit.io.dem import read_dem
+
+        return read_dem(str(like), z_units="m")
+    from orokit.data import open_dataset_dem
+    from orokit.errors import DataError
+
+    try:
+        return open_dataset_dem(str(like))
+    except DataError:
+        logger.warning("no real DEM found for %s (like=%r)", folder, like)
+        return None
+
+
+def roundtrip_rows(folders: list[PathLike], *, real_accuracy: pd.DataFrame | None = None) -> pd.DataFrame:
+    """One row per twin folder: recovered / extra peaks, histogram errors, classification.
+
+    ``real_accuracy`` is the classification report's per-class table
+    (``tables/per_class_<R>km.csv``: ``region``, ``random_accuracy_%``, ``spatial_accuracy_%``).
+    """
+    rows = []
+    real = real_accuracy.set_index("region") if real_accuracy is not None and len(real_accuracy) else None
+    for d in map(Path, folders):
+        v = _read_json(d / "validation.json")
+        s = v["summary"]
+        meta = _read_json(d / "synthesis.json") if (d / "synthesis.json").is_file() else {}
+        name = d.name
+        emd = [float(val) for k, val in s.items() if k.startswith("emd_")]
+        t = meta.get("render_timings_s") or {}
+        row = {
+            "region": name,
+            "shape": s.get("shape"),
+            "cell_m": round(float(s.get("cell_size_m", float("nan"))), 1),
+            "tree_peaks": s.get("tree_peaks"),
+            "recovered_%": 100.0 * float(s.get("recovered_share", float("nan"))),
+            "extra_%": 100.0 * float(s.get("extra_share", float("nan"))),
+            "median_prom_error_m": s.get("median_abs_prominence_error_m"),
+            "max_bin_error": s.get("max_bin_error"),
+            "max_emd_elevation_m": s.get("emd_elevation"),
+            "max_emd_prominence_m": s.get("emd_prominence"),
+            "mean_emd_all": float(np.mean(emd)) if emd else float("nan"),
+            "disks": s.get("n_disks", 0),
+            "synthetic_disk_acc_%": 100.0 * float(s["disk_accuracy"]) if "disk_accuracy" in s else float("nan"),
+            "vote": s.get("predicted") or "-",
+            "vote_correct": bool(s.get("vote_correct", False)),
+            "render_s": round(float(sum(t.values())), 2) if t else float("nan"),
+        }
+        if real is not None and name in real.index:
+            row["real_disk_acc_%"] = float(real.loc[name, "random_accuracy_%"])
+            if "spatial_accuracy_%" in real.columns:
+                row["real_disk_acc_spatial_%"] = float(real.loc[name, "spatial_accuracy_%"])
+        else:
+            row["real_disk_acc_%"] = float("nan")
+            row["real_disk_acc_spatial_%"] = float("nan")
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _fmt(v: Any, nd: int = 1) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (float, np.floating)):
+        return f"{v:.{nd}f}"
+    return str(v)
+
+
+def render_roundtrip_markdown(table: pd.DataFrame, *, header: str = "", model: str = "") -> str:
+    """Markdown page: the round-trip table, totals and the twin figures."""
+    cols = [("region", 0), ("shape", 0), ("tree_peaks", 0), ("recovered_%", 1), ("extra_%", 1),
+            ("max_bin_error", 3), ("max_emd_prominence_m", 1), ("disks", 0), ("synthetic_disk_acc_%", 0),
+            ("real_disk_acc_%", 0), ("real_disk_acc_spatial_%", 0), ("vote", 0), ("render_s", 1)]
+    names = {"tree_peaks": "tree peaks >= eps", "recovered_%": "recovered %", "extra_%": "extra %",
+             "max_bin_error": "max bin error", "max_emd_prominence_m": "EMD prominence (m)",
+             "disks": "disks", "synthetic_disk_acc_%": "synthetic disks right %",
+             "real_disk_acc_%": "real disks right % (random split)",
+             "real_disk_acc_spatial_%": "real disks right % (spatial)", "vote": "overall vote",
+             "render_s": "render (s)"}
+    lines = ["# Round trip: synthetic twins of the real DEMs", ""]
+    if header:
+        lines += [header, ""]
+    lines += ["| " + " | ".join(names.get(c, c) for c, _ in cols) + " |",
+              "|" + "|".join("---" if c in ("region", "shape", "vote") else "---:" for c, _ in cols) + "|"]
+    for _, r in table.iterrows():
+        cells = []
+        for c, nd in cols:
+            v = r.get(c)
+            txt = _fmt(v, nd)
+            if c == "vote" and txt != "-":
+                txt = txt if bool(r.get("vote_correct")) else f"{txt} (wrong)"
+            cells.append(txt)
+        lines.append("| " + " | ".join(cells) + " |")
+    lines.append("")
+    if len(table):
+        rec = table["recovered_%"].astype(float)
+        ext = table["extra_%"].astype(float)
+        syn = table["synthetic_disk_acc_%"].astype(float)
+        real = table["real_disk_acc_%"].astype(float)
+        both = syn.notna() & real.notna()
+        lines += [
+            "## Totals",
+            "",
+            f"- Peaks recovered: mean {rec.mean():.1f} % (min {rec.min():.1f} %, {int((rec >= 95).sum())} of "
+            f"{len(rec)} regions >= 95 %); extra peaks: mean {ext.mean():.1f} % (max {ext.max():.1f} %, "
+            f"{int((ext <= 5).sum())} of {len(ext)} regions <= 5 %).",
+            f"- Reclassification: overall vote right for {int(table['vote_correct'].sum())} of {len(table)} twins; "
+            f"synthetic disks right {syn.mean():.1f} % on average"
+            + (f"; synthetic >= real accuracy for {int((syn[both] >= real[both]).sum())} of {int(both.sum())} regions"
+               if both.any() else "") + ".",
+            "- Paper (Argudo et al. 2019, §7.1, R = 30 km, 15 regions): synthetic Sahara, Appalachians, Karakoram "
+            "100 %, Himalaya 99 %, Norway 89 %.",
+            "",
+        ]
+    if model:
+        lines += [f"Model: `{model}`.", ""]
+    figs = [r["region"] for _, r in table.iterrows()]
+    if figs:
+        lines += ["## Real DEM and synthetic twin (paper Fig. 17)", ""]
+        for name in figs:
+            lines += [f"![{name}]({name}/twin.png)", ""]
+    return "\n".join(lines)
+
+
+def write_twin_png(real, synthetic, path: PathLike, *, title: str = "", dpi: int = 80, colors: int = 96) -> Path:
+    """Hillshades of a real DEM and its synthetic twin side by side (small palette PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from orokit.io.atomic import write_bytes_atomic
+    from orokit.reports.dem_summary import _small_png, plot_hillshade
+
+    panels = [(real, "real"), (synthetic, "synthetic twin")] if real is not None else [(synthetic, "synthetic twin")]
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 3.9), constrained_layout=True, squeeze=False)
+    try:
+        for ax, (dem, label) in zip(axes[0], panels):
+            plot_hillshade(ax, dem, max_pixels=400, title=f"{title} - {label}" if title else label)
+        buf = io.BytesIO()
+        fig.savefig(buf, dpi=dpi, format="png", metadata={"Software": None})
+    finally:
+        plt.close(fig)
+    return write_bytes_atomic(Path(path), _small_png(buf.getvalue(), colors))
