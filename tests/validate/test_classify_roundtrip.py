@@ -1,0 +1,109 @@
+"""``orokit validate --model``: per-disk classification and vote of a rendered terrain."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+import rioxarray  # noqa: F401
+import xarray as xr
+from affine import Affine
+
+import orokit
+from orokit.cli.main import cli
+
+MODEL = Path(__file__).resolve().parents[2] / "models" / "regions-10km.skops"
+
+
+@pytest.fixture(scope="module")
+def rendered_folder(tmp_path_factory):
+    """A 30 x 30 km tree (analysis of a random multi-fractal DEM) rendered at 100 m."""
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+    from orokit.raster.noise import fractal_noise
+    from orokit.raster.render import RenderParams, render_elevation, write_cog
+
+    z = 1500.0 + fractal_noise((300, 300), 100.0, amplitude=600.0, largest_m=8000.0, rng=4)
+    x0, y0 = 500000.0, 4000000.0
+    src = xr.DataArray(z.astype(np.float32), dims=("y", "x"), attrs={"units": "m"},
+                       coords={"y": y0 - 50.0 - 100.0 * np.arange(300), "x": x0 + 50.0 + 100.0 * np.arange(300)})
+    src = src.rio.write_crs("EPSG:32633").rio.write_transform(Affine(100.0, 0.0, x0, 0.0, -100.0, y0))
+    tree = orokit.analyze(src, min_prominence=30.0, isolation=False).divide_tree
+    out = tmp_path_factory.mktemp("twin")
+    write_divide_tree_gpkg(tree, out / "dividetree.gpkg")
+    ext = (x0, y0 - 30000.0, x0 + 30000.0, y0)
+    dem = render_elevation(tree, resolution_m=100.0, extent=ext, erosion=False,
+                           params=RenderParams(erosion_steps=1), rng=0)
+    write_cog(dem, out / "dem.tif")
+    return out, tree
+
+
+def test_validate_classifies_disks_with_the_committed_model(rendered_folder, tmp_path):
+    from orokit.classify.model import load_model
+
+    folder, tree = rendered_folder
+    classes = load_model(MODEL).classes
+    label = classes[0]
+    rep = tmp_path / "reports"
+    r = CliRunner().invoke(cli, ["validate", str(folder), "--model", str(MODEL), "--label", label,
+                                 "--reports", str(rep)])
+    assert r.exit_code == 0, r.output
+    assert "classified as" in r.output
+    v = json.loads((folder / "validation.json").read_text())
+    s, c = v["summary"], v["classification"]
+    assert s["n_disks"] == c["n_disks"] >= 1
+    assert s["predicted"] == c["label"] and c["label"] in classes
+    assert sum(c["votes"].values()) == s["n_disks"]
+    # the overall label is the class of highest mean probability, and probabilities sum to 1
+    probs = c["probabilities"]
+    assert max(probs, key=probs.get) == c["label"]
+    assert sum(probs.values()) == pytest.approx(1.0, abs=1e-6)
+    # disk accuracy is the share of disks voting for the expected label
+    assert s["expected"] == label
+    assert s["disk_accuracy"] == pytest.approx(c["votes"][label] / s["n_disks"])
+    assert s["vote_correct"] == (c["label"] == label)
+    row = pd.read_csv(rep / "roundtrip.csv").iloc[0]
+    assert row["predicted"] == c["label"] and row["n_disks"] == s["n_disks"]
+    # the tree's own terrain keeps its peaks
+    assert s["recovered_share"] >= 0.95
+
+
+def test_validate_no_append_writes_only_the_folder(rendered_folder, tmp_path):
+    folder, _ = rendered_folder
+    (folder / "validation.json").unlink(missing_ok=True)
+    rep = tmp_path / "reports"
+    r = CliRunner().invoke(cli, ["validate", str(folder), "--model", str(MODEL), "--reports", str(rep), "--no-append"])
+    assert r.exit_code == 0, r.output
+    assert (folder / "validation.json").is_file() and not (rep / "roundtrip.csv").exists()
+    # without --label and without a type there is no expected region, only the vote
+    s = json.loads((folder / "validation.json").read_text())["summary"]
+    assert "expected" not in s and s["predicted"]
+
+
+def test_roundtrip_report_table(rendered_folder, tmp_path):
+    """roundtrip-report: one row per folder with the real-disk accuracy next to it."""
+    import shutil
+
+    folder, _ = rendered_folder
+    if not (folder / "validation.json").exists():
+        r = CliRunner().invoke(cli, ["validate", str(folder), "--reports", str(tmp_path), "--no-append"])
+        assert r.exit_code == 0, r.output
+    twin = tmp_path / "twins" / "alaska"
+    shutil.copytree(folder, twin)
+    per_class = tmp_path / "per_class.csv"
+    pd.DataFrame({"region": ["alaska"], "random_accuracy_%": [96.0], "spatial_accuracy_%": [38.0]}).to_csv(per_class)
+    out = tmp_path / "twins" / "README.md"
+    args = ["roundtrip-report", str(twin), "--classification", str(per_class), "-o", str(out), "--no-progress"]
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code == 0, r.output
+    text = out.read_text()
+    assert "| alaska |" in text and "96" in text and "alaska/twin.png" in text
+    assert (twin / "twin.png").stat().st_size > 0
+    table = pd.read_csv(out.parent / "roundtrip.csv")
+    assert table.loc[0, "real_disk_acc_%"] == 96.0
+    assert table.loc[0, "recovered_%"] >= 95.0
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code != 0 and "--overwrite" in r.output
