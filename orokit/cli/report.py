@@ -52,6 +52,8 @@ def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominen
                                       n_jobs=n_jobs, progress=progress, seed=seed, z_units=z_units,
                                       cell_size=cell_size)
     for r, e in sorted(res["evaluations"].items()):
+        sp = e["spatial"].mean_accuracy
+        sp_text = f"{100 * sp:.1f} %" if sp == sp else "not measurable (crops too small for this radius)"
         click.echo(f"R = {r / 1000:g} km: random split {100 * e['random'].mean_accuracy:.1f} %, spatial hold-out "
-                   f"{100 * e['spatial'].mean_accuracy:.1f} %")
+                   f"{sp_text}")
     click.echo(f"report -> {output}")
