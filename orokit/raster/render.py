@@ -52,8 +52,10 @@ class RenderParams:
     noise_ratio : noise amplitude as a fraction of eps (< 0.5 so no new peak reaches eps).
     uplift_radius : R of the compensating uplift and noise mask around peaks and saddles.
     erosion_scales : grid spacings of the erosion passes.
-    erosion_steps : erosion + uplift iterations per scale.
+    erosion_steps : erosion + uplift iterations per scale (one number or one per scale; fewer at the
+        fine, expensive scales).
     erosion_k_dt : stream-power K * dt.
+    erosion_max_nodes : largest erosion grid (finer scales run coarser; bounds memory).
     flank_slope, flank_ratio : flanks fall at least ``max(flank_slope, flank_ratio * ridge slope)``
         from every ridge point (keeps saddles the highest passes).
     """
@@ -67,8 +69,9 @@ class RenderParams:
     noise_ratio: float = 0.3
     uplift_radius: float = 1500.0
     erosion_scales: tuple[float, ...] = (100.0, 50.0, 30.0)
-    erosion_steps: int = 4
+    erosion_steps: int | tuple[int, ...] = (4, 3, 2)
     erosion_k_dt: float = 0.02
+    erosion_max_nodes: int = 4_000_000
     flank_slope: float = 0.15
     flank_ratio: float = 1.5
 
@@ -379,7 +382,8 @@ def render_elevation(
     if erosion:
         t0 = time.perf_counter()
         z = erode_multiscale(z, grid.res, uplift, scales_m=params.erosion_scales,
-                             steps=params.erosion_steps, k_dt=params.erosion_k_dt)
+                             steps=params.erosion_steps, k_dt=params.erosion_k_dt,
+                             max_nodes=params.erosion_max_nodes)
         timings["erosion"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     set_cells(z, grid, nodes[:, :2], nodes[:, 2])
