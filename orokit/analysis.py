@@ -165,13 +165,17 @@ def analyze(
             client = scheduler = Client(scheduler, set_as_default=False)
         if chunks is not None:
             data = data.rechunk(chunks) if hasattr(data, "rechunk") else _as_dask(data, chunks)
+        from orokit.metrics.isolation import GridMetric
+
+        metric = GridMetric.from_grid(transform, crs) if isolation else None
         core = tiled_orometry(data, min_prominence=min_prominence, outside=outside, scheduler=scheduler,
-                              checkpoint=checkpoint, progress=progress)
+                              checkpoint=checkpoint, progress=progress, isolation_metric=metric)
         t_core = time.perf_counter()
         iso = None
         if isolation and core.n_kept:
             iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform, crs=crs,
-                                  compute=get_compute(scheduler), chunk_stats=getattr(core, "chunk_stats", None))
+                                  compute=get_compute(scheduler), chunk_stats=getattr(core, "chunk_stats", None),
+                                  known=getattr(core, "chunk_isolation", None))
         t_iso = time.perf_counter()
         if client is not None:
             client.close()

@@ -48,21 +48,44 @@ def get_compute(scheduler: Any = None):
     return lambda objs: client.compute(list(objs), sync=True)
 
 
-def _load_summary(path: str) -> ChunkSummary:
+_ISO_FIELDS = ("key", "best", "cand", "nan")
+
+
+def _load_summary(path: str) -> tuple[ChunkSummary, dict | None]:
     with np.load(path) as data:
-        return ChunkSummary.from_npz(data)
+        iso = {f: data[f"iso_{f}"] for f in _ISO_FIELDS} if "iso_key" in data else None
+        return ChunkSummary.from_npz(data), iso
 
 
 def _tile_task(block: np.ndarray, row0: int, col0: int, shape, min_prominence: float,
-               path: str | None) -> ChunkSummary:
-    summary = chunk_summary(np.asarray(block, dtype=np.float64), row0, col0, shape, min_prominence)
+               path: str | None, metric) -> tuple[ChunkSummary, dict | None]:
+    block = np.asarray(block, dtype=np.float64)
+    summary = chunk_summary(block, row0, col0, shape, min_prominence)
+    iso = None
+    if metric is not None:
+        from orokit.tiling.isolation import chunk_isolation
+
+        iso = chunk_isolation(np.ascontiguousarray(block[1:-1, 1:-1]), row0, col0, shape,
+                              summary.key[summary.ismax], metric)
     if path is not None:
         from orokit.io.atomic import atomic_path
 
+        extra = {} if iso is None else {f"iso_{f}": v for f, v in iso.items()}
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
-                np.savez(fh, **summary.to_npz())
-    return summary
+                np.savez(fh, **summary.to_npz(), **extra)
+    return summary, iso
+
+
+def _merge_iso(parts: list) -> dict | None:
+    parts = [p for p in parts if p is not None]
+    if not parts:
+        return None
+    width = max(p["cand"].shape[1] for p in parts)
+    out = {f: np.concatenate([p[f] for p in parts]) for f in ("key", "best", "nan")}
+    out["cand"] = np.concatenate([np.pad(p["cand"], ((0, 0), (0, width - p["cand"].shape[1])), constant_values=-1)
+                                  for p in parts]) if parts else np.empty((0, 0), np.int64)
+    return out
 
 
 def _checkpoint_dir(checkpoint, data, min_prominence: float) -> Path | None:
@@ -93,11 +116,14 @@ def _checkpoint_dir(checkpoint, data, min_prominence: float) -> Path | None:
 
 
 def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", scheduler: Any = None,
-                   checkpoint=None, progress: bool = False) -> Orometry:
+                   checkpoint=None, progress: bool = False, isolation_metric=None) -> Orometry:
     """Exact orometry of a 2-D dask array (NaN = nodata), chunk by chunk.
 
     Gives exactly the :class:`~orokit.topology.engine.Orometry` of the in-memory
     engine (same peaks, prominences, key saddles, parents, flags and ridge saddles).
+    With ``isolation_metric`` (a :class:`~orokit.metrics.isolation.GridMetric`), each
+    chunk also settles the isolation of its candidate peaks whose higher ground lies
+    inside it (``result.chunk_isolation``), so the cross-chunk search reads few chunks.
     """
     import dask
     import dask.array as da
@@ -113,18 +139,20 @@ def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", sch
     cb = np.concatenate([[0], np.cumsum(data.chunks[1])]).astype(int)
     ckpt = _checkpoint_dir(checkpoint, data, min_prominence)
     tiles = {}
+    isos = {}
     reused = 0
     for i in range(len(rb) - 1):
         for j in range(len(cb) - 1):
             path = None if ckpt is None else str(ckpt / f"chunk_{i:05d}_{j:05d}.npz")
             if path is not None and Path(path).exists():
-                tiles[i, j] = dask.delayed(_load_summary)(path, dask_key_name=f"orokit-load-{i}-{j}-{_h(path)}")
+                task = dask.delayed(_load_summary, nout=2)(path, dask_key_name=f"orokit-load-{i}-{j}-{_h(path)}")
                 reused += 1
             else:
-                tiles[i, j] = dask.delayed(_tile_task)(
-                    blocks[i, j], int(rb[i]), int(cb[j]), (H, W), float(min_prominence), path,
-                    dask_key_name=f"orokit-tile-{i}-{j}-{data.name}-{min_prominence}",
+                task = dask.delayed(_tile_task, nout=2)(
+                    blocks[i, j], int(rb[i]), int(cb[j]), (H, W), float(min_prominence), path, isolation_metric,
+                    dask_key_name=f"orokit-tile-{i}-{j}-{data.name}-{min_prominence}-{isolation_metric is not None}",
                 )
+            tiles[i, j], isos[i, j] = task[0], task[1]
     if reused:
         logger.info("reusing %d chunk summaries from %s", reused, ckpt)
 
@@ -148,16 +176,18 @@ def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", sch
     stats = dask.delayed(np.array)(
         [[dask.delayed(chunk_stats)(raw[i, j]) for j in range(len(cb) - 1)] for i in range(len(rb) - 1)]
     )
+    iso = dask.delayed(_merge_iso)(list(isos.values()))
     compute = get_compute(scheduler)
     logger.info("tiled analysis of %dx%d cells in %d chunks", H, W, (len(rb) - 1) * (len(cb) - 1))
     if progress and (scheduler is None or isinstance(scheduler, str) and "://" not in scheduler):
         from dask.diagnostics import ProgressBar
 
         with ProgressBar():
-            result, st = compute([final, stats])
+            result, st, iso = compute([final, stats, iso])
     else:
-        result, st = compute([final, stats])
+        result, st, iso = compute([final, stats, iso])
     result.chunk_stats = st  # (nby, nbx, 2): max (-inf if empty), has NaN
+    result.chunk_isolation = iso
     return result
 
 

@@ -20,7 +20,7 @@ from orokit.metrics.isolation import GridMetric, finish_isolation
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["tiled_isolation"]
+__all__ = ["tiled_isolation", "chunk_isolation"]
 
 _BATCH = 4096
 
@@ -44,50 +44,76 @@ def _chunk_bounds(rows, cols, rb, cb, metric: GridMetric) -> np.ndarray:
 
 
 class _BlockCache:
-    """Loaded chunks, kept within a memory budget (peaks are processed chunk by chunk
-    in raster order, so neighbouring chunks are usually still here); the search
-    pyramids of the few most recent chunks are kept too."""
+    """Loaded chunks and their search pyramids, kept within a memory budget (peaks are
+    processed chunk by chunk in raster order, so neighbouring chunks are usually still
+    here). The NaN pyramid of a chunk is built only when a search asks for it."""
 
-    def __init__(self, blocks, nbx: int, compute, budget_bytes: int = 256 * 2**20, pyramids: int = 4):
-        self.blocks, self.nbx, self.compute = blocks, nbx, compute
-        self.budget, self.npyr = budget_bytes, pyramids
-        self.raw: dict[int, np.ndarray] = {}
-        self.pyr: dict[int, dict] = {}
+    def __init__(self, blocks, nbx: int, compute, budget_bytes: int = 512 * 2**20):
+        self.blocks, self.nbx, self.compute, self.budget = blocks, nbx, compute, budget_bytes
+        self.entries: dict[int, dict] = {}
         self.loads = 0
 
-    def get_many(self, ks) -> list[dict]:
-        """Per chunk: {"shape", "pyr": block pyramid, "nan": NaN pyramid}."""
-        missing = [k for k in ks if k not in self.raw]
+    @staticmethod
+    def _size(e: dict) -> int:
+        return sum(a.nbytes for part in (e["pyr"], e.get("nan") or ()) for a in part)
+
+    def get_many(self, ks, *, nan: bool = False) -> list[dict]:
+        """Per chunk: {"shape", "pyr": block pyramid, and with ``nan`` "nan": NaN pyramid}."""
+        missing = [k for k in ks if k not in self.entries]
         if missing:
             arrays = self.compute([self.blocks[k // self.nbx, k % self.nbx] for k in missing])
             self.loads += len(missing)
             for k, a in zip(missing, arrays):
-                self.raw[k] = np.ascontiguousarray(a)
+                a = np.ascontiguousarray(a)
+                self.entries[k] = {"shape": a.shape, "pyr": _mk.block_pyramid(a), "raw": a}
         out = []
         for k in ks:
-            a = self.raw.pop(k)
-            self.raw[k] = a  # most recent last
-            if k in self.pyr:
-                entry = self.pyr.pop(k)
-            else:
-                entry = {"shape": a.shape, "pyr": _mk.block_pyramid(a), "nan": _mk.nan_pyramid(a)}
-            self.pyr[k] = entry
-            out.append(entry)
-        while len(self.pyr) > max(self.npyr, len(ks)):
-            self.pyr.pop(next(iter(self.pyr)))
-        while len(self.raw) > len(ks) and sum(a.nbytes for a in self.raw.values()) > self.budget:
-            self.raw.pop(next(iter(self.raw)))
+            e = self.entries.pop(k)
+            self.entries[k] = e  # most recent last
+            if nan and "nan" not in e:
+                e["nan"] = _mk.nan_pyramid(e["raw"])
+            out.append(e)
+        while len(self.entries) > len(ks) and sum(self._size(e) for e in self.entries.values()) > self.budget:
+            self.entries.pop(next(iter(self.entries)))
         return out
 
 
-def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk_stats=None) -> pd.DataFrame:
+def chunk_isolation(core: np.ndarray, row0: int, col0: int, shape: tuple[int, int], keys: np.ndarray,
+                    metric: GridMetric) -> dict[str, np.ndarray]:
+    """Isolation of candidate peaks (global flat ``keys``) that their own chunk settles.
+
+    Run inside the tile task while the chunk is in memory: a peak is *resolved* when the
+    nearest higher cell found in the chunk is closer (with the geodesic slack) than any
+    cell outside the chunk. Returns the resolved peaks' ``key``, ``best`` (search
+    distance), ``cand`` (global candidate cells, -1 padded) and ``nan`` (distance to the
+    nearest NaN cell of the chunk, inf beyond ``best``).
+    """
+    H, W = shape
+    h, w = core.shape
+    rows = keys // W - row0
+    cols = keys % W - col0
+    pz = core[rows, cols].astype(np.float64)
+    args = metric.args(row0)
+    inf = np.full(keys.size, np.inf)
+    best, cand = _mk.nearest_query(*_mk.block_pyramid(core), rows, cols, pz, inf, *args, metric.slack, metric.ncand)
+    exterior = _mk.outside_distance(rows, cols, h, w, *args)
+    ok = best * (1.0 + metric.slack) < exterior
+    nan = _mk.nearest_nan_query(*_mk.nan_pyramid(core), rows[ok], cols[ok], best[ok], *args)
+    c = cand[ok]
+    gc = np.where(c >= 0, (row0 + c // w) * W + col0 + c % w, -1)
+    return {"key": keys[ok], "best": best[ok], "cand": gc, "nan": nan}
+
+
+def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk_stats=None,
+                    known: dict[str, np.ndarray] | None = None) -> pd.DataFrame:
     """Isolation of peaks at (rows, cols) with elevations pz on a dask array.
 
     Same result as :func:`orokit.metrics.isolation.isolation` on the whole array.
     ``compute`` is a callable that computes a list of dask objects (defaults to
     ``dask.compute``), so a distributed client can be used. ``chunk_stats`` (nby, nbx, 2)
     holds each chunk's maximum and NaN flag when already known (the tiled engine
-    computes them while reading the chunks).
+    computes them while reading the chunks). ``known`` holds the peaks already settled
+    inside their own chunk by :func:`chunk_isolation` (only the others are searched).
     """
     import dask
 
@@ -115,9 +141,22 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
     ncand = np.zeros(n, np.int64)
     edge = _mk.outside_distance(rows, cols, H, W, *metric.args())
     cache = _BlockCache(blocks, nbx, compute)
+    todo = np.ones(n, bool)
+    if known is not None and known["key"].size:
+        order_k = np.argsort(known["key"])
+        kk = known["key"][order_k]
+        pos = np.minimum(np.searchsorted(kk, rows * W + cols), kk.size - 1)
+        hit = kk[pos] == rows * W + cols
+        src = order_k[pos[hit]]
+        best[hit] = known["best"][src]
+        m = min(cand.shape[1], known["cand"].shape[1])
+        cand[hit, :m] = known["cand"][src, :m]
+        edge[hit] = np.minimum(edge[hit], known["nan"][src])
+        todo &= ~hit
     # peaks grouped by their own chunk, chunks in raster order
     home = (np.searchsorted(rb, rows, side="right") - 1) * nbx + np.searchsorted(cb, cols, side="right") - 1
     order = np.lexsort((cols, rows, home))
+    order = order[todo[order]]
     bounds = np.flatnonzero(np.diff(home[order])) + 1
     slack = 1.0 + metric.slack
     for group in np.split(order, bounds):
@@ -129,7 +168,8 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
             _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, pz, rows, cols, W, slack)
             # nearest NaN cell, only where it could be closer than the edge and the target
             _visit_nan(lb_nan, idx, cache, rb, cb, nbx, metric, best, edge, rows, cols)
-    logger.info("isolation of %d peaks: %d chunk loads for %d chunks", n, cache.loads, nby * nbx)
+    logger.info("isolation of %d peaks (%d settled in their chunk): %d chunk loads for %d chunks",
+                n, int((~todo).sum()), cache.loads, nby * nbx)
     return finish_isolation(metric, rows, cols, best, cand, W, edge)
 
 
@@ -173,7 +213,7 @@ def _visit_nan(lb, idx, cache, rb, cb, nbx, metric, best, edge, rows, cols):
         if not active.any():
             return
         chunks = np.unique(nxt[active])
-        for k, block in zip(chunks, cache.get_many(list(chunks))):
+        for k, block in zip(chunks, cache.get_many(list(chunks), nan=True)):
             sel = np.flatnonzero(active & (nxt == k))
             p = idx[sel]
             r0, c0 = rb[k // nbx], cb[k % nbx]
