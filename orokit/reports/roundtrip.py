@@ -82,6 +82,7 @@ def roundtrip_rows(folders: list[PathLike], *, real_accuracy: pd.DataFrame | Non
             "synthetic_disk_acc_%": 100.0 * float(s["disk_accuracy"]) if "disk_accuracy" in s else float("nan"),
             "vote": s.get("predicted") or "-",
             "vote_correct": bool(s.get("vote_correct", False)),
+            "in_model": name in ((v.get("classification") or {}).get("probabilities") or {}),
             "render_s": round(float(sum(t.values())), 2) if t else float("nan"),
         }
         if real is not None and name in real.index:
@@ -127,7 +128,10 @@ def render_roundtrip_markdown(table: pd.DataFrame, *, header: str = "", model: s
             v = r.get(c)
             txt = _fmt(v, nd)
             if c == "vote" and txt != "-":
-                txt = txt if bool(r.get("vote_correct")) else f"{txt} (wrong)"
+                if not bool(r.get("in_model", True)):
+                    txt = f"{txt} (region not in the model)"
+                elif not bool(r.get("vote_correct")):
+                    txt = f"{txt} (wrong)"
             cells.append(txt)
         lines.append("| " + " | ".join(cells) + " |")
     lines.append("")
@@ -136,6 +140,8 @@ def render_roundtrip_markdown(table: pd.DataFrame, *, header: str = "", model: s
         ext = table["extra_%"].astype(float)
         syn = table["synthetic_disk_acc_%"].astype(float)
         real = table["real_disk_acc_%"].astype(float)
+        inm = table["in_model"].astype(bool) if "in_model" in table else pd.Series(True, index=table.index)
+        syn = syn.where(inm)
         both = syn.notna() & real.notna()
         lines += [
             "## Totals",
@@ -143,7 +149,8 @@ def render_roundtrip_markdown(table: pd.DataFrame, *, header: str = "", model: s
             f"- Peaks recovered: mean {rec.mean():.1f} % (min {rec.min():.1f} %, {int((rec >= 95).sum())} of "
             f"{len(rec)} regions >= 95 %); extra peaks: mean {ext.mean():.1f} % (max {ext.max():.1f} %, "
             f"{int((ext <= 5).sum())} of {len(ext)} regions <= 5 %).",
-            f"- Reclassification: overall vote right for {int(table['vote_correct'].sum())} of {len(table)} twins; "
+            f"- Reclassification ({int(inm.sum())} twins of regions the model knows): overall vote right for "
+            f"{int(table['vote_correct'][inm].sum())} of {int(inm.sum())}; "
             f"synthetic disks right {syn.mean():.1f} % on average"
             + (f"; synthetic >= real accuracy for {int((syn[both] >= real[both]).sum())} of {int(both.sum())} regions"
                if both.any() else "") + ".",

@@ -107,3 +107,27 @@ def test_roundtrip_report_table(rendered_folder, tmp_path):
     assert table.loc[0, "recovered_%"] >= 95.0
     r = CliRunner().invoke(cli, args)
     assert r.exit_code != 0 and "--overwrite" in r.output
+
+
+def test_synthesize_like_takes_the_size_and_cell_size_of_a_dem(rendered_folder, tmp_path):
+    """`orokit synthesize --like DEM`: a twin with the DEM's extent size and cell size."""
+    import rasterio
+
+    from orokit.io.dem import read_dem
+    from orokit.synthesis.terrain_type import TerrainType
+
+    folder, _ = rendered_folder
+    like = read_dem(str(folder / "dem.tif"), z_units="m")
+    ttype = TerrainType.from_analysis(orokit.analyze(like, min_prominence=30.0), name="noise")
+    type_file = ttype.save(tmp_path / "noise.json")
+    out = tmp_path / "twin"
+    r = CliRunner().invoke(cli, ["synthesize", "--type", str(type_file), "--like", str(folder / "dem.tif"),
+                                 "--no-erosion", "--seed", "1", "-o", str(out), "--no-progress"])
+    assert r.exit_code == 0, r.output
+    with rasterio.open(out / "dem.tif") as src:
+        assert src.res == (100.0, 100.0) and (src.width, src.height) == (300, 300)
+    meta = json.loads((out / "synthesis.json").read_text())
+    assert meta["like"] == str(folder / "dem.tif") and meta["resolution_m"] == 100.0
+    r = CliRunner().invoke(cli, ["synthesize", "--type", str(type_file), "--like", "no-such-dataset", "-o",
+                                 str(tmp_path / "x"), "--no-progress"])
+    assert r.exit_code != 0 and "--like" in r.output
