@@ -40,6 +40,7 @@ def sample_elevation(
     *,
     ridge_slope: np.ndarray | None = None,
     k_neighbours: int = 16,
+    floor_slope: float = 0.05,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elevation of ``points`` from the nearest ridge point q and river point r.
 
@@ -48,8 +49,8 @@ def sample_elevation(
     With ``ridge_slope`` (one value per ridge point), ``h`` is also capped by the cone
     envelope ``max_q h(q) - s_q |p - q|`` over the ``k_neighbours`` nearest ridge points
     (orokit): flanks then fall faster than the ridge rises, so the ground beside a
-    saddle stays below it and the saddle stays the highest pass; the nearest river bed
-    ``h(r)`` is the floor (no pit below the drainage).
+    saddle stays below it and the saddle stays the highest pass; the floor is
+    ``h(r) + floor_slope * max(d(p, R) - w, 0)`` (no pit below the drainage).
     Returns ``(h, d_ridge, d_river)``.
     """
     tree = cKDTree(ridge_xy)
@@ -63,8 +64,9 @@ def sample_elevation(
     if ridge_slope is not None:
         env = flank_envelope(points, ridge_xy, ridge_z, ridge_slope, k_neighbours=k_neighbours, tree=tree)
         # the cones only cap; far from every ridge they would dig pits far below the rivers, so
-        # the nearest river bed is the floor
-        h = np.maximum(np.minimum(h, env), np.minimum(hr, h))
+        # the floor rises gently from the nearest river bed (valley sides, not flat plains)
+        floor = np.minimum(hr + floor_slope * np.maximum(dR - w, 0.0), h)
+        h = np.maximum(np.minimum(h, env), floor)
     return h, dT, dR
 
 
