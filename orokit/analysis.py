@@ -42,11 +42,16 @@ class AnalysisResult:
     Attributes
     ----------
     peaks : GeoDataFrame indexed by ``peak_id`` with :data:`PEAK_COLUMNS`.
-    saddles : GeoDataFrame indexed by ``saddle_id`` (row, col, x, y, elevation,
-        peak_a, peak_b, key_of: the peak whose key saddle it is).
+    saddles : GeoDataFrame indexed by ``saddle_id``: row, col, x, y, elevation of each
+        saddle of the Divide Tree, and key_of (a peak whose key saddle it is, -1 if
+        none; a monkey saddle can be the key saddle of several peaks).
     divide_tree : the Divide Tree pruned at ``min_prominence`` (same ids).
     crs : CRS of x/y (None for a local metric grid without CRS).
-    attrs : metadata (threshold, outside convention, units, source, timings...).
+    attrs : metadata (threshold, outside convention, units, source, dataset, shape,
+        ``transform`` (affine a, b, c, d, e, f of the grid), ``crs_geographic``, timings).
+
+    Integer columns use -1 for "none" (saddle_row/col and parent of domain roots,
+    isolation_row/col when nothing is higher); float columns use NaN.
     """
 
     peaks: Any
@@ -211,6 +216,8 @@ def analyze(
             "dataset": str(dem.attrs.get("dataset", "")),
             "z_units_in": str(dem.attrs.get("z_units_in", "m")),
             "cell_size": [abs(transform.a), abs(transform.e)],
+            "transform": [transform.a, transform.b, transform.c, transform.d, transform.e, transform.f],
+            "crs_geographic": bool(crs is not None and crs.is_geographic),
             "shape": list(dem.shape),
             "engine": "tiled" if tiled else "in-memory",
             "n_local_maxima": int(core.n_maxima),
