@@ -500,9 +500,12 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
     basins of two tree peaks whose pass (the lower of the two) is above the tree's
     bottleneck between the peaks (lowest saddle on the tree path) is lowered ``drop_m``
     below it: the lower cell, or the higher one when the target is below the lower
-    cell's ``floor`` (a ridge cell's own saddle elevation, +inf at peaks and saddles). Stops when a round changes nothing. Returns counters
+    cell's ``floor`` (a ridge cell's own saddle elevation, +inf at peaks and saddles).
+    Stops when a round changes nothing. ``z`` must be C-contiguous. Returns counters
     (rounds, cells cut, cells capped, border pairs left above their bottleneck).
     """
+    if not z.flags.c_contiguous:
+        raise ValueError("cap_basins works in place on a C-contiguous array; pass np.ascontiguousarray(z)")
     n = skel.n_peaks
     nodes = skel.node_xyz
     e = skel.edges if skel.edges is not None else np.empty((0, 3), np.int64)
@@ -521,11 +524,14 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
     ff = floor.reshape(-1)
     stats = {"rounds": 0, "cut": 0, "capped": 0, "left": 0}
 
+    if cells.size == 0:
+        return stats
+
     def owners() -> np.ndarray:
+        """Tree peak owning each cell's basin (-1: a spurious maximum, -2: NaN)."""
         lab, peak_cell = _kernels.basin_labels(z)
-        k = np.searchsorted(cells, peak_cell)
-        k = np.minimum(k, max(cells.size - 1, 0))
-        tid = np.where((cells.size > 0) & (cells[k] == peak_cell), pid[k] if cells.size else -1, -1)
+        k = np.minimum(np.searchsorted(cells, peak_cell), cells.size - 1)
+        tid = np.where(cells[k] == peak_cell, pid[k], -1)
         return np.where(lab >= 0, tid[np.maximum(lab, 0)], -2).reshape(z.shape)
 
     for _ in range(max_rounds):
@@ -544,7 +550,7 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
         keys, inv = np.unique(lo * n + hi, return_inverse=True)
         bn = _kernels.bottlenecks(parent, height, depth, keys // n, keys % n)[inv.ravel()]
         za, zb = zf[ia].astype(np.float64), zf[ib].astype(np.float64)
-        viol = np.minimum(za, zb) > bn + 1e-3
+        viol = (np.minimum(za, zb) > bn + 1e-3) & np.isfinite(bn)  # -inf: peaks of separate trees
         stats["left"] = int(viol.sum())
         if not viol.any():
             break
