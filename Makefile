@@ -75,7 +75,7 @@ $(INSTALLED): pyproject.toml | $(BIN)/python
 venv: $(INSTALLED)  ## create .venv and install orokit[dev]
 
 test: $(INSTALLED)  ## run the test suite on 2 cores
-	$(BIN)/python -m pytest -n 2 tests $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -n 2 tests orokit --doctest-modules $(PYTEST_ARGS)
 
 $(DATA_STAMP): $(MANIFEST) | $(INSTALLED)
 	@mkdir -p $(@D)
@@ -93,8 +93,8 @@ $(REPORTS)/README.md: $(DATASET_SUMMARIES) orokit/cli/report_index.py | $(INSTAL
 
 # stage: exact analysis (issues 4, 5) of each manifest DEM at eps = 30 m (units and cell size from
 # the manifest); analysis.json is written last.
-ANALYSIS_SRC := orokit/analysis.py $(wildcard orokit/topology/*.py orokit/metrics/_kernels.py orokit/metrics/isolation.py) \
-                orokit/io/analysis_io.py orokit/cli/analyze.py
+ANALYSIS_SRC := orokit/analysis.py $(wildcard orokit/topology/*.py orokit/tiling/*.py) orokit/metrics/_kernels.py \
+                orokit/metrics/isolation.py orokit/io/dem.py orokit/io/analysis_io.py orokit/cli/analyze.py
 $(REPORTS)/analysis/%/analysis.json: $(DATA_STAMP) $(ANALYSIS_SRC) | $(INSTALLED)
 	$(OROKIT) -q analyze $* -o $(@D) --min-prominence 30 --overwrite --no-progress
 
@@ -103,9 +103,11 @@ $(ANALYSIS_README): $(ANALYSIS_JSONS) orokit/reports/analysis_report.py orokit/v
 
 analysis: $(ANALYSIS_README)  ## exact analysis of every DEM, table + Divide Tree figures
 
-$(CLASSIFICATION_README): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
-	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(@D) --radius 10km --radius 5km --radius 15km \
-	  --runs 100 --feature-runs 20 --model models/regions-10km.skops --overwrite --no-progress
+# grouped target: the report and the default model are written by one command
+REGION_MODEL := models/regions-10km.skops
+$(CLASSIFICATION_README) $(REGION_MODEL) &: $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
+	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(REPORTS)/classification --radius 10km \
+	  --radius 5km --radius 15km --runs 100 --feature-runs 20 --model $(REGION_MODEL) --overwrite --no-progress
 
 classification: $(CLASSIFICATION_README)  ## region classification report (Table 2) and models/regions-10km.skops
 

@@ -60,7 +60,7 @@ class AnalysisResult:
     crs: Any = None
     attrs: dict = field(default_factory=dict)
 
-    def write(self, outdir, *, overwrite: bool = True) -> Path:
+    def write(self, outdir, *, overwrite: bool = False) -> Path:
         """Write peaks.csv, peaks.parquet, saddles.parquet, dividetree.gpkg, analysis.json."""
         from orokit.io.analysis_io import write_analysis
 
@@ -167,23 +167,31 @@ def analyze(
         if isinstance(scheduler, str) and "://" in scheduler:
             from distributed import Client
 
-            client = scheduler = Client(scheduler, set_as_default=False)
-        if chunks is not None:
-            data = data.rechunk(chunks) if hasattr(data, "rechunk") else _as_dask(data, chunks)
-        from orokit.metrics.isolation import GridMetric
+            try:
+                client = scheduler = Client(scheduler, set_as_default=False, timeout="20s")
+            except (OSError, TimeoutError) as exc:
+                from orokit.errors import TilingError
 
-        metric = GridMetric.from_grid(transform, crs) if isolation else None
-        core = tiled_orometry(data, min_prominence=min_prominence, outside=outside, scheduler=scheduler,
-                              checkpoint=checkpoint, progress=progress, isolation_metric=metric)
-        t_core = time.perf_counter()
-        iso = None
-        if isolation and core.n_kept:
-            iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform, crs=crs,
-                                  compute=get_compute(scheduler), chunk_stats=getattr(core, "chunk_stats", None),
-                                  known=getattr(core, "chunk_isolation", None))
-        t_iso = time.perf_counter()
-        if client is not None:
-            client.close()
+                raise TilingError(f"cannot reach the dask scheduler at {scheduler}: {exc}") from None
+        try:
+            if chunks is not None:
+                data = data.rechunk(chunks) if hasattr(data, "rechunk") else _as_dask(data, chunks)
+            from orokit.metrics.isolation import GridMetric
+
+            metric = GridMetric.from_grid(transform, crs) if isolation else None
+            core = tiled_orometry(data, min_prominence=min_prominence, outside=outside, scheduler=scheduler,
+                                  checkpoint=checkpoint, progress=progress, isolation_metric=metric)
+            t_core = time.perf_counter()
+            iso = None
+            if isolation and core.n_kept:
+                iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform,
+                                      crs=crs, compute=get_compute(scheduler),
+                                      chunk_stats=getattr(core, "chunk_stats", None),
+                                      known=getattr(core, "chunk_isolation", None))
+            t_iso = time.perf_counter()
+        finally:
+            if client is not None:
+                client.close()
     else:
         z = np.asarray(dem.values)
         if not np.issubdtype(z.dtype, np.floating):

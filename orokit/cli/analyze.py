@@ -17,6 +17,7 @@ import click
               help="Elevation units of the input when the file does not say (required for PNG DEMs).")
 @click.option("--cell-size", type=float, default=None,
               help="Cell size in metres for rasters without georeference (PNG); gives a local metric grid.")
+@click.option("--band", type=int, default=None, help="Band number (1-based) of a multi-band raster.")
 @click.option("--outside", type=click.Choice(["unknown", "sea"]), default="unknown", show_default=True,
               help="What lies beyond the data edge and nodata: unknown (edge prominences flagged as upper "
                    "bounds) or sea (all exact).")
@@ -32,7 +33,7 @@ import click
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
 @click.pass_context
 def analyze(ctx: click.Context, dem: str, outdir: Path, min_prominence: float, z_units: str | None, cell_size: float | None,
-            outside: str, no_isolation: bool, chunks: int | None, scheduler: str | None,
+            band: int | None, outside: str, no_isolation: bool, chunks: int | None, scheduler: str | None,
             checkpoint: Path | None, overwrite: bool, progress: bool) -> None:
     """Analyse DEM into OUTPUT.
 
@@ -59,7 +60,7 @@ def analyze(ctx: click.Context, dem: str, outdir: Path, min_prominence: float, z
             chunks = plan_chunks(dem)
             if chunks is not None:
                 click.echo(f"{dem} is too large for memory: analysing in {chunks} x {chunks} chunks", err=True)
-        da = read_dem(dem, z_units=z_units, cell_size=cell_size, chunks=chunks)
+        da = read_dem(dem, z_units=z_units, cell_size=cell_size, chunks=chunks, band=band)
     else:
         from orokit.data import load_manifest, open_dataset_dem
 

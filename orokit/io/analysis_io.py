@@ -24,7 +24,7 @@ __all__ = ["write_analysis", "read_analysis", "read_peaks", "ANALYSIS_FILES"]
 ANALYSIS_FILES = ("peaks.csv", "peaks.parquet", "saddles.parquet", "dividetree.gpkg", "analysis.json")
 
 
-def write_analysis(result, outdir: PathLike, *, overwrite: bool = True) -> Path:
+def write_analysis(result, outdir: PathLike, *, overwrite: bool = False) -> Path:
     """Write an :class:`~orokit.analysis.AnalysisResult` into ``outdir``.
 
     A lock file keeps two processes from writing the same folder at once.

@@ -91,7 +91,10 @@ def test_dask_analyze_equals_in_memory(make_dem, case, eps):
 def test_real_dem_in_many_chunks(real_data, eps):
     from orokit.io.dem import read_dem
 
-    dem = read_dem(real_data("norway"), z_units="ft", cell_size=92.6)
+    from orokit.data import open_dataset_dem
+
+    real_data("norway")
+    dem = open_dataset_dem("norway")
     a = orokit.analyze(dem, min_prominence=eps)
     b = orokit.analyze(dem, min_prominence=eps, chunks=(97, 130))
     assert b.attrs["engine"] == "tiled" and a.attrs["engine"] == "in-memory"
@@ -118,11 +121,14 @@ def test_mosaic_of_geotiff_tiles_and_vrt(real_data, tmp_path):
     from orokit.io.dem import read_dem
     from orokit.io.mosaic import build_vrt
 
-    z1 = read_dem(real_data("rockies"), z_units="ft", cell_size=92.6).values
-    z2 = read_dem(real_data("alaska"), z_units="ft", cell_size=92.6).values
+    from orokit.data import open_dataset_dem
+
+    real_data("rockies"), real_data("alaska")
+    z1 = open_dataset_dem("rockies").values
+    z2 = open_dataset_dem("alaska").values
     big = np.block([[z1, z2], [z2[::-1], z1[:, ::-1]]])
     big[600:700, 500:800] = np.nan
-    res = 92.6
+    res = 92.61
     paths = []
     for i in range(0, big.shape[0], 500):
         for j in range(0, big.shape[1], 400):
@@ -143,18 +149,23 @@ def test_mosaic_of_geotiff_tiles_and_vrt(real_data, tmp_path):
     _assert_same_tables(a, b)
 
 
-def test_checkpoint_resume_and_mismatch(make_dem, tmp_path):
+def test_checkpoint_resume_and_mismatch(make_dem, tmp_path, monkeypatch):
+    import orokit.tiling.engine as te
     from orokit.errors import TilingError
 
     rng = np.random.default_rng(3)
     z = rng.normal(size=(60, 70)).cumsum(0).cumsum(1)
     dem = make_dem(z)
     ck = tmp_path / "ck"
-    a = orokit.analyze(dem, min_prominence=1.0, chunks=20, checkpoint=ck)
+    a = orokit.analyze(dem, min_prominence=1.0, chunks=20, checkpoint=ck, scheduler="synchronous")
     files = sorted(ck.glob("chunk_*.npz"))
     assert len(files) == 12
     files[0].unlink()  # an interrupted run: one chunk missing
-    b = orokit.analyze(dem, min_prominence=1.0, chunks=20, checkpoint=ck)
+    calls = []
+    real = te.chunk_summary
+    monkeypatch.setattr(te, "chunk_summary", lambda *args, **kw: calls.append(args[1:3]) or real(*args, **kw))
+    b = orokit.analyze(dem, min_prominence=1.0, chunks=20, checkpoint=ck, scheduler="synchronous")
+    assert calls == [(0, 0)]  # only the missing chunk was recomputed
     _assert_same_tables(a, b)
     assert len(sorted(ck.glob("chunk_*.npz"))) == 12
     with pytest.raises(TilingError, match="another run"):

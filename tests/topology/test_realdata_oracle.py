@@ -1,9 +1,6 @@
 """The exact engine on the real DEMs: persistence oracle and the reference Divide Trees."""
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 from _orometry_oracles import persistence_pairs
@@ -12,8 +9,7 @@ import orokit
 from orokit.io.dem import read_dem
 from orokit.io.divide_tree_io import read_divide_tree_txt
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from reference_trees import near_share  # noqa: E402
+from orokit.validate.reference import near_share
 
 FT = 0.3048
 DEMS = [
