@@ -117,6 +117,8 @@ def main() -> None:
             rows[n, mode] = m
             print(f"{n:>3}x{n:<4} {m['cells'] / 1e6:>8.1f} {mode:>10} {m['peaks']:>8d} {m['seconds']:>8.1f} "
                   f"{m['cells'] / m['seconds'] / 1e6:>6.1f} {m['rss_mb']:>11.0f}")
+    summary = {"chunks": args.chunks, "eps_ft": args.eps_ft, "dem": args.dem,
+               "runs": [{"mosaic": n, "mode": mode, **m} for (n, mode), m in rows.items()]}
     both = [n for n in args.sizes if (n, "in-memory") in rows]
     if both:
         n = max(both)
@@ -126,11 +128,18 @@ def main() -> None:
         print(f"largest raster both handle ({n}x{n}, {c['cells'] / 1e6:.1f} M cells): chunked/in-memory time "
               f"{c['seconds'] / i['seconds']:.2f}x, memory {c['rss_mb'] / i['rss_mb']:.2f}x; "
               f"peak tables identical: {a.equals(b)}")
+        summary.update({"time_ratio_chunked_vs_in_memory": c["seconds"] / i["seconds"],
+                        "memory_ratio_chunked_vs_in_memory": c["rss_mb"] / i["rss_mb"],
+                        "tables_identical": bool(a.equals(b))})
     sizes = sorted(n for n in args.sizes)
     if len(sizes) > 1:
         s0, s1 = rows[sizes[0], "chunked"], rows[sizes[-1], "chunked"]
         print(f"time per cell, largest vs smallest chunked run: "
               f"{(s1['seconds'] / s1['cells']) / (s0['seconds'] / s0['cells']):.2f} (1.0 = linear in area)")
+    sys.path.insert(0, str(Path(__file__).parent))
+    from _record import record
+
+    print(f"recorded in {record('scaling', summary)}")
 
 
 if __name__ == "__main__":

@@ -48,7 +48,7 @@ class _BlockCache:
     processed chunk by chunk in raster order, so neighbouring chunks are usually still
     here). The NaN pyramid of a chunk is built only when a search asks for it."""
 
-    def __init__(self, blocks, nbx: int, compute, budget_bytes: int = 512 * 2**20):
+    def __init__(self, blocks, nbx: int, compute, budget_bytes: int = 256 * 2**20):
         self.blocks, self.nbx, self.compute, self.budget = blocks, nbx, compute, budget_bytes
         self.entries: dict[int, dict] = {}
         self.loads = 0
