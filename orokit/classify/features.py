@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
-import tempfile
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -36,6 +34,7 @@ from orokit import __version__
 from orokit._typing import PathLike, SeedLike
 from orokit.classify.peaklist import NORMALIZED_COLUMNS, is_geographic, peak_geometry
 from orokit.errors import InputError, OrokitWarning, SchemaError
+from orokit.io.atomic import atomic_path
 from orokit.metrics.disk import RELATIVE_ELEVATION_DEFAULT, RelativeElevation, disk_metrics
 from orokit.sampling.disks import sample_disks_in_mask, sample_disks_in_polygon
 from orokit.sampling.histograms import HistogramSpec, disk_histograms
@@ -303,15 +302,8 @@ def write_features(features: pd.DataFrame, path: PathLike) -> Path:
     md = dict(table.schema.metadata or {})
     md[b"orokit"] = json.dumps(features.attrs, default=_json_default).encode()
     table = table.replace_schema_metadata(md)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_path(path) as tmp:
         pq.write_table(table, tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return path
 
 

@@ -34,9 +34,16 @@ RASTER_SUFFIXES = {".tif", ".tiff", ".png", ".hgt", ".asc", ".vrt", ".nc", ".img
 
 
 def default_label(source: PathLike) -> str:
-    """Dataset name of an input: file stem, or the folder name of an analysis folder."""
+    """Dataset name of an input: ``analysis.json["dataset"]`` of an analysis folder (else
+    the folder name), or the file stem."""
     p = Path(source)
-    return p.name if p.is_dir() else p.name.split(".")[0]
+    if p.is_dir():
+        try:
+            dataset = json.loads((p / "analysis.json").read_text(encoding="utf-8")).get("dataset")
+        except (OSError, ValueError, AttributeError):
+            dataset = None
+        return str(dataset) if dataset else p.name
+    return p.name.split(".")[0]
 
 
 def read_region(path: PathLike) -> Any:
@@ -59,40 +66,36 @@ def read_region(path: PathLike) -> Any:
     return g
 
 
-def _grid_from_peaks(peaks: pd.DataFrame) -> Any:
-    """North-up affine transform fitted to the peaks' (row, col) -> (x, y) (cell centres)."""
-    from affine import Affine
-
-    if not {"row", "col"} <= set(peaks.columns) or len(peaks) < 2:
-        return None
-    r, c = peaks["row"].to_numpy(float), peaks["col"].to_numpy(float)
-    if np.ptp(r) == 0 or np.ptp(c) == 0:
-        return None
-    a, x0 = np.polyfit(c + 0.5, peaks["x"].to_numpy(float), 1)
-    e, y0 = np.polyfit(r + 0.5, peaks["y"].to_numpy(float), 1)
-    return Affine(a, 0.0, x0, 0.0, e, y0)
-
-
 def _analysis_domain(peaks: pd.DataFrame, meta: dict[str, Any]) -> tuple[np.ndarray, Any] | None:
     """Valid mask and transform of the DEM behind an analysis folder, when known.
 
-    The grid comes from ``analysis.json`` (``shape``) and a fit of the peaks' row/col to
-    x/y; the valid mask from the source DEM named in ``analysis.json`` when it can be
-    read (its nodata), else every cell.
+    The grid is the one recorded in ``analysis.json`` (``shape``, ``transform``; see
+    :func:`orokit.sampling.grid.analysis_grid`); the valid mask comes from the source DEM
+    named there when it can be read on that grid (its nodata), else every cell is valid.
     """
-    shape = meta.get("shape")
-    transform = _grid_from_peaks(peaks)
-    if not shape or transform is None:
+    from orokit.sampling.grid import analysis_grid
+
+    try:
+        transform, _, shape = analysis_grid(meta, peaks)
+    except InputError as exc:
+        logger.warning("%s", exc)
         return None
-    valid = np.ones(tuple(int(v) for v in shape), dtype=bool)
+    valid = np.ones(shape, dtype=bool)
     src = meta.get("source")
     if src and Path(str(src)).exists():
         try:
             from orokit.io.dem import read_dem
 
-            dem = read_dem(str(src), z_units=meta.get("z_units_in") or "m", cell_size=abs(transform.a))
-            if dem.shape == valid.shape:
+            # a local grid needs its cell size again; a georeferenced file brings its own
+            cell = [abs(transform.a), abs(transform.e)] if meta.get("local_grid") else None
+            dem = read_dem(str(src), z_units=meta.get("z_units_in") or "m", cell_size=cell)
+            same = dem.shape == valid.shape and np.allclose(tuple(dem.rio.transform())[:6], tuple(transform)[:6],
+                                                            rtol=1e-9, atol=1e-9)
+            if same:
                 valid = np.isfinite(np.asarray(dem.values, dtype=float))
+            else:
+                logger.warning("%s no longer matches the analysed grid (shape %s, transform %s); using the full "
+                               "extent", src, dem.shape, tuple(transform)[:6])
         except Exception as exc:  # noqa: BLE001 - the extent alone is a usable domain
             logger.warning("cannot read %s for its nodata mask (%s); using the full extent", src, exc)
     return valid, transform

@@ -19,8 +19,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
-import tempfile
 import warnings
 from pathlib import Path
 from typing import Any
@@ -31,6 +29,7 @@ import pandas as pd
 from orokit import __version__
 from orokit._typing import PathLike
 from orokit.errors import InputError, OrokitWarning, SchemaError
+from orokit.io.atomic import write_bytes_atomic
 from orokit.sampling.histograms import HistogramSpec
 
 MODEL_FORMAT = "orokit-region-classifier/1"
@@ -92,20 +91,6 @@ def model_metadata(pipeline: Any, features: pd.DataFrame, *, evaluation: dict[st
     return md
 
 
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
 def metadata_path(path: PathLike) -> Path:
     """Sidecar path of a model file: ``MODEL.skops`` -> ``MODEL.skops.json``."""
     p = Path(path)
@@ -122,8 +107,8 @@ def save_model(pipeline: Any, path: PathLike, metadata: dict[str, Any]) -> Path:
     blob = sio.dumps(pipeline)
     md = dict(metadata)
     md["sha256"] = hashlib.sha256(blob).hexdigest()
-    _atomic_write_bytes(path, blob)
-    _atomic_write_bytes(metadata_path(path), json.dumps(md, indent=2, sort_keys=True, default=str).encode())
+    write_bytes_atomic(path, blob)
+    write_bytes_atomic(metadata_path(path), json.dumps(md, indent=2, sort_keys=True, default=str).encode())
     return path
 
 

@@ -59,9 +59,12 @@ def classify_input(model: RegionModel, source: Any, *, z_units: str | None = Non
     from orokit.classify.inputs import features_for_input
 
     md = model.metadata
+    eps = md.get("min_prominence_m")
+    if min_peaks is None:
+        min_peaks = md.get("min_peaks")
     feats = features_for_input(
-        source, radius_m=model.radius_m, min_prominence_m=float(md.get("min_prominence_m") or 30.0),
-        min_peaks=int(min_peaks if min_peaks is not None else md.get("min_peaks") or 20), spec=model.spec,
+        source, radius_m=model.radius_m, min_prominence_m=float(eps if eps is not None else 30.0),
+        min_peaks=int(min_peaks if min_peaks is not None else 20), spec=model.spec,
         relative_elevation=md.get("relative_elevation") or "minmax", z_units=z_units, cell_size=cell_size,
         region=region, isolation=isolation, rng=rng)
     if len(feats) == 0:

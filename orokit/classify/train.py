@@ -90,23 +90,65 @@ def _cat(parts: list[NDArray]) -> NDArray[np.int64]:
     return np.sort(np.concatenate(parts).astype(np.int64)) if parts else np.zeros(0, dtype=np.int64)
 
 
+def metric_coordinates(x: NDArray, y: NDArray, groups: Sequence[Any], *, crs: Any = None,
+                       lon: NDArray | None = None, lat: NDArray | None = None
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Disk centres in metres, group by group, for distance tests between disks.
+
+    - ``crs`` geographic: ``x, y`` are lon/lat degrees;
+    - else, where ``lon``/``lat`` are finite for every disk of a group, they are used;
+
+    and each such group is projected to an azimuthal equidistant CRS centred on it
+    (:func:`orokit.sampling.disks.local_metric_crs`; distances good to a fraction of a
+    percent over hundreds of km). Other groups keep ``x, y`` (metres of a projected or
+    local grid). Only distances within a group are meaningful.
+    """
+    from pyproj import CRS, Transformer
+
+    from orokit.sampling.disks import local_metric_crs
+
+    grp = np.asarray(groups, dtype=object)
+    mx = np.asarray(x, dtype=float).copy()
+    my = np.asarray(y, dtype=float).copy()
+    geographic = crs is not None and CRS.from_user_input(crs).is_geographic
+    if geographic:
+        glon, glat = mx.copy(), my.copy()
+    elif lon is not None and lat is not None:
+        glon, glat = np.asarray(lon, dtype=float), np.asarray(lat, dtype=float)
+    else:
+        return mx, my
+    for g in pd.unique(grp):
+        idx = np.flatnonzero(grp == g)
+        lo, la = glon[idx], glat[idx]
+        if not (np.isfinite(lo).all() and np.isfinite(la).all()):
+            if geographic:
+                raise InputError(f"group {g!r} has disks without finite lon/lat; cannot measure distances")
+            continue
+        lon0 = 0.5 * (lo.min() + lo.max()) if np.ptp(lo) <= 180 else float(lo[0])
+        to_local = Transformer.from_crs("EPSG:4326", local_metric_crs(lon0, 0.5 * (la.min() + la.max())),
+                                        always_xy=True)
+        px, py = to_local.transform(lo, la)
+        mx[idx], my[idx] = px, py
+    return mx, my
+
+
 def spatial_split(labels: Sequence[Any], x: NDArray, y: NDArray, *, groups: Sequence[Any] | None = None,
                   buffer_m: float = 0.0, max_train: int = 80, max_val: int = 20, val_fraction: float = 0.2,
-                  rng: SeedLike = None) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+                  crs: Any = None, rng: SeedLike = None) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """Per-class spatially held-out split.
 
     For each group (input file / region; default: the label) a random direction is
     drawn; the last ``val_fraction`` of its disks along that direction (>= 1) are
     validation disks; training disks are those whose centre is farther than
-    ``buffer_m`` from every validation centre of the same group. Caps of
-    ``max_val``/``max_train`` per class are applied by random subsets. ``x, y`` must be
-    metric coordinates (or any coordinates when ``buffer_m == 0``).
+    ``buffer_m`` metres from every validation centre of the same group. Caps of
+    ``max_val``/``max_train`` per class are applied by random subsets. ``x, y`` are
+    metres, or lon/lat degrees when ``crs`` is geographic (each group is then
+    projected to a local azimuthal equidistant CRS, see :func:`metric_coordinates`).
     """
     rng = np.random.default_rng(rng)
     lab = np.asarray(labels, dtype=object)
     grp = np.asarray(groups if groups is not None else labels, dtype=object)
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
+    x, y = metric_coordinates(x, y, grp, crs=crs)
     tr, va = [], []
     for c in pd.unique(lab):
         ctr, cva = [], []
@@ -248,6 +290,10 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
     if buffer_m is None:
         buffer_m = 2.0 * radius
     groups = (f["label"].astype(str) + "|" + f["source"].astype(str)).to_numpy()
+    if split == "spatial":  # metres: lon/lat tables (peak lists, geographic DEMs) are projected per group
+        mx, my = metric_coordinates(f["x"].to_numpy(float), f["y"].to_numpy(float), groups,
+                                    lon=f["lon"].to_numpy(float) if "lon" in f else None,
+                                    lat=f["lat"].to_numpy(float) if "lat" in f else None)
     rng = np.random.default_rng(rng)
     seeds = rng.integers(0, 2**31 - 1, size=runs)
     splits = []
@@ -255,7 +301,7 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
         if split == "random":
             splits.append(random_split(y, max_train=max_train, max_val=max_val, val_fraction=val_fraction, rng=s))
         else:
-            splits.append(spatial_split(y, f["x"].to_numpy(float), f["y"].to_numpy(float), groups=groups,
+            splits.append(spatial_split(y, mx, my, groups=groups,
                                         buffer_m=buffer_m, max_train=max_train, max_val=max_val,
                                         val_fraction=val_fraction, rng=s))
     tasks = [(None, None, i) for i in range(runs)]

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from orokit.cli.features import common_input_options
+from orokit.cli.options import common_input_options
 
 
 @click.command()

@@ -1,58 +1,14 @@
 """``orokit features``: orometric disk histograms of DEMs, analysis folders or peak lists."""
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import click
 
-_UNIT = {"m": 1.0, "km": 1000.0, "": 1.0}
+from orokit.cli.options import Length, common_input_options
 
-
-def parse_radius(value: str | float) -> float:
-    """'10km', '10 km', '10000m', '10000' -> metres (a bare number is metres)."""
-    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*(km|m)?\s*", str(value))
-    if not m:
-        raise click.BadParameter(f"{value!r} is not a distance; write e.g. 10km or 10000m", param_hint="--radius")
-    r = float(m.group(1)) * _UNIT[m.group(2) or ""]
-    if not m.group(2) and r < 100:
-        raise click.BadParameter(f"{value!r} without unit means {r:g} metres; did you mean {value}km?",
-                                 param_hint="--radius")
-    if r <= 0:
-        raise click.BadParameter(f"radius must be > 0, got {value!r}", param_hint="--radius")
-    return r
-
-
-class RadiusType(click.ParamType):
-    name = "DISTANCE"
-
-    def convert(self, value, param, ctx):  # noqa: D102
-        if isinstance(value, float):
-            return value
-        try:
-            return parse_radius(value)
-        except click.BadParameter as exc:
-            self.fail(exc.message, param, ctx)
-
-
-RADIUS = RadiusType()
-
-
-def common_input_options(f):
-    """Options shared by ``features`` and ``classify`` to read an input."""
-    for opt in reversed([
-        click.option("--z-units", type=click.Choice(["m", "ft"]), default=None,
-                     help="Elevation units of DEMs without units (PNG) and of Kirmse peak lists (default ft)."),
-        click.option("--cell-size", type=float, default=None,
-                     help="Cell size in METRES of DEMs without georeference (PNG): local metric grid."),
-        click.option("--region", "region", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-                     default=None, help="Region polygon (shapefile, KML, GeoPackage) for peak-list inputs: "
-                                        "disks are placed inside it eroded by R."),
-        click.option("--isolation", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
-                     help="Kirmse & de Ferranti isolation list to join to a Kirmse prominence list."),
-    ]):
-        f = opt(f)
-    return f
+#: disk radius: a length with unit; a bare number is metres (>= 100, else it was meant as km)
+RADIUS = Length(allow_bare=True, bare_min_m=100.0)
 
 
 @click.command()

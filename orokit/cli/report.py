@@ -5,7 +5,7 @@ from pathlib import Path
 
 import click
 
-from orokit.cli.features import RADIUS
+from orokit.cli.features import RADIUS  # the shared Length type (orokit.cli.options)
 
 
 @click.command()

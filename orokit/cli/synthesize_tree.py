@@ -1,25 +1,20 @@
 """``orokit synthesize-tree``: a new Divide Tree following one or several terrain types."""
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import click
 
-_SIZE = re.compile(r"^\s*([0-9.]+)\s*(?:x\s*([0-9.]+))?\s*(km|m)?\s*$", re.IGNORECASE)
+from orokit.cli.options import Length, parse_length
+
+#: domain size: ``90km``, ``90x60km``, ``90000m``; a plain number is metres
+SIZE = Length(allow_bare=True, pair=True)
 
 
 def parse_size(text: str) -> tuple[float, float]:
-    """'90km', '90000', '90000m', '90x60km' -> (width, height) in metres."""
-    m = _SIZE.match(str(text))
-    if not m:
-        raise click.BadParameter(f"{text!r} is not a size; use e.g. 90km, 90000m or 90x60km", param_hint="--size")
-    unit = 1000.0 if (m.group(3) or "m").lower() == "km" else 1.0
-    w = float(m.group(1)) * unit
-    h = float(m.group(2)) * unit if m.group(2) else w
-    if w <= 0 or h <= 0:
-        raise click.BadParameter(f"size must be positive, got {text!r}", param_hint="--size")
-    return w, h
+    """'90km', '90000', '90000m', '90x60km' -> (width, height) in metres (strict, see
+    :func:`orokit.cli.options.parse_length`)."""
+    return parse_length(text, allow_bare=True, pair=True, hint="--size")
 
 
 @click.command(name="synthesize-tree")
@@ -27,7 +22,8 @@ def parse_size(text: str) -> tuple[float, float]:
               type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Terrain type JSON (from `orokit type`); repeat with --type-map to mix types (map value i = "
                    "i-th --type).")
-@click.option("--size", "size", default="90km", show_default=True, help="Domain size: 90km, 90000m, 90x60km.")
+@click.option("--size", "size", type=SIZE, default="90km", show_default=True,
+              help="Domain size: 90km, 90000m, 90x60km (a plain number is metres).")
 @click.option("--n-peaks", type=int, default=None, help="Number of peaks (default: type density x area).")
 @click.option("--control-elevation", type=click.Path(exists=True, path_type=Path), default=None,
               help="Coarse elevation map C_H in metres (any CRS; resampled).")
@@ -66,7 +62,7 @@ def synthesize_tree(type_files, size, n_peaks, control_elevation, control_densit
         raise click.UsageError(f"{outdir} already holds {', '.join(existing)}; pass --overwrite to replace them")
     if type_map is None and len(type_files) > 1:
         raise click.BadParameter("several --type need a --type-map telling where each applies", param_hint="--type")
-    w, h = parse_size(size)
+    w, h = size
     types = [load_terrain_type(p) for p in type_files]
     fixed = _read_points(fixed_peaks) if fixed_peaks is not None else None
     frag = _read_tree(fragment) if fragment is not None else None

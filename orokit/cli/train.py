@@ -31,7 +31,7 @@ import click
               help="Print mean_accuracy, median_accuracy, per_class and per_feature accuracies as JSON.")
 @click.option("--n-jobs", type=int, default=2, show_default=True, help="Parallel fits.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of splits and forests.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing model.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing model and report files.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bars.")
 def train(features_path, output, runs, feature_runs, split, buffer_radii, trees, drop_small_classes, report_dir,
           as_json, n_jobs, seed, overwrite, progress):
@@ -43,13 +43,22 @@ def train(features_path, output, runs, feature_runs, split, buffer_radii, trees,
     from orokit.classify.model import model_metadata, save_model, sha256_file
     from orokit.classify.train import evaluate, train_classifier
 
-    if output.exists() and not overwrite:
-        raise click.UsageError(f"{output} exists; pass --overwrite to replace it")
+    from orokit.classify.model import metadata_path
+
+    kinds = ["random", "spatial"] if split == "both" else [split]
     feats = read_features(features_path)
-    small = "drop" if drop_small_classes else "error"
     radius = float(feats["radius_m"].max()) if len(feats) else 0.0
+    outputs = [output, metadata_path(output)]
+    if report_dir is not None:
+        from orokit.reports.classification import training_report_files
+
+        outputs += training_report_files(radius, kinds, report_dir)
+    existing = [str(p) for p in outputs if p.exists()]
+    if existing and not overwrite:  # checked before the (long) training runs
+        raise click.UsageError(f"{', '.join(existing)} exist(s); pass --overwrite to replace them")
+    small = "drop" if drop_small_classes else "error"
     evals = {}
-    for kind in (["random", "spatial"] if split == "both" else [split]):
+    for kind in kinds:
         evals[kind] = evaluate(feats, runs=runs, split=kind, feature_groups=feature_runs > 0,
                                feature_runs=feature_runs, n_estimators=trees, buffer_m=buffer_radii * radius,
                                small_classes=small, n_jobs=n_jobs, progress=progress, rng=seed)

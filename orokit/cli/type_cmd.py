@@ -53,7 +53,8 @@ def type_cmd(source: Path, output: Path, name: str | None, min_prominence: float
         else:
             tree = read_divide_tree_gpkg(source)
         area = area_km2 if area_km2 is not None else _tree_area_km2(tree)
-        tt = TerrainType.from_divide_tree(tree, area_km2=area, min_prominence_m=min_prominence or 30.0,
+        eps = 30.0 if min_prominence is None else min_prominence
+        tt = TerrainType.from_divide_tree(tree, area_km2=area, min_prominence_m=eps,
                                           name=name or source.stem, rho=rho,
                                           provenance={"source": str(source), "area_from": "tree extent"})
     else:
@@ -61,7 +62,7 @@ def type_cmd(source: Path, output: Path, name: str | None, min_prominence: float
         from orokit.io.dem import read_dem
 
         da = read_dem(source, z_units=z_units, cell_size=cell_size)
-        result = analyze(da, min_prominence=min_prominence or 30.0, progress=True)
+        result = analyze(da, min_prominence=30.0 if min_prominence is None else min_prominence, progress=True)
         tt = TerrainType.from_analysis(result, name=name or source.stem, isolation_basis=isolation_basis, rho=rho)
     if scale_prominence is not None:
         tt = tt.scaled("prominence", scale_prominence)
@@ -86,4 +87,11 @@ def _tree_area_km2(tree) -> float:
         parts.append(run[["x", "y"]])
     xy = pd.concat(parts)
     cell = float((tree.attrs or {}).get("cell_size") or 0.0)
+    if tree.crs is not None and tree.crs.is_geographic:  # lon/lat box: its area on the ellipsoid
+        from affine import Affine
+
+        from orokit.sampling.grid import grid_area_km2
+
+        w, h = float(xy["x"].max() - xy["x"].min()), float(xy["y"].max() - xy["y"].min())
+        return grid_area_km2(Affine(w, 0.0, float(xy["x"].min()), 0.0, -h, float(xy["y"].max())), tree.crs, (1, 1))
     return float((xy["x"].max() - xy["x"].min() + cell) * (xy["y"].max() - xy["y"].min() + cell)) / 1e6

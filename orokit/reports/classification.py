@@ -178,6 +178,17 @@ def write_radius_outputs(features: pd.DataFrame, evals: Mapping[str, Any], outdi
     return files
 
 
+def training_report_files(radius_m: float, splits: Sequence[str], outdir: PathLike) -> list[Path]:
+    """Every file :func:`write_training_report` writes for this radius and these splits
+    (so a command can refuse to overwrite them before any work)."""
+    out = Path(outdir)
+    tag = f"{float(radius_m) / 1000:g}km"
+    files = [out / "tables" / f"per_class_{tag}.csv", out / "tables" / f"evaluation_{tag}.json"]
+    files += [out / "figures" / f"confusion_{k}_{tag}.png" for k in splits]
+    files += [out / "figures" / f"histograms_{tag}.png", out / "tables" / "table2.csv", out / "tables" / "table2.md"]
+    return files
+
+
 def write_training_report(features: pd.DataFrame, evals: Mapping[str, Any], outdir: PathLike) -> Path:
     """Report of one ``orokit train`` run (one radius)."""
     out = Path(outdir)

@@ -7,16 +7,50 @@ key saddle comes from the elder-rule sweep of :meth:`DivideTree.prominence_table
 from __future__ import annotations
 
 import logging
+from typing import Any
 
 import numpy as np
 import pandas as pd
+from affine import Affine
 from scipy.spatial import cKDTree
 
 from orokit.topology.divide_tree import DivideTree
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["tree_orometry", "nearest_higher_peak", "direction_deg"]
+__all__ = ["tree_orometry", "nearest_higher_peak", "direction_deg", "planar_xy"]
+
+
+def planar_xy(x: np.ndarray, y: np.ndarray, crs: Any = None) -> tuple[np.ndarray, np.ndarray]:
+    """Planar metric coordinates for neighbour searches and planar geometry.
+
+    Geographic CRS (lon/lat): a local azimuthal equidistant projection centred on the
+    points' bounding-box centre (:func:`orokit.sampling.disks.local_metric_crs`);
+    projected CRS: x/y times the CRS's linear unit; None: x/y as they are (metres).
+    """
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
+    if crs is None:
+        return x, y
+    from orokit.geodesy import CellMetric
+
+    metric = CellMetric(Affine.identity(), crs)
+    if not metric.is_geographic:
+        u = metric.unit_m
+        return (x, y) if u == 1.0 else (x * u, y * u)
+    from pyproj import Transformer
+
+    from orokit.sampling.disks import local_metric_crs
+
+    ok = np.isfinite(x) & np.isfinite(y)
+    if not ok.any():
+        return x.copy(), y.copy()
+    lon, lat = metric.lonlat(x, y)
+    lon0 = 0.5 * (np.nanmin(lon) + np.nanmax(lon))
+    lat0 = 0.5 * (np.nanmin(lat) + np.nanmax(lat))
+    to_local = Transformer.from_crs("EPSG:4326", local_metric_crs(lon0, lat0), always_xy=True)
+    px, py = to_local.transform(lon, lat)
+    return np.asarray(px, float), np.asarray(py, float)
 
 
 def direction_deg(dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
@@ -35,7 +69,7 @@ def nearest_higher_peak(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarr
 
     Parameters
     ----------
-    x, y : planar coordinates (metres).
+    x, y : planar coordinates (metres; see :func:`planar_xy` for lon/lat).
     z : elevations; ties are broken by id (the lower id counts as higher).
 
     Notes
@@ -86,6 +120,9 @@ def tree_orometry(tree: DivideTree) -> pd.DataFrame:
     peak exists), ``isolation_peak``, ``isolation_x``, ``isolation_y``,
     ``isolation_direction`` (degrees counter-clockwise from east).
     """
+    from orokit.geodesy import point_distance
+    from orokit.metrics.disk import dominance
+
     table = tree.prominence_table()
     x = tree.peaks["x"].to_numpy(float)
     y = tree.peaks["y"].to_numpy(float)
@@ -99,17 +136,16 @@ def tree_orometry(tree: DivideTree) -> pd.DataFrame:
     sy[has] = tree.saddles["y"].to_numpy(float)[ks[has]]
     sz[has] = tree.saddles["elevation"].to_numpy(float)[ks[has]]
     out = table.copy()
-    with np.errstate(divide="ignore", invalid="ignore"):
-        out["dominance"] = np.where(z > 0, table["prominence"].to_numpy() / z, np.nan)
+    out["dominance"] = dominance(z, table["prominence"].to_numpy(float))
     out["saddle_x"], out["saddle_y"], out["saddle_elevation"] = sx, sy, sz
-    out["saddle_distance"] = np.hypot(sx - x, sy - y)
-    out["saddle_direction"] = direction_deg(sx - x, sy - y)
-    near = nearest_higher_peak(x, y, z)
+    out["saddle_distance"], out["saddle_direction"] = point_distance(x, y, sx, sy, crs=tree.crs)
+    near = nearest_higher_peak(*planar_xy(x, y, tree.crs), z)
     ok = near >= 0
     ix = np.where(ok, x[np.maximum(near, 0)], np.nan)
     iy = np.where(ok, y[np.maximum(near, 0)], np.nan)
-    out["isolation"] = np.hypot(ix - x, iy - y)
+    iso, iso_dir = point_distance(x, y, ix, iy, crs=tree.crs)
+    out["isolation"] = np.where(ok, iso, np.nan)
     out["isolation_peak"] = near
     out["isolation_x"], out["isolation_y"] = ix, iy
-    out["isolation_direction"] = direction_deg(ix - x, iy - y)
+    out["isolation_direction"] = iso_dir
     return out

@@ -239,27 +239,34 @@ class TerrainType:
         rho: float | None = None,
         name: str = "type",
         provenance: Mapping[str, Any] | None = None,
+        crs: Any = None,
     ) -> "TerrainType":
         """Type from a peak table (``orokit analyze`` columns).
 
         Parameters
         ----------
-        peaks : needs ``x``, ``y`` (metres), ``elevation``, ``prominence``, ``saddle_x``,
-            ``saddle_y`` (NaN for roots); with ``isolation_basis="terrain"`` also
-            ``isolation``, ``isolation_x``, ``isolation_y``.
+        peaks : needs ``x``, ``y`` (in ``crs``), ``elevation``, ``prominence`` (metres),
+            ``saddle_x``, ``saddle_y`` (NaN for roots); with ``isolation_basis="terrain"``
+            also ``isolation`` (metres), ``isolation_x``, ``isolation_y``.
         area_km2 : area the peaks were found in (for the density).
         min_prominence_m : only peaks with prominence >= this count.
         divide_tree : optional :class:`DivideTree` of the same peaks, used to pick rho.
         isolation_basis : "peaks" (default, nearest higher peak among the counted peaks,
             comparable with synthesized trees) or "terrain" (the table's isolation).
         rho : ridge exponent; estimated from ``divide_tree`` when None (default 1).
+        crs : CRS of x/y. Geographic (lon/lat): distances are WGS84 geodesics and
+            directions geodesic azimuths (through :mod:`orokit.geodesy`), the nearest
+            higher peak is searched in a local azimuthal equidistant projection.
+            Projected: the CRS's linear unit is converted to metres. None: metres.
 
         Raises
         ------
         InputError
             Missing columns, non-positive area or fewer than 3 peaks above the threshold.
         """
-        from orokit.synthesis.orometry import direction_deg, nearest_higher_peak
+        from orokit.geodesy import point_distance
+        from orokit.metrics.disk import dominance
+        from orokit.synthesis.orometry import nearest_higher_peak, planar_xy
 
         need = {"x", "y", "elevation", "prominence", "saddle_x", "saddle_y"}
         if isolation_basis == "terrain":
@@ -284,21 +291,24 @@ class TerrainType:
         if isolation_basis == "terrain":
             ix, iy = p["isolation_x"].to_numpy(float), p["isolation_y"].to_numpy(float)
             iso = p["isolation"].to_numpy(float)
+            _, iso_dir = point_distance(x, y, ix, iy, crs=crs)
         else:
-            near = nearest_higher_peak(x, y, z)
+            near = nearest_higher_peak(*planar_xy(x, y, crs), z)
             ok = near >= 0
             ix = np.where(ok, x[np.maximum(near, 0)], np.nan)
             iy = np.where(ok, y[np.maximum(near, 0)], np.nan)
-            iso = np.hypot(ix - x, iy - y)
+            iso, iso_dir = point_distance(x, y, ix, iy, crs=crs)
+        iso = np.where(np.isfinite(ix) & np.isfinite(iy), iso, np.nan)
+        saddle_dist, saddle_dir = point_distance(x, y, sx, sy, crs=crs)
         has_iso = np.isfinite(iso)
         values = {
             "elevation": z,
             "prominence": prom[keyed],
-            "dominance": np.clip(prom[keyed] / np.where(z[keyed] > 0, z[keyed], np.nan), 0, 1),
+            "dominance": dominance(z[keyed], prom[keyed]),
             "isolation_distance": iso[has_iso],
-            "isolation_direction": direction_deg(ix - x, iy - y)[has_iso],
-            "saddle_distance": np.hypot(sx - x, sy - y)[keyed],
-            "saddle_direction": direction_deg(sx - x, sy - y)[keyed],
+            "isolation_direction": iso_dir[has_iso],
+            "saddle_distance": saddle_dist[keyed],
+            "saddle_direction": saddle_dir[keyed],
         }
         for k, v in values.items():
             if np.isfinite(v).sum() < 2:
@@ -341,16 +351,20 @@ class TerrainType:
         frame = pd.concat([pruned.peaks[["x", "y", "elevation"]].reset_index(drop=True),
                            table[["prominence", "saddle_x", "saddle_y"]].reset_index(drop=True)], axis=1)
         return cls.from_peaks(frame, area_km2=area_km2, min_prominence_m=min_prominence_m,
-                              divide_tree=pruned, name=name, rho=rho, provenance=provenance)
+                              divide_tree=pruned, name=name, rho=rho, provenance=provenance, crs=pruned.crs)
 
     @classmethod
     def from_analysis(cls, result: Any, *, min_prominence_m: float | None = None, name: str | None = None,
                       isolation_basis: str = "peaks", rho: float | None = None) -> "TerrainType":
         """Type from an :class:`orokit.analysis.AnalysisResult` or an ``orokit analyze`` folder.
 
-        The area is the number of DEM cells (``attrs["shape"]``) times the cell area,
-        the cell size being recovered from the peaks' ``row/col`` and ``x/y`` columns.
+        The area is that of the analysed grid (``shape`` and ``transform`` recorded in
+        ``analysis.json``) on the ground: exact ellipsoidal cell areas for lon/lat grids.
+        Distances and directions are in metres and degrees whatever the CRS (see
+        :meth:`from_peaks`).
         """
+        from orokit.sampling.grid import analysis_grid, grid_area_km2
+
         src = None
         if not hasattr(result, "peaks"):
             from orokit.analysis import read_analysis
@@ -360,11 +374,14 @@ class TerrainType:
         attrs = dict(getattr(result, "attrs", {}) or {})
         eps = float(attrs.get("min_prominence", 30.0) if min_prominence_m is None else min_prominence_m)
         peaks = pd.DataFrame(result.peaks.drop(columns="geometry", errors="ignore"))
-        area = _analysis_area_km2(peaks, attrs)
+        transform, grid_crs, shape = analysis_grid(attrs, peaks)
+        crs = getattr(result, "crs", None)
+        crs = grid_crs if crs is None else crs
+        area = float(attrs["area_km2"]) if "area_km2" in attrs else grid_area_km2(transform, crs, shape)
         name = name or Path(str(attrs.get("source") or src or "type")).stem
         return cls.from_peaks(peaks, area_km2=area, min_prominence_m=eps,
                               divide_tree=getattr(result, "divide_tree", None), isolation_basis=isolation_basis,
-                              rho=rho, name=name, provenance={"source": attrs.get("source") or src})
+                              rho=rho, name=name, provenance={"source": attrs.get("source") or src}, crs=crs)
 
     # --------------------------------------------------------------- editing
     def _edited(self, note: str, **changes: Any) -> "TerrainType":
@@ -513,26 +530,6 @@ def _check_range(feature: str, h: FeatureHistogram) -> None:
         raise SchemaError(f"{feature} histogram must lie in [0, 360] degrees")
 
 
-def _analysis_area_km2(peaks: pd.DataFrame, attrs: Mapping[str, Any]) -> float:
-    if "area_km2" in attrs:
-        return float(attrs["area_km2"])
-    shape = attrs.get("shape")
-    if shape is None or not {"row", "col", "x", "y"} <= set(peaks.columns) or len(peaks) < 2:
-        raise InputError("cannot tell the analysed area: the analysis has no 'shape' attribute or row/col columns; "
-                         "pass area_km2 to TerrainType.from_peaks")
-    r, c = peaks["row"].to_numpy(float), peaks["col"].to_numpy(float)
-    x, y = peaks["x"].to_numpy(float), peaks["y"].to_numpy(float)
-    A = np.column_stack([c, r, np.ones_like(c)])
-    cx = np.linalg.lstsq(A, x, rcond=None)[0]
-    cy = np.linalg.lstsq(A, y, rcond=None)[0]
-    cell_area = abs(cx[0] * cy[1] - cx[1] * cy[0])
-    if not np.isfinite(cell_area) or cell_area <= 0:
-        raise InputError("cannot recover the cell size from the peak table; pass area_km2 explicitly")
-    if attrs.get("crs_geographic"):
-        raise InputError("geographic analyses need area_km2 explicitly")
-    return float(shape[0]) * float(shape[1]) * cell_area / 1e6
-
-
 def estimate_rho(divide_tree: Any, min_prominence_m: float = 30.0, choices: tuple[float, ...] = (0.0, 1.0, 2.0)) -> float:
     """Ridge exponent whose Delaunay MST best reproduces the ridges of ``divide_tree``.
 
@@ -545,8 +542,9 @@ def estimate_rho(divide_tree: Any, min_prominence_m: float = 30.0, choices: tupl
     tree = divide_tree.prune(min_prominence_m) if min_prominence_m > 0 else divide_tree
     if tree.n_peaks < 4:
         return 1.0
-    x = tree.peaks["x"].to_numpy(float)
-    y = tree.peaks["y"].to_numpy(float)
+    from orokit.synthesis.orometry import planar_xy
+
+    x, y = planar_xy(tree.peaks["x"].to_numpy(float), tree.peaks["y"].to_numpy(float), tree.crs)
     z = tree.peaks["elevation"].to_numpy(float)
     real = {(min(a, b), max(a, b)) for a, b in zip(tree.edges["peak_a"], tree.edges["peak_b"])}
     best, best_score = 1.0, -1

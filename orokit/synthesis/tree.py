@@ -17,14 +17,18 @@ import numpy as np
 import pandas as pd
 
 from orokit._typing import SeedLike
-from orokit.errors import InputError
+from orokit.errors import InputError, OrokitError
 from orokit.synthesis.controls import Domain, build_controls, make_domain
 from orokit.synthesis.terrain_type import TerrainType
 from orokit.topology.divide_tree import DivideTree
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["synthesize_divide_tree", "peaks_table"]
+__all__ = ["synthesize_divide_tree", "peaks_table", "MAX_PEAKS"]
+
+#: refuse to synthesize more peaks than this (the arrays of the dart throwing and the
+#: optimal transport grow faster than linearly; real 90 km regions hold a few thousand)
+MAX_PEAKS = 1_000_000
 
 
 def _fixed_frame(fixed_peaks: Any) -> pd.DataFrame:
@@ -186,6 +190,15 @@ def synthesize_divide_tree(
     area_t = np.array([((controls.type_index == t) & (controls.density > 0)).sum() * cell_km2 for t in range(len(types))])
     dens_t = np.array([t.peak_density_per_km2 for t in types])
     expected = dens_t * area_t
+    total = float(np.sum(expected)) if n_peaks is None else float(n_peaks)
+    if not np.isfinite(total) or total > MAX_PEAKS:
+        dens = ", ".join(f"{t.name}: {t.peak_density_per_km2:.4g}" for t in types)
+        raise OrokitError(
+            f"the domain would hold {total:.4g} peaks "
+            f"({domain.area_km2:.4g} km2 at peak densities {dens} per km2), more than the limit of {MAX_PEAKS}; "
+            "a density this high usually comes from a terrain type built in degrees instead of metres "
+            "(re-create it with `orokit type` from a current analysis), else pass a smaller size_m or n_peaks"
+        )
     if n_peaks is None:
         n_t = np.rint(expected).astype(np.int64)
     else:
