@@ -50,7 +50,7 @@ class GridMetric:
 
     @property
     def ncand(self) -> int:
-        return NCAND if self.geo else 16
+        return NCAND if self.geo else 8
 
     def args(self, row0: int = 0) -> tuple:
         """Kernel arguments for a block whose first row is ``row0``."""
