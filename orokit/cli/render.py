@@ -1,23 +1,14 @@
 """``orokit render``: an elevation raster (COG) from a Divide Tree."""
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import click
 
-_LEN = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(km|m)?\s*$", re.IGNORECASE)
+from orokit.cli.options import Length
 
-
-def parse_length(text: str, *, hint: str = "--resolution") -> float:
-    """'30m', '30', '0.03km' -> metres (positive)."""
-    m = _LEN.match(str(text))
-    if not m:
-        raise click.BadParameter(f"{text!r} is not a length; use e.g. 30m, 30 or 0.03km", param_hint=hint)
-    value = float(m.group(1)) * (1000.0 if (m.group(2) or "m").lower() == "km" else 1.0)
-    if value <= 0:
-        raise click.BadParameter(f"{text!r} must be positive", param_hint=hint)
-    return value
+#: a length in metres: 30m, 0.03km, or a plain number of metres (strict, see orokit.cli.options)
+LENGTH = Length(allow_bare=True)
 
 
 def read_tree(path: Path, *, cell_size: float | None = None):
@@ -45,29 +36,33 @@ def extent_like(path: Path, *, cell_size: float | None = None) -> tuple[float, f
 
 
 def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None, skeleton=None) -> None:
+    """Write the raster, then the TIN, then the hillshade preview (each atomically; the
+    preview last, so it marks a complete set)."""
     from orokit.raster.render import write_cog, write_hillshade_png, write_tin_ply
 
     write_cog(dem, out)
-    if preview is not None:
-        write_hillshade_png(dem, preview)
     if tin_path is not None and skeleton is not None:
         write_tin_ply(skeleton.tin, tin_path)
+    if preview is not None:
+        write_hillshade_png(dem, preview)
 
 
 @click.command(name="render")
 @click.argument("tree", type=click.Path(exists=True, path_type=Path))
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Output GeoTIFF (COG).")
-@click.option("--resolution", default="30m", show_default=True, help="Cell size: 30m, 30, 0.03km.")
+@click.option("--resolution", type=LENGTH, default="30m", show_default=True,
+              help="Cell size: 30m, 0.03km (a plain number is metres).")
 @click.option("--erosion/--no-erosion", default=True, show_default=True, help="Multi-scale constrained erosion.")
-@click.option("--seed", type=int, default=None, help="Random seed (same seed, same raster).")
+@click.option("--seed", type=click.IntRange(min=0), default=None,
+              help="Random seed (same seed, same raster) [default: fresh entropy, recorded in the tags].")
 @click.option("--extent", type=(float, float, float, float), default=None,
               help="XMIN YMIN XMAX YMAX in the tree's CRS (default: the tree's domain or bounding box).")
 @click.option("--like", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Use the extent of this raster (e.g. the DEM the tree came from).")
 @click.option("--min-prominence", type=float, default=30.0, show_default=True,
               help="eps (m): noise stays below it.")
-@click.option("--lambda", "lam", default="200m", show_default=True, help="Meshing distance lambda.")
+@click.option("--lambda", "lam", type=LENGTH, default="200m", show_default=True, help="Meshing distance lambda.")
 @click.option("--cell-size", type=float, default=None,
               help="Cell size (m) of a reference .txt tree or of a --like raster without georeferencing.")
 @click.option("--preview", type=click.Path(dir_okay=False, path_type=Path), default=None,
@@ -85,8 +80,8 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
     for p in (out, preview, tin_path):
         if p is not None and p.exists() and not overwrite:
             raise click.UsageError(f"{p} exists; pass --overwrite to replace it")
-    res = parse_length(resolution)
-    params = RenderParams(lam=parse_length(lam, hint="--lambda"), min_prominence=min_prominence)
+    res = resolution
+    params = RenderParams(lam=lam, min_prominence=min_prominence)
     t = read_tree(tree, cell_size=cell_size)
     if like is not None:
         extent = extent_like(like, cell_size=cell_size)
@@ -95,4 +90,4 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
                                  return_skeleton=True, rng=seed)
     write_outputs(dem, out, preview=preview, tin_path=tin_path, skeleton=skel)
     click.echo(f"{dem.shape[1]} x {dem.shape[0]} cells at {res:g} m from {t.n_peaks} peaks "
-               f"in {time.perf_counter() - t0:.1f} s -> {out}")
+               f"in {time.perf_counter() - t0:.1f} s (seed {dem.attrs['seed']}) -> {out}")

@@ -30,12 +30,13 @@ from orokit.raster.rasterize import MAX_CELLS, Grid, burn_max, make_grid, raster
 from orokit.raster.refine import Polylines, densify, refine_segments
 from orokit.raster.rivers import RidgeSegments, RiverNetwork, ridge_segments, river_network
 from orokit.raster.tin import TIN, constrained_tin
+from orokit.topology import _kernels as _engine
 
 logger = logging.getLogger(__name__)
 
 __all__ = [
     "RenderParams", "TerrainSkeleton", "build_skeleton", "render_elevation", "tree_extent",
-    "write_cog", "write_hillshade_png", "write_tin_ply", "hillshade",
+    "write_cog", "write_hillshade_png", "write_tin_ply", "resolve_seed",
 ]
 
 
@@ -93,6 +94,35 @@ class TerrainSkeleton:
     timings: dict[str, float] = field(default_factory=dict)
     piece_saddle: np.ndarray | None = None  # saddle (0..m-1) of each straight ridge piece
     edges: np.ndarray | None = None  # (m, 3) peak_a, peak_b, saddle (0..m-1, rows of node_xyz after the peaks)
+
+
+def resolve_seed(rng: SeedLike | np.random.SeedSequence) -> int:
+    """The int seed a render runs with, so it can be recorded and replayed.
+
+    An int is kept; ``None`` draws fresh entropy (``np.random.SeedSequence().entropy``);
+    a Generator or SeedSequence yields an int drawn from it (deterministic for a seeded
+    one). ``np.random.default_rng(resolve_seed(rng))`` then drives the whole render, so
+    rendering again with the recorded seed gives the same raster.
+
+    Examples
+    --------
+    >>> resolve_seed(7)
+    7
+    >>> resolve_seed(np.random.default_rng(0)) == resolve_seed(np.random.default_rng(0))
+    True
+    """
+    if rng is None:
+        return int(np.random.SeedSequence().entropy)
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, (bool, np.bool_)):
+        if int(rng) < 0:
+            raise InputError(f"seed must be a non-negative integer, got {int(rng)}")
+        return int(rng)
+    if isinstance(rng, np.random.SeedSequence):
+        lo, hi = (int(v) for v in rng.generate_state(2, np.uint64))
+        return lo + (hi << 64)
+    if isinstance(rng, np.random.Generator):
+        return int(rng.integers(0, 2**63 - 1))
+    raise InputError(f"rng must be an int seed, a numpy Generator, a SeedSequence or None, got {type(rng).__name__}")
 
 
 def _tree_arrays(tree) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -300,7 +330,9 @@ def render_elevation(
     params : :class:`RenderParams` (lambda, noise, erosion...).
     max_cells : refuse rasters larger than this (checked before allocating).
     return_skeleton : also return the :class:`TerrainSkeleton` (TIN, rivers...).
-    rng : seed or generator; the same seed gives the same raster.
+    rng : seed, Generator, SeedSequence or None; the int seed actually used
+        (:func:`resolve_seed`: fresh entropy for None) is recorded in ``attrs['seed']``,
+        and the same seed gives the same raster.
 
     Returns
     -------
@@ -327,8 +359,8 @@ def render_elevation(
     5. Peak and saddle cells are reset to their exact elevations.
     """
     params = params or RenderParams()
-    seed = rng if isinstance(rng, (int, np.integer)) else None
-    rng = np.random.default_rng(rng)
+    seed = resolve_seed(rng)
+    rng = np.random.default_rng(seed)
     crs = _check_crs(divide_tree)
     if divide_tree.n_peaks == 0:
         raise DivideTreeError("the Divide Tree has no peaks; nothing to render")
@@ -403,7 +435,7 @@ def render_elevation(
         "orokit_version": __version__,
         "parameters": json.dumps({**params.to_dict(), "resolution_m": grid.res, "extent": list(ext),
                                   "erosion": bool(erosion)}),
-        "seed": -1 if seed is None else int(seed),
+        "seed": seed,
         "local_grid": crs is None,
         "cell_size": grid.res,
         "n_tree_peaks": int(divide_tree.n_peaks),
@@ -494,8 +526,9 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
                max_rounds: int = 6) -> dict[str, int]:
     """Rounds of spurious-hill cutting and pass capping on the raster's own basins (in place).
 
-    Each round labels the basins of steepest ascent (same total order as the orometry
-    engine); basins whose maximum is not a tree peak are cut down (flooded from their
+    Each round labels the basins of steepest ascent with the orometry engine's own
+    kernels (:func:`orokit.topology._kernels.steepest_ascent` and ``label_basins``, so
+    the total order and tie-breaks are the engine's); basins whose maximum is not a tree peak are cut down (flooded from their
     outside with a 1 mm per cell ascent); then every pair of 8-adjacent cells in the
     basins of two tree peaks whose pass (the lower of the two) is above the tree's
     bottleneck between the peaks (lowest saddle on the tree path) is lowered ``drop_m``
@@ -529,7 +562,8 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
 
     def owners() -> np.ndarray:
         """Tree peak owning each cell's basin (-1: a spurious maximum, -2: NaN)."""
-        lab, peak_cell = _kernels.basin_labels(z)
+        ptr, _ = _engine.steepest_ascent(np.pad(z, 1, constant_values=np.nan))
+        lab, peak_cell = _engine.label_basins(ptr)
         k = np.minimum(np.searchsorted(cells, peak_cell), cells.size - 1)
         tid = np.where(cells[k] == peak_cell, pid[k], -1)
         return np.where(lab >= 0, tid[np.maximum(lab, 0)], -2).reshape(z.shape)
@@ -575,43 +609,55 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
 def write_cog(dem: xr.DataArray, path: PathLike, *, tags: dict[str, Any] | None = None) -> None:
     """Write ``dem`` as a Cloud-Optimized GeoTIFF (deflate, NaN nodata) with provenance tags.
 
-    Written atomically (temporary file beside ``path``, then renamed).
+    The band's unit is set to ``dem.attrs['units']`` (metres), so
+    :func:`orokit.io.dem.read_dem` (and ``orokit analyze`` / ``classify``) read the file
+    without ``z_units``, also when it has no CRS (a local metric grid: the transform is
+    kept). The CRS is written when ``dem`` has one. Dataset tags: units, generator,
+    orokit version, parameters, seed, local_grid, timings, plus ``tags``. Written
+    atomically (temporary file beside ``path``, then renamed).
     """
+    import rasterio
+
     from orokit.io.atomic import atomic_path
 
+    units = str(dem.attrs.get("units", "m"))
+    if units != "m":
+        raise InputError(f"write_cog writes elevations in metres; the raster's units are {units!r}")
     all_tags = {k: str(v) for k, v in dem.attrs.items() if k in (
         "units", "generator", "orokit_version", "parameters", "seed", "local_grid", "timings")}
     all_tags.update({k: str(v) for k, v in (tags or {}).items()})
-    out = dem.astype(np.float32)
-    out.attrs = {}
-    out = out.rio.write_nodata(np.nan, encoded=False)
+    z = np.asarray(dem.values, dtype=np.float32)
+    if z.ndim != 2:
+        raise InputError(f"write_cog writes one 2-D band; got an array of shape {z.shape}")
+    profile = {"driver": "COG", "width": z.shape[1], "height": z.shape[0], "count": 1, "dtype": "float32",
+               "crs": dem.rio.crs, "transform": dem.rio.transform(), "nodata": np.nan,
+               "compress": "DEFLATE", "predictor": 3}
     with atomic_path(path) as tmp:
-        out.rio.to_raster(tmp, driver="COG", compress="DEFLATE", predictor=3, tags=all_tags)
-
-
-def hillshade(z: np.ndarray, res: float, *, azimuth: float = 315.0, altitude: float = 45.0) -> np.ndarray:
-    """Hillshade in [0, 1] (sun azimuth and altitude in degrees)."""
-    z = np.asarray(z, dtype=np.float64)
-    z = np.where(np.isfinite(z), z, np.nanmin(z) if np.isfinite(z).any() else 0.0)
-    dzdy, dzdx = np.gradient(z, res)
-    slope = np.arctan(np.hypot(dzdx, dzdy))
-    aspect = np.arctan2(-dzdx, dzdy)
-    az = math.radians(360.0 - azimuth + 90.0)
-    alt = math.radians(altitude)
-    shade = np.sin(alt) * np.cos(slope) + np.cos(alt) * np.sin(slope) * np.cos(az - aspect)
-    return np.clip(shade, 0.0, 1.0)
+        with rasterio.open(tmp, "w", **profile) as dst:
+            dst.write(z, 1)
+            dst.units = ("m",)
+            dst.set_band_description(1, "elevation")
+            dst.update_tags(**all_tags)
 
 
 def write_hillshade_png(dem: xr.DataArray, path: PathLike, *, max_size: int = 2048) -> None:
-    """Grey hillshade preview PNG (downsampled to at most ``max_size`` pixels a side)."""
+    """Grey hillshade preview PNG (downsampled to at most ``max_size`` pixels a side).
+
+    The shading is :func:`orokit.reports.dem_summary.hillshade` (cell sizes in metres,
+    light from the north-west); NaN cells are black.
+    """
+    from affine import Affine
     from PIL import Image
 
     from orokit.io.atomic import atomic_path
+    from orokit.reports.dem_summary import hillshade
 
-    z = np.asarray(dem.values, dtype=np.float64)
-    step = max(int(math.ceil(max(z.shape) / max_size)), 1)
-    res = float(abs(dem.rio.transform().a)) * step if dem.rio.transform().a else float(dem.attrs.get("cell_size", 1.0))
-    hs = hillshade(z[::step, ::step], res)
+    step = max(int(math.ceil(max(dem.shape) / max_size)), 1)
+    small = dem
+    if step > 1:
+        small = dem.isel(y=slice(None, None, step), x=slice(None, None, step))
+        small = small.rio.write_transform(dem.rio.transform() @ Affine.scale(step))
+    hs = np.nan_to_num(hillshade(small), nan=0.0)
     img = Image.fromarray((hs * 255).astype(np.uint8), mode="L")
     with atomic_path(path) as tmp:
         img.save(tmp, format="PNG")
