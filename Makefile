@@ -137,7 +137,7 @@ $(REPORTS)/roundtrip/%/hillshade.png: $(REPORTS)/synthesis/types/%.json $(DATA_S
 	$(OROKIT) -q synthesize --type $< --like $* --seed 0 -o $(@D) --overwrite --no-progress
 
 $(REPORTS)/roundtrip/%/validation.json: $(REPORTS)/roundtrip/%/hillshade.png $(CLASSIFICATION_README) orokit/cli/validate.py | $(INSTALLED)
-	$(OROKIT) -q validate $(@D) --model $(ROUNDTRIP_MODEL) --no-append
+	$(OROKIT) -q validate $(@D) --model $(ROUNDTRIP_MODEL) --overwrite
 
 $(ROUNDTRIP_README): $(ROUNDTRIP_VALIDATIONS) orokit/reports/roundtrip.py orokit/cli/roundtrip_report.py | $(INSTALLED)
 	$(OROKIT) -q roundtrip-report $(ROUNDTRIP_VALIDATIONS:%/validation.json=%) --model $(ROUNDTRIP_MODEL) \

@@ -4,7 +4,8 @@ Usage: python benchmarks/render.py [--dem appalachians] [--size-km 90] [--res 30
 
 A terrain type is derived from a shared DEM, a Divide Tree of SIZE x SIZE km is synthesized
 from it, and the tree is rendered at RES metres (each variant in its own process so the
-peak RSS is that variant's). Prints one line per stage and the round-trip numbers.
+peak RSS is that variant's). Prints one line per stage and the round-trip numbers, and
+records them (with the machine load) in reports/benchmarks/render.json.
 """
 from __future__ import annotations
 
@@ -16,18 +17,16 @@ import sys
 import time
 from pathlib import Path
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "dems"
-
 
 def run(dem_name: str, size_km: float, res: float, erosion: bool, seed: int) -> dict:
     import orokit
-    from orokit.io.dem import read_dem
+    from orokit.data import open_dataset_dem
     from orokit.raster.render import render_elevation, tree_extent
     from orokit.synthesis.terrain_type import TerrainType
     from orokit.synthesis.tree import synthesize_divide_tree
     from orokit.validate.roundtrip import roundtrip
 
-    dem = read_dem(str(DATA / f"{dem_name}.png"), z_units="ft", cell_size=92.6)
+    dem = open_dataset_dem(dem_name)  # the manifest knows the units and the cell size
     ttype = TerrainType.from_analysis(orokit.analyze(dem, min_prominence=30.0), name=dem_name)
     t0 = time.perf_counter()
     tree = synthesize_divide_tree(ttype, size_m=size_km * 1000.0, rng=seed)
@@ -61,16 +60,22 @@ def main() -> None:
         print(json.dumps(run(a.dem, a.size_km, a.res, a.erosion, a.seed)))
         return
     variants = {"both": [False, True], "plain": [False], "eroded": [True]}[a.variant]
+    runs = []
     for ero in variants:
         cmd = [sys.executable, __file__, "--child", "--dem", a.dem, "--size-km", str(a.size_km), "--res", str(a.res),
                "--seed", str(a.seed)] + (["--erosion"] if ero else [])
         res = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout.strip().splitlines()[-1])
+        runs.append(res)
         print(f"{'with' if ero else 'without'} erosion: {res['shape']} from {res['peaks']} peaks: "
               f"render {res['render_s']} s, peak RSS {res['peak_rss_gb']} GB (tree synthesis {res['tree_s']} s)")
         for k, v in res["stages_s"].items():
             print(f"  {k:10s} {v:7.2f} s")
         print(f"  round trip: {100 * res['recovered_share']:.1f} % recovered, {100 * res['extra_share']:.1f} % extra "
               f"(re-analysis {res['roundtrip_s']} s)")
+    sys.path.insert(0, str(Path(__file__).parent))
+    from _record import record
+
+    print(f"recorded in {record('render', {'dem': a.dem, 'size_km': a.size_km, 'res_m': a.res, 'seed': a.seed, 'runs': runs})}")
 
 
 if __name__ == "__main__":

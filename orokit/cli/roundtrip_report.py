@@ -12,11 +12,16 @@ import click
               default=None, help="Per-region accuracy of real disks (classification report tables/per_class_*.csv).")
 @click.option("--model", default="", help="Model name to quote in the report.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="Markdown file to write (TWIN/twin.png figures are written first).")
-@click.option("--overwrite", is_flag=True, help="Replace an existing OUTPUT.")
+              help="Markdown file to write (TWIN/twin.png figures and the table CSV are written first).")
+@click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="CSV of the table [default: OUTPUT with the suffix .csv, e.g. README.csv].")
+@click.option("--overwrite", is_flag=True, help="Replace existing outputs (OUTPUT, the table, TWIN/twin.png).")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
-def roundtrip_report(twins, per_class, model, output, overwrite, progress) -> None:
-    """Tabulate the round trip of TWINS (folders of `orokit synthesize --like` + `orokit validate`)."""
+def roundtrip_report(twins, per_class, model, output, table_path, overwrite, progress) -> None:
+    """Tabulate the round trip of TWINS (folders of `orokit synthesize --like` + `orokit validate`).
+
+    Writes TWIN/twin.png for every twin, the table as CSV (--table) and, last, OUTPUT.
+    """
     import pandas as pd
     from tqdm.auto import tqdm
 
@@ -24,8 +29,14 @@ def roundtrip_report(twins, per_class, model, output, overwrite, progress) -> No
     from orokit.io.dem import read_dem
     from orokit.reports.roundtrip import real_dem_of, render_roundtrip_markdown, roundtrip_rows, write_twin_png
 
-    if output.exists() and not overwrite:
-        raise click.UsageError(f"{output} exists; pass --overwrite to replace it")
+    table_path = table_path if table_path is not None else default_table_path(output)
+    if table_path.resolve() == output.resolve():
+        raise click.BadParameter(f"the table {table_path} would replace OUTPUT; give another --table",
+                                 param_hint="--table")
+    outputs = [output, table_path] + [d / "twin.png" for d in twins]
+    existing = [str(p) for p in outputs if p.exists()]
+    if existing and not overwrite:
+        raise click.UsageError(f"{', '.join(existing)} exist(s); pass --overwrite to replace them")
     for d in twins:
         for f in ("validation.json", "dem.tif"):
             if not (d / f).is_file():
@@ -44,6 +55,17 @@ def roundtrip_report(twins, per_class, model, output, overwrite, progress) -> No
               "classification report's per-region accuracy of the same region's real disks.")
     if per_class is not None:
         header += f" Real accuracies from `{per_class}`."
-    write_text_atomic(output.parent / "roundtrip.csv", table.to_csv(index=False))
+    write_text_atomic(table_path, table.to_csv(index=False))
     write_text_atomic(output, render_roundtrip_markdown(table, header=header, model=model))
-    click.echo(f"{len(table)} twins -> {output}")
+    click.echo(f"{len(table)} twins -> {output}, {table_path}")
+
+
+def default_table_path(output: Path) -> Path:
+    """CSV beside the markdown OUTPUT, named after it (``README.md`` -> ``README.csv``).
+
+    Distinct from the append log of ``orokit validate --append-to`` and never OUTPUT itself.
+    """
+    output = Path(output)
+    if output.suffix.lower() == ".csv":
+        return output.with_name(output.stem + ".table.csv")
+    return output.with_suffix(".csv")

@@ -5,8 +5,13 @@ from pathlib import Path
 
 import click
 
-#: files written into OUT besides those of ``orokit synthesize-tree``
+#: files written into OUT besides those of ``orokit synthesize-tree``; hillshade.png is
+#: written last and marks a complete folder
 TERRAIN_FILES = ("dem.tif", "hillshade.png")
+#: the completion marker: removed first on --overwrite, written last
+MARKER = "hillshade.png"
+#: outputs of later steps that describe the old terrain, removed on --overwrite
+STALE_FILES = ("validation.json",)
 
 
 def like_domain(like: str, *, cell_size: float | None = None) -> tuple[float, float, float]:
@@ -44,7 +49,9 @@ def like_domain(like: str, *, cell_size: float | None = None) -> tuple[float, fl
 @click.option("--cell-size", type=float, default=None, help="Cell size (m) of a --like file without georeferencing.")
 @click.option("--n-peaks", type=int, default=None, help="Number of peaks (default: type density x area).")
 @click.option("--erosion/--no-erosion", default=True, show_default=True, help="Multi-scale constrained erosion.")
-@click.option("--seed", type=int, default=None, help="Random seed (tree and raster).")
+@click.option("--seed", type=click.IntRange(min=0), default=None,
+              help="Random seed of the tree and the raster [default: fresh entropy, recorded in synthesis.json "
+                   "and in the dem.tif tags].")
 @click.option("--crs", default=None, help="Output CRS (projected). Default: local frame.")
 @click.option("--tin", "write_tin", is_flag=True, help="Also write the TIN as tin.ply.")
 @click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False, path_type=Path),
@@ -53,47 +60,59 @@ def like_domain(like: str, *, cell_size: float | None = None) -> tuple[float, fl
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
 def synthesize(type_file, size, resolution, like, cell_size, n_peaks, erosion, seed, crs, write_tin, outdir, overwrite,
                progress) -> None:
-    """Synthesize a Divide Tree following a terrain type and render it to a raster."""
+    """Synthesize a Divide Tree following a terrain type and render it to a raster.
+
+    With --overwrite an interrupted run never leaves old and new files side by side: the
+    old outputs are removed (the marker hillshade.png first) once the new terrain is
+    computed, then every file is written atomically, the tree files, dem.tif and, last,
+    hillshade.png.
+    """
     import json
     import time
 
     import numpy as np
 
-    from orokit.cli.render import parse_length, write_outputs
-    from orokit.cli.synthesize_tree import parse_size
+    from orokit.cli.options import parse_length
+    from orokit.cli.render import write_outputs
     from orokit.raster.render import RenderParams, make_grid, render_elevation, tree_extent
     from orokit.synthesis.fidelity import compare_to_type
     from orokit.synthesis.output import SYNTHESIS_FILES, write_synthesis
     from orokit.synthesis.terrain_type import load_terrain_type
     from orokit.synthesis.tree import synthesize_divide_tree
 
-    existing = [f for f in SYNTHESIS_FILES + TERRAIN_FILES + ("tin.ply",) if (outdir / f).exists()]
+    outputs = (MARKER,) + tuple(f for f in SYNTHESIS_FILES + TERRAIN_FILES + ("tin.ply",) if f != MARKER)
+    existing = [f for f in outputs if (outdir / f).exists()]
     if existing and not overwrite:
         raise click.UsageError(f"{outdir} already holds {', '.join(existing)}; pass --overwrite to replace them")
     if like is not None:
         w, h, like_res = like_domain(like, cell_size=cell_size)
-        res = parse_length(resolution) if resolution is not None else like_res
+        res = parse_length(resolution, hint="--resolution") if resolution is not None else like_res
     else:
-        w, h = parse_size(size)
-        res = parse_length(resolution or "30m")
+        w, h = parse_length(size, pair=True, hint="--size")
+        res = parse_length(resolution or "30m", hint="--resolution")
     make_grid((0.0, 0.0, w, h), res)  # resolution errors before the synthesis
     ttype = load_terrain_type(type_file)
-    rng = np.random.default_rng(seed)
+    if seed is None:
+        seed = int(np.random.SeedSequence().entropy)  # recorded, so the run can be replayed
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
         bar = tqdm(total=3, desc="synthesize", unit="stage")
     t0 = time.perf_counter()
-    tree = synthesize_divide_tree(ttype, size_m=(w, h), n_peaks=n_peaks, crs=crs, rng=rng)
+    # the same int seeds the tree and the raster: `synthesize-tree --seed S` gives this tree and
+    # `render --seed S` this raster
+    tree = synthesize_divide_tree(ttype, size_m=(w, h), n_peaks=n_peaks, crs=crs, rng=seed)
     if bar is not None:
         bar.update(1)
     dem, skel = render_elevation(tree, resolution_m=res, extent=tree_extent(tree), erosion=erosion,
                                  params=RenderParams(min_prominence=float(tree.attrs.get("min_prominence", 30.0))),
-                                 return_skeleton=True, rng=rng)
+                                 return_skeleton=True, rng=seed)
     if bar is not None:
         bar.update(1)
     outdir.mkdir(parents=True, exist_ok=True)
+    for f in outputs + STALE_FILES:  # marker first: from here on the folder reads as incomplete
+        (outdir / f).unlink(missing_ok=True)
     extra = {"seed": seed, "types": [str(type_file)], "resolution_m": res, "erosion": bool(erosion), "like": like,
              "render_timings_s": json.loads(dem.attrs.get("timings", "{}")),
              "fidelity": compare_to_type(tree, ttype).reset_index().to_dict(orient="records")}

@@ -31,22 +31,35 @@ def append_row(table: Path, row: dict) -> None:
               help="Terrain type JSON to compare histograms with (default: the one in OUT/synthesis.json).")
 @click.option("--label", default=None, help="Expected region (default: the type's name).")
 @click.option("--min-prominence", type=float, default=30.0, show_default=True, help="eps (m) of the re-analysis.")
-@click.option("--reports", "reports_dir", type=click.Path(file_okay=False, path_type=Path), default=Path("reports"),
-              show_default=True, help="Folder of roundtrip.csv (one row appended per run).")
-@click.option("--append/--no-append", default=True, show_default=True,
-              help="Append the run's row to REPORTS/roundtrip.csv (--no-append: only OUT/validation.json).")
+@click.option("--z-units", type=click.Choice(["m", "ft"]), default=None,
+              help="Elevation units of a raster that declares none (rasters of `orokit render`/`synthesize` "
+                   "declare metres).")
+@click.option("-o", "--output", "json_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Validation JSON to write [default: OUT/validation.json when OUT is a folder; none for a "
+                   "raster, whose summary is only printed].")
+@click.option("--append-to", "append_to", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="CSV log to append the run's summary row to (created if missing). Default: no log.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing validation JSON.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the disk placement.")
-def validate(out, model_path, tree_path, type_file, label, min_prominence, reports_dir, append, seed) -> None:
-    """Re-analyse OUT (a synthesize folder or a raster), compare it with its Divide Tree, classify it."""
-    import json
+def validate(out, model_path, tree_path, type_file, label, min_prominence, z_units, json_path, append_to, overwrite,
+             seed) -> None:
+    """Re-analyse OUT (a synthesize folder or a raster), compare it with its Divide Tree, classify it.
 
-    from orokit.cli.render import read_tree
-    from orokit.io.atomic import write_text_atomic
-    from orokit.io.dem import read_dem
-    from orokit.validate.roundtrip import roundtrip, summary_json
+    Writes OUT/validation.json for a folder (or -o JSON) and, with --append-to, one row to a CSV log;
+    nothing else.
+    """
+    import json
 
     folder = out if out.is_dir() else None
     raster = folder / "dem.tif" if folder else out
+    if json_path is None and folder is not None:
+        json_path = folder / "validation.json"
+    if json_path is not None and json_path.exists() and not overwrite:
+        raise click.UsageError(f"{json_path} exists; pass --overwrite to replace it")
+    if append_to is not None and append_to.exists() and append_to.is_dir():
+        raise click.BadParameter(f"{append_to} is a folder; give the CSV file to append to", param_hint="--append-to")
+    if folder is not None and not raster.is_file():
+        raise click.UsageError(f"{folder} has no dem.tif; run `orokit synthesize -o {folder}` (or give the raster)")
     if tree_path is None:
         if folder is None or not (folder / "dividetree.gpkg").exists():
             raise click.UsageError("give --tree (the Divide Tree the raster was rendered from)")
@@ -55,7 +68,13 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, repor
         types = json.loads((folder / "synthesis.json").read_text()).get("types") or []
         if len(types) == 1 and Path(types[0]).exists():
             type_file = Path(types[0])
-    dem = read_dem(str(raster), z_units="m")
+
+    from orokit.cli.render import read_tree
+    from orokit.io.atomic import write_text_atomic
+    from orokit.io.dem import read_dem
+    from orokit.validate.roundtrip import roundtrip, summary_json
+
+    dem = read_dem(str(raster), z_units=z_units)
     tree = read_tree(tree_path)
     ttype = None
     if type_file is not None:
@@ -69,19 +88,23 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, repor
         model = load_model(model_path)
     rt = roundtrip(dem, tree, min_prominence=min_prominence, terrain_type=ttype, model=model,
                    expected_label=label, rng=seed)
-    row = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "raster": str(raster),
-           "tree": str(tree_path), "model": str(model_path) if model_path else "", **rt.summary()}
-    if append:
-        append_row(reports_dir / "roundtrip.csv", row)
-    if folder is not None:
-        write_text_atomic(folder / "validation.json", summary_json(rt))
     s = rt.summary()
+    if json_path is not None:
+        write_text_atomic(json_path, summary_json(rt))
+    if append_to is not None:
+        row = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "raster": str(raster),
+               "tree": str(tree_path), "model": str(model_path) if model_path else "", **s}
+        append_row(append_to, row)
     msg = (f"recovered {100 * s['recovered_share']:.1f} % of {s['tree_peaks']} tree peaks >= {min_prominence:g} m, "
            f"{s['extra_peaks']} extra ({100 * s['extra_share']:.1f} %)")
     if "max_bin_error" in s:
         msg += f"; max histogram bin error {s['max_bin_error']:.3f}"
-    if "predicted" in s:
-        msg += f"; classified as {s['predicted']}"
-        if "disk_accuracy" in s:
-            msg += f" ({100 * s['disk_accuracy']:.0f} % of {s['n_disks']} disks right)"
-    click.echo(msg + (f" -> {reports_dir / 'roundtrip.csv'}" if append else ""))
+    if model is not None:
+        if not s.get("n_disks"):
+            msg += f"; not classified: no disk of radius {model.radius_m / 1000:g} km fits"
+        else:
+            msg += f"; classified as {s['predicted']}"
+            if "disk_accuracy" in s:
+                msg += f" ({100 * s['disk_accuracy']:.0f} % of {s['n_disks']} disks right)"
+    written = [str(p) for p in (json_path, append_to) if p is not None]
+    click.echo(msg + (f" -> {', '.join(written)}" if written else ""))

@@ -20,7 +20,7 @@ from orokit.errors import InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["PeakComparison", "RoundTrip", "compare_peaks", "roundtrip", "roundtrip_table"]
+__all__ = ["PeakComparison", "RoundTrip", "compare_peaks", "model_feature_options", "roundtrip", "roundtrip_table"]
 
 
 @dataclass
@@ -188,17 +188,34 @@ def roundtrip(
         from orokit.classify.features import features_from_dem
         from orokit.classify.predict import predict_regions
 
-        md = model.metadata
         feats = features_from_dem(dem, radius_m=model.radius_m, analysis=analysis, spec=model.spec,
-                                  min_prominence_m=float(md.get("min_prominence_m") or min_prominence),
-                                  min_peaks=int(md.get("min_peaks") or 20),
-                                  relative_elevation=md.get("relative_elevation") or "minmax", rng=rng)
+                                  **model_feature_options(model.metadata, min_prominence=min_prominence), rng=rng)
         pred = predict_regions(model, feats)
     attrs = {"min_prominence": float(min_prominence), "raster_peaks": int(len(analysis.peaks)),
              "cell_size_m": res, "shape": f"{dem.shape[1]}x{dem.shape[0]}"}
     logger.info("round trip: %.1f %% of %d tree peaks recovered, %d extra",
                 100 * comp.recovered_share, comp.n_tree, len(comp.extra))
     return RoundTrip(comp, hist, pred, expected_label, attrs)
+
+
+def model_feature_options(metadata: dict[str, Any], *, min_prominence: float = 30.0) -> dict[str, Any]:
+    """Feature options a model was trained with (eps, minimum peaks per disk, relative
+    elevation), so the raster's disks are described the same way.
+
+    Only missing (``None``) entries take the defaults (``min_prominence``, 20 peaks,
+    ``"minmax"``): an explicit 0 is kept.
+
+    Examples
+    --------
+    >>> model_feature_options({"min_prominence_m": 0.0, "min_peaks": 0})
+    {'min_prominence_m': 0.0, 'min_peaks': 0, 'relative_elevation': 'minmax'}
+    """
+    eps = metadata.get("min_prominence_m")
+    min_peaks = metadata.get("min_peaks")
+    rel = metadata.get("relative_elevation")
+    return {"min_prominence_m": float(eps if eps is not None else min_prominence),
+            "min_peaks": int(min_peaks if min_peaks is not None else 20),
+            "relative_elevation": rel if rel is not None else "minmax"}
 
 
 def roundtrip_table(runs: list[dict[str, Any]]) -> pd.DataFrame:

@@ -47,9 +47,9 @@ def test_validate_classifies_disks_with_the_committed_model(rendered_folder, tmp
     folder, tree = rendered_folder
     classes = load_model(MODEL).classes
     label = classes[0]
-    rep = tmp_path / "reports"
+    log = tmp_path / "roundtrip.csv"
     r = CliRunner().invoke(cli, ["validate", str(folder), "--model", str(MODEL), "--label", label,
-                                 "--reports", str(rep)])
+                                 "--append-to", str(log), "--overwrite"])
     assert r.exit_code == 0, r.output
     assert "classified as" in r.output
     v = json.loads((folder / "validation.json").read_text())
@@ -65,19 +65,19 @@ def test_validate_classifies_disks_with_the_committed_model(rendered_folder, tmp
     assert s["expected"] == label
     assert s["disk_accuracy"] == pytest.approx(c["votes"][label] / s["n_disks"])
     assert s["vote_correct"] == (c["label"] == label)
-    row = pd.read_csv(rep / "roundtrip.csv").iloc[0]
+    row = pd.read_csv(log).iloc[0]
     assert row["predicted"] == c["label"] and row["n_disks"] == s["n_disks"]
     # the tree's own terrain keeps its peaks
     assert s["recovered_share"] >= 0.95
 
 
-def test_validate_no_append_writes_only_the_folder(rendered_folder, tmp_path):
+def test_validate_without_label_writes_only_the_folder(rendered_folder, tmp_path, monkeypatch):
     folder, _ = rendered_folder
     (folder / "validation.json").unlink(missing_ok=True)
-    rep = tmp_path / "reports"
-    r = CliRunner().invoke(cli, ["validate", str(folder), "--model", str(MODEL), "--reports", str(rep), "--no-append"])
+    monkeypatch.chdir(tmp_path)
+    r = CliRunner().invoke(cli, ["validate", str(folder), "--model", str(MODEL)])
     assert r.exit_code == 0, r.output
-    assert (folder / "validation.json").is_file() and not (rep / "roundtrip.csv").exists()
+    assert (folder / "validation.json").is_file() and list(tmp_path.iterdir()) == []
     # without --label and without a type there is no expected region, only the vote
     s = json.loads((folder / "validation.json").read_text())["summary"]
     assert "expected" not in s and s["predicted"]
@@ -89,7 +89,7 @@ def test_roundtrip_report_table(rendered_folder, tmp_path):
 
     folder, _ = rendered_folder
     if not (folder / "validation.json").exists():
-        r = CliRunner().invoke(cli, ["validate", str(folder), "--reports", str(tmp_path), "--no-append"])
+        r = CliRunner().invoke(cli, ["validate", str(folder)])
         assert r.exit_code == 0, r.output
     twin = tmp_path / "twins" / "alaska"
     shutil.copytree(folder, twin)
@@ -102,7 +102,7 @@ def test_roundtrip_report_table(rendered_folder, tmp_path):
     text = out.read_text()
     assert "| alaska |" in text and "96" in text and "alaska/twin.png" in text
     assert (twin / "twin.png").stat().st_size > 0
-    table = pd.read_csv(out.parent / "roundtrip.csv")
+    table = pd.read_csv(out.parent / "README.csv")
     assert table.loc[0, "real_disk_acc_%"] == 96.0
     assert table.loc[0, "recovered_%"] >= 95.0
     r = CliRunner().invoke(cli, args)
@@ -131,3 +131,19 @@ def test_synthesize_like_takes_the_size_and_cell_size_of_a_dem(rendered_folder, 
     r = CliRunner().invoke(cli, ["synthesize", "--type", str(type_file), "--like", "no-such-dataset", "-o",
                                  str(tmp_path / "x"), "--no-progress"])
     assert r.exit_code != 0 and "--like" in r.output
+
+
+def test_classify_reads_rendered_rasters_without_flags(rendered_folder, tmp_path):
+    """`orokit classify` on a rendered raster, with its CRS and on a local grid, needs no --z-units."""
+    from orokit.io.dem import read_dem
+    from orokit.raster.render import write_cog
+
+    folder, _ = rendered_folder
+    dem = read_dem(str(folder / "dem.tif"))
+    local = xr.DataArray(dem.values, dims=("y", "x"), coords={"y": dem.y.values, "x": dem.x.values},
+                         attrs={"units": "m"}).rio.write_transform(dem.rio.transform())
+    write_cog(local, tmp_path / "local.tif")
+    for path in (folder / "dem.tif", tmp_path / "local.tif"):
+        r = CliRunner().invoke(cli, ["classify", str(MODEL), str(path), "--json"])
+        assert r.exit_code == 0, r.output
+        assert json.loads(r.output[r.output.index("{"):])["n_disks"] >= 1

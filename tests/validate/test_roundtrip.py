@@ -69,13 +69,13 @@ def test_cli_render_then_validate(tmp_path):
     assert (tmp_path / "hs.png").stat().st_size > 0 and (tmp_path / "t.ply").read_text().startswith("ply")
     r = CliRunner().invoke(cli, args)
     assert r.exit_code != 0 and "--overwrite" in r.output
-    rep = tmp_path / "reports"
-    r = CliRunner().invoke(cli, ["validate", str(out), "--tree", str(gpkg), "--reports", str(rep)])
+    log = tmp_path / "reports" / "roundtrip.csv"
+    r = CliRunner().invoke(cli, ["validate", str(out), "--tree", str(gpkg), "--append-to", str(log)])
     assert r.exit_code == 0, r.output
-    table = pd.read_csv(rep / "roundtrip.csv")
+    table = pd.read_csv(log)
     assert len(table) == 1 and table["recovered_share"].iloc[0] == 1.0
-    CliRunner().invoke(cli, ["validate", str(out), "--tree", str(gpkg), "--reports", str(rep)])
-    assert len(pd.read_csv(rep / "roundtrip.csv")) == 2  # appended
+    CliRunner().invoke(cli, ["validate", str(out), "--tree", str(gpkg), "--append-to", str(log)])
+    assert len(pd.read_csv(log)) == 2  # appended
 
 
 @pytest.mark.parametrize("res", ["0m", "-5", "abc"])
@@ -93,13 +93,16 @@ def test_cli_render_bad_resolution(tmp_path, res):
 @pytest.mark.slow
 def test_real_tree_round_trip(real_data):
     """The Divide Tree of a real DEM, rendered on the DEM's grid, keeps >= 95 % of its peaks."""
+    from orokit.data.manifest import load_manifest
     from orokit.io.dem import read_dem
     from orokit.raster.render import render_elevation
 
-    dem = read_dem(real_data("alaska"), z_units="ft", cell_size=92.6)
+    ds = load_manifest()["alaska"]
+    cell = ds.cell_size_m  # 92.61 m, as the manifest says
+    dem = read_dem(real_data("alaska"), z_units=ds.z_units, cell_size=cell)
     res = orokit.analyze(dem, min_prominence=30.0, isolation=False)
     ny, nx = dem.shape
-    out = render_elevation(res.divide_tree, resolution_m=92.6, extent=(0.0, -ny * 92.6, nx * 92.6, 0.0),
+    out = render_elevation(res.divide_tree, resolution_m=cell, extent=(0.0, -ny * cell, nx * cell, 0.0),
                            erosion=True, rng=0)
     s = roundtrip(out, res.divide_tree, min_prominence=30.0).summary()
     assert s["recovered_share"] >= 0.95
