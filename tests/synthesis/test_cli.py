@@ -158,3 +158,69 @@ def test_type_from_dem_file(tmp_path, make_dem):
     assert t.name == "dem"
     assert t.histograms["elevation"].edges[0] >= 1000.0
     assert t.provenance["area_km2"] == pytest.approx(80 * 80 * 0.06**2, rel=1e-6)
+
+
+def _bumps(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:n, 0:n]
+    z = np.full((n, n), 200.0)
+    for _ in range(50):
+        cy, cx, h, w = rng.uniform(0, n), rng.uniform(0, n), rng.uniform(50, 300), rng.uniform(2, 5)
+        z += h * np.exp(-((yy - cy) ** 2 + (xx - cx) ** 2) / (2 * w**2))
+    return z.astype("float32")
+
+
+def test_type_min_prominence_zero_is_kept(tmp_path, make_dem):
+    """--min-prominence 0 is a threshold, not "use the default" (review B3)."""
+    tif = tmp_path / "dem.tif"
+    make_dem(_bumps(60, 2), res=60.0).rio.to_raster(tif)
+    out = tmp_path / "t.json"
+    res = CliRunner().invoke(cli, ["type", str(tif), "-o", str(out), "--min-prominence", "0", "--z-units", "m"])
+    assert res.exit_code == 0, res.output
+    t = load_terrain_type(out)
+    assert t.min_prominence_m == 0.0
+    assert json.loads(out.read_text())["min_prominence_m"] == 0.0
+    # peaks below 30 m of prominence are counted: the prominence histogram starts at 0
+    assert t.histograms["prominence"].edges[0] == 0.0
+
+
+def test_type_min_prominence_zero_from_tree_file(tmp_path, small_type):
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+    from orokit.synthesis.tree import synthesize_divide_tree
+
+    tree = synthesize_divide_tree(small_type, size_m=12_000.0, rng=4)
+    gpkg = tmp_path / "tree.gpkg"
+    write_divide_tree_gpkg(tree, gpkg)
+    out = tmp_path / "t.json"
+    res = CliRunner().invoke(cli, ["type", str(gpkg), "-o", str(out), "--min-prominence", "0"])
+    assert res.exit_code == 0, res.output
+    assert load_terrain_type(out).min_prominence_m == 0.0
+
+
+@pytest.mark.parametrize("size", ["1.2.3km", ".", "-5km", "0km", "90 miles", "x60km", "nan"])
+def test_synthesize_tree_malformed_size_is_a_usage_error(tmp_path, type_file, size):
+    out = tmp_path / "o"
+    res = CliRunner().invoke(cli, ["synthesize-tree", "--type", str(type_file), "--size", size, "--no-progress",
+                                   "-o", str(out)])
+    assert res.exit_code == 2, res.output
+    assert "--size" in res.output and res.exception is None or isinstance(res.exception, SystemExit)
+    assert "Traceback" not in res.output and not out.exists()
+
+
+def test_length_parser_grammar():
+    from click import BadParameter
+
+    from orokit.cli.options import parse_length
+
+    assert parse_length("30 m") == 30.0
+    assert parse_length(".5km") == 500.0
+    assert parse_length("2e3m") == 2000.0
+    assert parse_length("9000 x 6000 m", pair=True) == (9000.0, 6000.0)
+    assert parse_length("90x60KM", pair=True) == (90_000.0, 60_000.0)
+    with pytest.raises(BadParameter, match="no unit"):
+        parse_length("2500", allow_bare=False)
+    with pytest.raises(BadParameter, match="did you mean"):
+        parse_length("10", bare_min_m=100.0)
+    for bad in ("1.2.3km", ".", "-5km", "0m", "1e999m", "5 k m", "90x60", "inf"):
+        with pytest.raises(BadParameter):
+            parse_length(bad, allow_bare=False, pair="x" in bad)
