@@ -70,7 +70,10 @@ def test_evaluate_and_model_roundtrip(feats, tmp_path):
     assert set(ev.per_feature) == set(feats.attrs["spec"] and [f["name"] for f in feats.attrs["spec"]["features"]])
     assert ev.confusion.sum() == sum(len(random_split(feats["label"], rng=0)[1]) for _ in range(4))
     sp = evaluate(feats, runs=3, split="spatial", feature_groups=False, rng=0)
-    assert 0.0 <= sp.mean_accuracy <= 1.0 and sp.params["buffer_m"] == 20_000.0
+    assert sp.params["buffer_m"] == 20_000.0
+    # every run had training disks of every region far enough from its held-out strip
+    assert np.isfinite(sp.accuracies).all() and min(sp.mean_train.values()) > 5
+    assert sp.mean_accuracy > 0.6  # 3 well separated styles; chance is 1/3
     model = train_classifier(feats, rng=0)
     path = save_model(model, tmp_path / "m.skops", model_metadata(model, feats, evaluation={"x": 1}))
     m = load_model(path)
