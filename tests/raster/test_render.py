@@ -58,22 +58,16 @@ def test_river_graph_is_forest_draining_to_outlets(rendered):
 def test_no_river_crosses_a_ridge(rendered):
     import shapely
 
-    tree, _, skel = rendered
-    p = tree.peaks[["x", "y"]].to_numpy()
-    s = tree.saddles[["x", "y"]].to_numpy()
-    e = tree.edges.to_numpy()
-    ridges = shapely.linestrings(np.concatenate([np.stack([p[e[:, 0]], s[e[:, 2]]], 1),
-                                                 np.stack([s[e[:, 2]], p[e[:, 1]]], 1)]))
+    _, _, skel = rendered
     rv = skel.river_network
     ed = rv.edges()
+    assert len(ed) > 10
     rivers = shapely.linestrings(np.stack([rv.xy[ed[:, 0]], rv.xy[ed[:, 1]]], 1))
-    # the straight tree ridges (before jitter) are crossed by no unrefined river edge
-    # except through the jitter band: check against the refined ridges exactly
+    # no river edge crosses a refined (jittered) ridge piece
     fine = skel.ridges
     fr = shapely.linestrings(np.stack([fine.xy[fine.segments[:, 0]], fine.xy[fine.segments[:, 1]]], 1))
     hits = shapely.STRtree(fr).query(rivers, predicate="crosses")
     assert hits.shape[1] == 0
-    assert len(ridges) == 8
 
 
 def test_raster_honours_peaks_and_saddles(rendered):
