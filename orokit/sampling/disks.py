@@ -161,19 +161,12 @@ def sample_disks_in_polygon(polygon: Any, *, radius_m: float, crs: Any = None, s
 
 
 def cell_size_m(transform: Any, crs: Any, shape: tuple[int, int]) -> tuple[float, float]:
-    """Ground size (dx, dy) in metres of one cell; geographic grids measured at the centre row."""
-    from pyproj import CRS, Geod
+    """Ground size (dx, dy) in metres of one cell; geographic grids measured at the centre row
+    (through :class:`orokit.geodesy.CellMetric`, like every distance in orokit)."""
+    from orokit.geodesy import CellMetric
 
-    dx, dy = abs(transform.a), abs(transform.e)
-    pcrs = CRS.from_user_input(crs) if crs is not None else None
-    if pcrs is not None and pcrs.is_geographic:
-        lon0 = transform.c + transform.a * shape[1] / 2
-        lat0 = transform.f + transform.e * shape[0] / 2
-        g = Geod(ellps="WGS84")
-        _, _, ex = g.inv(lon0, lat0, lon0 + dx, lat0)
-        _, _, ny = g.inv(lon0, lat0, lon0, lat0 + dy)
-        return float(ex), float(ny)
-    return float(dx), float(dy)
+    dx, dy = CellMetric(transform, crs).cell_size_m([int(shape[0]) // 2])
+    return float(dx[0]), float(dy[0])
 
 
 def sample_disks_in_mask(valid: NDArray[np.bool_], *, transform: Any, radius_m: float, crs: Any = None,
