@@ -109,12 +109,15 @@ def test_type_from_reference_tree_and_fidelity(tmp_path, real_data):
     from orokit.synthesis.fidelity import compare_to_type
     from orokit.synthesis.tree import synthesize_divide_tree
 
+    from orokit.data import load_manifest
+
     txt = real_data("dems/appalachians.txt")
+    cell = load_manifest()["appalachians"].cell_size_m  # the manifest knows the cell size
     out = tmp_path / "app.json"
-    res = CliRunner().invoke(cli, ["type", str(txt), "-o", str(out), "--cell-size", "92.6"])
+    res = CliRunner().invoke(cli, ["type", str(txt), "-o", str(out), "--cell-size", str(cell)])
     assert res.exit_code == 0, res.output
     t = load_terrain_type(out)
-    assert t.provenance["area_km2"] == pytest.approx((648 * 92.6) ** 2 / 1e6, rel=0.02)
+    assert t.provenance["area_km2"] == pytest.approx((648 * cell) ** 2 / 1e6, rel=0.02)
     tree = synthesize_divide_tree(t, size_m=50_000, rng=0)
     tree.validate()
     err = compare_to_type(tree, t)["max_bin_error"]
