@@ -75,7 +75,8 @@ $(INSTALLED): pyproject.toml | $(BIN)/python
 venv: $(INSTALLED)  ## create .venv and install orokit[dev]
 
 test: $(INSTALLED)  ## run the test suite on 2 cores
-	$(BIN)/python -m pytest -n 2 tests orokit --doctest-modules $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -q --doctest-modules orokit
+	$(BIN)/python -m pytest -n 2 tests $(PYTEST_ARGS)
 
 $(DATA_STAMP): $(MANIFEST) | $(INSTALLED)
 	@mkdir -p $(@D)
