@@ -60,7 +60,7 @@ REPORT_OUTPUTS += $(SYNTH_TYPES) $(SYNTHESIS_README)
 
 .PHONY: report test data venv clean-reports help analysis classification synthesis
 
-report: $(REPORT_OUTPUTS)  ## main pipeline: fetch/verify data, per-dataset summaries, index
+.DEFAULT_GOAL := report
 
 help:  ## list targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/'
@@ -145,6 +145,9 @@ $(ROUNDTRIP_README): $(ROUNDTRIP_VALIDATIONS) orokit/reports/roundtrip.py orokit
 	  --classification $(REPORTS)/classification/tables/per_class_10km.csv -o $@ --overwrite --no-progress
 
 roundtrip: $(ROUNDTRIP_README)  ## synthetic twins of every region: recovered peaks, histogram errors, reclassification
+
+# last, so that every stage above has appended its outputs (prerequisites expand when the rule is read)
+report: $(REPORT_OUTPUTS)  ## main pipeline: data, summaries, analysis, classification, synthesis, round trip
 
 clean-reports:  ## delete generated reports (keeps data and .venv)
 	rm -rf $(REPORTS)/datasets $(REPORTS)/README.md
