@@ -135,7 +135,7 @@ REPORT_OUTPUTS += $(ROUNDTRIP_README)
 
 # hillshade.png is the last of the files synthesize writes
 $(REPORTS)/roundtrip/%/hillshade.png: $(REPORTS)/synthesis/types/%.json $(DATA_STAMP) $(SYNTH_SRC) $(ROUNDTRIP_SRC) | $(INSTALLED)
-	$(OROKIT) -q synthesize --type $< --like $* --seed 0 -o $(@D) --overwrite --no-progress
+	$(OROKIT) -q synthesize --type $< --like $* --control-elevation like --seed 0 -o $(@D) --overwrite --no-progress
 
 $(REPORTS)/roundtrip/%/validation.json: $(REPORTS)/roundtrip/%/hillshade.png $(CLASSIFICATION_README) orokit/cli/validate.py | $(INSTALLED)
 	$(OROKIT) -q validate $(@D) --model $(ROUNDTRIP_MODEL) --overwrite

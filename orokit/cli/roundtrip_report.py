@@ -46,8 +46,16 @@ def roundtrip_report(twins, per_class, model, output, table_path, overwrite, pro
     table = roundtrip_rows(list(twins), real_accuracy=real)
     for d in tqdm(twins, desc="twin figures", disable=not progress):
         write_twin_png(real_dem_of(d), read_dem(str(d / "dem.tif"), z_units="m"), d / "twin.png", title=d.name)
+    import json
+
+    controls = {json.loads((d / "synthesis.json").read_text()).get("control_elevation")
+                for d in twins if (d / "synthesis.json").is_file()}
+    how = ("`orokit synthesize --like REGION --control-elevation like --seed 0`, erosion on: the real DEM's "
+           "elevation is the coarse elevation control C_H of the paper's section 5, so the large-scale relief "
+           "follows the real one while every peak, saddle, ridge, river and all detail are synthesized"
+           if controls == {"like"} else "`orokit synthesize --like REGION --seed 0`, erosion on")
     header = ("Each region's terrain type (`orokit type` on its analysis) is synthesized on a domain of the real "
-              "DEM's size and cell size (`orokit synthesize --like REGION --seed 0`, erosion on), re-analysed at "
+              f"DEM's size and cell size ({how}), re-analysed at "
               "eps = 30 m and classified by the region model (`orokit validate --model`). A tree peak >= eps is "
               "recovered when a raster peak lies within max(2 cells, 100 m) with a prominence within "
               "max(15 m, 10 %); extra = raster peaks >= eps with no tree peak within that distance. Histogram "

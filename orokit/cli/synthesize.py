@@ -16,6 +16,15 @@ STALE_FILES = ("validation.json",)
 
 def like_domain(like: str, *, cell_size: float | None = None) -> tuple[float, float, float]:
     """Width, height and cell size (metres) of a DEM file or of a manifest dataset."""
+    dem = _like_dem(like, cell_size=cell_size)
+    t = dem.rio.transform()
+    ny, nx = dem.shape
+    res = abs(float(t.a))
+    return nx * res, ny * abs(float(t.e)), res
+
+
+def _like_dem(like: str, *, cell_size: float | None = None):
+    """The DEM named by --like (a file or a manifest dataset), in metres."""
     from orokit.io.dem import read_dem
 
     if Path(like).exists():
@@ -32,10 +41,7 @@ def like_domain(like: str, *, cell_size: float | None = None) -> tuple[float, fl
     if dem.rio.crs is not None and dem.rio.crs.is_geographic:
         raise click.BadParameter(f"{like} is in a geographic CRS; give --size and --resolution in metres",
                                  param_hint="--like")
-    t = dem.rio.transform()
-    ny, nx = dem.shape
-    res = abs(float(t.a))
-    return nx * res, ny * abs(float(t.e)), res
+    return dem
 
 
 @click.command(name="synthesize")
@@ -48,6 +54,9 @@ def like_domain(like: str, *, cell_size: float | None = None) -> tuple[float, fl
                    "--resolution is given), e.g. a synthetic twin of a real DEM.")
 @click.option("--cell-size", type=float, default=None, help="Cell size (m) of a --like file without georeferencing.")
 @click.option("--n-peaks", type=int, default=None, help="Number of peaks (default: type density x area).")
+@click.option("--control-elevation", default=None,
+              help="Coarse elevation map C_H (m) guiding where high and low peaks go: a raster file, or 'like' for "
+                   "the --like DEM itself (a twin then keeps the real large-scale relief).")
 @click.option("--erosion/--no-erosion", default=True, show_default=True, help="Multi-scale constrained erosion.")
 @click.option("--seed", type=click.IntRange(min=0), default=None,
               help="Random seed of the tree and the raster [default: fresh entropy, recorded in synthesis.json "
@@ -58,8 +67,8 @@ def like_domain(like: str, *, cell_size: float | None = None) -> tuple[float, fl
               help="Output folder: dividetree.gpkg/.txt, peaks.csv, synthesis.json, dem.tif, hillshade.png.")
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs in OUTPUT.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
-def synthesize(type_file, size, resolution, like, cell_size, n_peaks, erosion, seed, crs, write_tin, outdir, overwrite,
-               progress) -> None:
+def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_elevation, erosion, seed, crs, write_tin,
+               outdir, overwrite, progress) -> None:
     """Synthesize a Divide Tree following a terrain type and render it to a raster.
 
     With --overwrite an interrupted run never leaves old and new files side by side: the
@@ -102,7 +111,14 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, erosion, s
     t0 = time.perf_counter()
     # the same int seeds the tree and the raster: `synthesize-tree --seed S` gives this tree and
     # `render --seed S` this raster
-    tree = synthesize_divide_tree(ttype, size_m=(w, h), n_peaks=n_peaks, crs=crs, rng=seed)
+    c_h = control_elevation
+    if control_elevation == "like":
+        if like is None:
+            raise click.UsageError("--control-elevation like needs --like")
+        c_h = np.asarray(_like_dem(like, cell_size=cell_size).values, dtype=float)  # row 0 north, stretched
+    elif control_elevation is not None and not Path(control_elevation).exists():
+        raise click.BadParameter(f"{control_elevation} does not exist", param_hint="--control-elevation")
+    tree = synthesize_divide_tree(ttype, size_m=(w, h), n_peaks=n_peaks, crs=crs, control_elevation=c_h, rng=seed)
     if bar is not None:
         bar.update(1)
     dem, skel = render_elevation(tree, resolution_m=res, extent=tree_extent(tree), erosion=erosion,
@@ -114,6 +130,7 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, erosion, s
     for f in outputs + STALE_FILES:  # marker first: from here on the folder reads as incomplete
         (outdir / f).unlink(missing_ok=True)
     extra = {"seed": seed, "types": [str(type_file)], "resolution_m": res, "erosion": bool(erosion), "like": like,
+             "control_elevation": None if control_elevation is None else str(control_elevation),
              "render_timings_s": json.loads(dem.attrs.get("timings", "{}")),
              "fidelity": compare_to_type(tree, ttype).reset_index().to_dict(orient="records")}
     write_synthesis(tree, outdir, extra=extra)
