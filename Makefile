@@ -12,6 +12,8 @@
 
 SHELL := /bin/bash
 .DELETE_ON_ERROR:
+# keep intermediate files of pattern-rule chains (a twin's hillshade.png marks its folder complete)
+.PRECIOUS: reports/roundtrip/%/hillshade.png reports/roundtrip/relief/%/hillshade.png
 .SUFFIXES:
 
 PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
@@ -135,7 +137,7 @@ REPORT_OUTPUTS += $(ROUNDTRIP_README)
 
 # hillshade.png is the last of the files synthesize writes
 $(REPORTS)/roundtrip/%/hillshade.png: $(REPORTS)/synthesis/types/%.json $(DATA_STAMP) $(SYNTH_SRC) $(ROUNDTRIP_SRC) | $(INSTALLED)
-	$(OROKIT) -q synthesize --type $< --like $* --control-elevation like --seed 0 -o $(@D) --overwrite --no-progress
+	$(OROKIT) -q synthesize --type $< --like $* --seed 0 -o $(@D) --overwrite --no-progress
 
 $(REPORTS)/roundtrip/%/validation.json: $(REPORTS)/roundtrip/%/hillshade.png $(CLASSIFICATION_README) orokit/cli/validate.py | $(INSTALLED)
 	$(OROKIT) -q validate $(@D) --model $(ROUNDTRIP_MODEL) --overwrite
@@ -144,7 +146,23 @@ $(ROUNDTRIP_README): $(ROUNDTRIP_VALIDATIONS) orokit/reports/roundtrip.py orokit
 	$(OROKIT) -q roundtrip-report $(ROUNDTRIP_VALIDATIONS:%/validation.json=%) --model $(ROUNDTRIP_MODEL) \
 	  --classification $(REPORTS)/classification/tables/per_class_10km.csv -o $@ --overwrite --no-progress
 
-roundtrip: $(ROUNDTRIP_README)  ## synthetic twins of every region: recovered peaks, histogram errors, reclassification
+# the same twins with the real DEM's elevation as the coarse elevation control C_H (paper section 5):
+# the large-scale relief follows the real one, every peak, saddle, ridge and detail is synthesized
+RELIEF_VALIDATIONS := $(DATASETS:%=$(REPORTS)/roundtrip/relief/%/validation.json)
+RELIEF_README := $(REPORTS)/roundtrip/relief/README.md
+REPORT_OUTPUTS += $(RELIEF_README)
+
+$(REPORTS)/roundtrip/relief/%/hillshade.png: $(REPORTS)/synthesis/types/%.json $(DATA_STAMP) $(SYNTH_SRC) $(ROUNDTRIP_SRC) | $(INSTALLED)
+	$(OROKIT) -q synthesize --type $< --like $* --control-elevation like --seed 0 -o $(@D) --overwrite --no-progress
+
+$(REPORTS)/roundtrip/relief/%/validation.json: $(REPORTS)/roundtrip/relief/%/hillshade.png $(CLASSIFICATION_README) orokit/cli/validate.py | $(INSTALLED)
+	$(OROKIT) -q validate $(@D) --model $(ROUNDTRIP_MODEL) --overwrite
+
+$(RELIEF_README): $(RELIEF_VALIDATIONS) orokit/reports/roundtrip.py orokit/cli/roundtrip_report.py | $(INSTALLED)
+	$(OROKIT) -q roundtrip-report $(RELIEF_VALIDATIONS:%/validation.json=%) --model $(ROUNDTRIP_MODEL) \
+	  --classification $(REPORTS)/classification/tables/per_class_10km.csv -o $@ --overwrite --no-progress
+
+roundtrip: $(ROUNDTRIP_README) $(RELIEF_README)  ## synthetic twins of every region (free, and with the real relief as C_H)
 
 # last, so that every stage above has appended its outputs (prerequisites expand when the rule is read)
 report: $(REPORT_OUTPUTS)  ## main pipeline: data, summaries, analysis, classification, synthesis, round trip
