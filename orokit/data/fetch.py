@@ -74,7 +74,9 @@ def _copy(src: Path, dst: Path) -> None:
 def _download(url: str, dst: Path, *, retries: int = 3) -> None:
     import pooch
 
-    downloader = pooch.choose_downloader(url, progressbar=False)
+    from pooch.downloaders import choose_downloader
+
+    downloader = choose_downloader(url, progressbar=False)
     if isinstance(downloader, pooch.HTTPDownloader):
         downloader = pooch.HTTPDownloader(progressbar=False, timeout=60)
     last: Exception | None = None
