@@ -5,6 +5,7 @@ from pathlib import Path
 
 import click
 
+from orokit.cli.generator_options import generator_options
 from orokit.cli.options import Length
 
 #: a length in metres: 30m, 0.03km, or a plain number of metres (strict, see orokit.cli.options)
@@ -40,7 +41,9 @@ def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None
     preview last, so it marks a complete set)."""
     from orokit.raster.render import write_cog, write_hillshade_png, write_tin_ply
 
-    write_cog(dem, out)
+    from orokit.cli.generator_options import EXTRA_TAGS
+
+    write_cog(dem, out, tags={k: v for k, v in dem.attrs.items() if k in EXTRA_TAGS})
     if tin_path is not None and skeleton is not None:
         write_tin_ply(skeleton.tin, tin_path)
     if preview is not None:
@@ -70,9 +73,14 @@ def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None
 @click.option("--tin", "tin_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write the TIN as a PLY mesh.")
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
+@generator_options
 def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, lam, cell_size, preview,
-           tin_path, overwrite) -> None:
-    """Render the Divide Tree TREE (.gpkg, .txt or a synthesize folder) to an elevation raster."""
+           tin_path, overwrite, generator, params, exemplar) -> None:
+    """Render the Divide Tree TREE (.gpkg, .txt or a synthesize folder) to an elevation raster.
+
+    --generator picks the backend (default argudo, orokit's renderer); --erosion, --lambda and
+    --min-prominence are the argudo parameters, other backends take --param K=V.
+    """
     import time
 
     from orokit.raster.render import RenderParams, render_elevation
@@ -81,6 +89,24 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
         if p is not None and p.exists() and not overwrite:
             raise click.UsageError(f"{p} exists; pass --overwrite to replace it")
     res = resolution
+    if generator != "argudo" or params:
+        from orokit.cli.generator_options import check_generator_inputs, render_generator
+
+        if tin_path is not None:
+            raise click.UsageError("--tin needs --generator argudo (other generators build no TIN)")
+        if generator == "argudo":
+            params = (f"lam={lam}", f"min_prominence={min_prominence}", f"erosion={erosion}") + tuple(params)
+        parsed = check_generator_inputs(generator, params, exemplar)
+        t = read_tree(tree, cell_size=cell_size)
+        if like is not None:
+            extent = extent_like(like, cell_size=cell_size)
+        t0 = time.perf_counter()
+        dem = render_generator(t, generator=generator, params=parsed, resolution_m=res, extent=extent, seed=seed,
+                               tree_path=tree, exemplar=exemplar)
+        write_outputs(dem, out, preview=preview, tin_path=None)
+        click.echo(f"{dem.shape[1]} x {dem.shape[0]} cells at {res:g} m from {t.n_peaks} peaks with {generator} "
+                   f"in {time.perf_counter() - t0:.1f} s (seed {dem.attrs['seed']}) -> {out}")
+        return
     params = RenderParams(lam=lam, min_prominence=min_prominence)
     t = read_tree(tree, cell_size=cell_size)
     if like is not None:

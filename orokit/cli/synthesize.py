@@ -5,6 +5,8 @@ from pathlib import Path
 
 import click
 
+from orokit.cli.generator_options import generator_options
+
 #: files written into OUT besides those of ``orokit synthesize-tree``; hillshade.png is
 #: written last and marks a complete folder
 TERRAIN_FILES = ("dem.tif", "hillshade.png")
@@ -67,8 +69,9 @@ def _like_dem(like: str, *, cell_size: float | None = None):
               help="Output folder: dividetree.gpkg/.txt, peaks.csv, synthesis.json, dem.tif, hillshade.png.")
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs in OUTPUT.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
+@generator_options
 def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_elevation, erosion, seed, crs, write_tin,
-               outdir, overwrite, progress) -> None:
+               outdir, overwrite, progress, generator, params, exemplar) -> None:
     """Synthesize a Divide Tree following a terrain type and render it to a raster.
 
     With --overwrite an interrupted run never leaves old and new files side by side: the
@@ -100,6 +103,15 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
         w, h = parse_length(size, pair=True, hint="--size")
         res = parse_length(resolution or "30m", hint="--resolution")
     make_grid((0.0, 0.0, w, h), res)  # resolution errors before the synthesis
+    parsed = None
+    if generator != "argudo" or params:
+        from orokit.cli.generator_options import check_generator_inputs
+
+        if write_tin:
+            raise click.UsageError("--tin needs --generator argudo (other generators build no TIN)")
+        if generator == "argudo":
+            params = (f"erosion={erosion}",) + tuple(params)
+        parsed = check_generator_inputs(generator, params, exemplar)
     ttype = load_terrain_type(type_file)
     if seed is None:
         seed = int(np.random.SeedSequence().entropy)  # recorded, so the run can be replayed
@@ -121,15 +133,23 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
     tree = synthesize_divide_tree(ttype, size_m=(w, h), n_peaks=n_peaks, crs=crs, control_elevation=c_h, rng=seed)
     if bar is not None:
         bar.update(1)
-    dem, skel = render_elevation(tree, resolution_m=res, extent=tree_extent(tree), erosion=erosion,
-                                 params=RenderParams(min_prominence=float(tree.attrs.get("min_prominence", 30.0))),
-                                 return_skeleton=True, rng=seed)
+    if parsed is None:
+        dem, skel = render_elevation(tree, resolution_m=res, extent=tree_extent(tree), erosion=erosion,
+                                     params=RenderParams(min_prominence=float(tree.attrs.get("min_prominence", 30.0))),
+                                     return_skeleton=True, rng=seed)
+    else:
+        from orokit.cli.generator_options import render_generator
+
+        skel = None
+        dem = render_generator(tree, generator=generator, params=parsed, resolution_m=res, extent=tree_extent(tree),
+                               seed=seed, exemplar=exemplar)
     if bar is not None:
         bar.update(1)
     outdir.mkdir(parents=True, exist_ok=True)
     for f in outputs + STALE_FILES:  # marker first: from here on the folder reads as incomplete
         (outdir / f).unlink(missing_ok=True)
     extra = {"seed": seed, "types": [str(type_file)], "resolution_m": res, "erosion": bool(erosion), "like": like,
+             "generator": generator, "generator_parameters": json.loads(dem.attrs.get("parameters", "{}")),
              "control_elevation": None if control_elevation is None else str(control_elevation),
              "render_timings_s": json.loads(dem.attrs.get("timings", "{}")),
              "fidelity": compare_to_type(tree, ttype).reset_index().to_dict(orient="records")}
