@@ -21,7 +21,8 @@ from pathlib import Path
 def run(dem_name: str, size_km: float, res: float, erosion: bool, seed: int) -> dict:
     import orokit
     from orokit.data import open_dataset_dem
-    from orokit.raster.render import render_elevation, tree_extent
+    from orokit.raster.render import render_elevation
+    from orokit.raster.skeleton import tree_extent
     from orokit.synthesis.terrain_type import TerrainType
     from orokit.synthesis.tree import synthesize_divide_tree
     from orokit.validate.roundtrip import roundtrip

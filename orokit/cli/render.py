@@ -39,7 +39,7 @@ def extent_like(path: Path, *, cell_size: float | None = None) -> tuple[float, f
 def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None, skeleton=None) -> None:
     """Write the raster, then the TIN, then the hillshade preview (each atomically; the
     preview last, so it marks a complete set)."""
-    from orokit.raster.render import write_cog, write_hillshade_png, write_tin_ply
+    from orokit.io.raster_io import write_cog, write_hillshade_png, write_tin_ply
 
     from orokit.cli.generator_options import EXTRA_TAGS
 
@@ -83,7 +83,8 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
     """
     import time
 
-    from orokit.raster.render import RenderParams, render_elevation
+    from orokit.raster.params import RenderParams
+    from orokit.raster.render import render_elevation
 
     for p in (out, preview, tin_path):
         if p is not None and p.exists() and not overwrite:

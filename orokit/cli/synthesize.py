@@ -86,7 +86,10 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
 
     from orokit.cli.options import parse_length
     from orokit.cli.render import write_outputs
-    from orokit.raster.render import RenderParams, make_grid, render_elevation, tree_extent
+    from orokit.raster.params import RenderParams
+    from orokit.raster.rasterize import make_grid
+    from orokit.raster.render import render_elevation
+    from orokit.raster.skeleton import tree_extent
     from orokit.synthesis.fidelity import compare_to_type
     from orokit.synthesis.output import SYNTHESIS_FILES, write_synthesis
     from orokit.synthesis.terrain_type import load_terrain_type

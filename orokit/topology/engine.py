@@ -56,6 +56,17 @@ class Orometry:
         return self.peak_cell % self.shape[1]
 
 
+def steepest_ascent_basins(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Basins of steepest ascent of a 2-D array in the engine's total order (NaN = nodata).
+
+    Returns ``(label, max_cell)``: the basin (index into ``max_cell``, -1 for NaN cells)
+    of every cell in raster order, and the flat cell of each basin's maximum. Ties break
+    as in :func:`orometry` (elevation, then raster order; earlier = higher).
+    """
+    ptr, _ = _kernels.steepest_ascent(np.pad(z, 1, constant_values=np.nan))
+    return _kernels.label_basins(ptr)
+
+
 def orometry(z: np.ndarray, *, min_prominence: float, outside: str = "unknown") -> Orometry:
     """Exact peaks, prominences and pruned Divide Tree of a 2-D array (NaN = nodata)."""
     if z.ndim != 2 or z.size == 0:

@@ -12,7 +12,9 @@ from affine import Affine
 import orokit
 from orokit.raster import _kernels
 from orokit.raster.rasterize import Grid
-from orokit.raster.render import cap_basins, render_elevation, separate_saddles
+from orokit.raster.enforce import cap_basins
+from orokit.raster.render import render_elevation
+from orokit.raster.skeleton import separate_saddles
 from orokit.topology.divide_tree import DivideTree
 from orokit.validate.roundtrip import compare_peaks
 

@@ -6,7 +6,9 @@ import pytest
 
 import orokit
 from orokit.errors import CRSError, DivideTreeError, InputError
-from orokit.raster.render import RenderParams, build_skeleton, render_elevation
+from orokit.raster.params import RenderParams
+from orokit.raster.render import render_elevation
+from orokit.raster.skeleton import build_skeleton
 from orokit.topology.divide_tree import DivideTree
 from orokit.validate.roundtrip import compare_peaks
 

@@ -11,7 +11,9 @@ import orokit.raster._kernels as raster_kernels
 import orokit.topology._kernels as engine_kernels
 from orokit.cli.main import cli
 from orokit.io.dem import read_dem
-from orokit.raster.render import RenderParams, render_elevation, resolve_seed, write_cog, write_hillshade_png
+from orokit.io.raster_io import write_cog, write_hillshade_png
+from orokit.raster.params import RenderParams
+from orokit.raster.render import render_elevation, resolve_seed
 from orokit.topology.divide_tree import DivideTree
 from orokit.validate.roundtrip import compare_peaks
 
@@ -132,18 +134,22 @@ def test_basins_come_from_the_engine_kernels(monkeypatch):
     assert calls and calls[0] == dem.size
 
 
-def test_hillshade_preview_uses_the_report_hillshade(tmp_path, monkeypatch):
+def test_hillshade_preview_uses_the_shared_hillshade(tmp_path, monkeypatch):
+    import orokit.io.raster_io as raster_io
     import orokit.reports.dem_summary as dem_summary
+    import orokit.raster.shade as shade
+
+    assert raster_io.hillshade is shade.hillshade is dem_summary.hillshade  # one shading for previews and reports
     from PIL import Image
 
     calls = []
-    real = dem_summary.hillshade
+    real = shade.hillshade
 
     def counting(dem, **kw):
         calls.append(dem.shape)
         return real(dem, **kw)
 
-    monkeypatch.setattr(dem_summary, "hillshade", counting)
+    monkeypatch.setattr(raster_io, "hillshade", counting)
     dem = render_elevation(two_peaks(), resolution_m=50.0, erosion=False, params=FAST, rng=4)
     dem[:5, :5] = np.nan
     write_hillshade_png(dem, tmp_path / "hs.png", max_size=30)

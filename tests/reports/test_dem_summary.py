@@ -12,8 +12,8 @@ import pytest  # noqa: E402
 from click.testing import CliRunner  # noqa: E402
 
 from orokit.cli.main import cli  # noqa: E402
+from orokit.raster.shade import hillshade  # noqa: E402
 from orokit.reports.dem_summary import (  # noqa: E402
-    hillshade,
     plot_hillshade,
     render_index,
     summarize_dem,

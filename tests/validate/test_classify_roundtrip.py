@@ -24,7 +24,9 @@ def rendered_folder(tmp_path_factory):
     """A 30 x 30 km tree (analysis of a random multi-fractal DEM) rendered at 100 m."""
     from orokit.io.divide_tree_io import write_divide_tree_gpkg
     from orokit.raster.noise import fractal_noise
-    from orokit.raster.render import RenderParams, render_elevation, write_cog
+    from orokit.io.raster_io import write_cog
+    from orokit.raster.params import RenderParams
+    from orokit.raster.render import render_elevation
 
     z = 1500.0 + fractal_noise((300, 300), 100.0, amplitude=600.0, largest_m=8000.0, rng=4)
     x0, y0 = 500000.0, 4000000.0
@@ -136,7 +138,7 @@ def test_synthesize_like_takes_the_size_and_cell_size_of_a_dem(rendered_folder, 
 def test_classify_reads_rendered_rasters_without_flags(rendered_folder, tmp_path):
     """`orokit classify` on a rendered raster, with its CRS and on a local grid, needs no --z-units."""
     from orokit.io.dem import read_dem
-    from orokit.raster.render import write_cog
+    from orokit.io.raster_io import write_cog
 
     folder, _ = rendered_folder
     dem = read_dem(str(folder / "dem.tif"))

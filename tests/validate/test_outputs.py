@@ -10,7 +10,7 @@ import pytest
 import rasterio
 from click.testing import CliRunner
 
-import orokit.raster.render as render_mod
+import orokit.io.raster_io as raster_io
 from orokit.cli.main import cli
 from orokit.io.dem import read_dem
 from orokit.topology.divide_tree import DivideTree
@@ -65,7 +65,7 @@ def test_interrupted_overwrite_leaves_no_old_file_behind(small_type_file, tmp_pa
     def disk_full(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(render_mod, "write_cog", disk_full)
+    monkeypatch.setattr(raster_io, "write_cog", disk_full)
     r = synthesize(out, small_type_file, "--seed", "2", "--overwrite")
     assert r.exit_code != 0
     left = sorted(p.name for p in out.iterdir())

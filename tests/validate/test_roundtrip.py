@@ -38,7 +38,8 @@ def test_compare_peaks_counts_recovered_and_extra():
 
 
 def test_roundtrip_of_rendered_tree():
-    from orokit.raster.render import RenderParams, render_elevation
+    from orokit.raster.params import RenderParams
+    from orokit.raster.render import render_elevation
 
     tree = two_peak_tree()
     dem = render_elevation(tree, resolution_m=50.0, erosion=False, params=RenderParams(erosion_steps=1), rng=1)

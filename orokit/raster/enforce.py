@@ -1,0 +1,174 @@
+"""Orometry enforcement: make a rendered raster's Divide Tree the tree it was rendered from."""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from orokit.raster import _kernels
+from orokit.raster.rasterize import Grid, set_cells
+from orokit.raster.skeleton import TerrainSkeleton
+from orokit.topology.engine import steepest_ascent_basins
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["cap_basins", "enforce_orometry"]
+
+
+def _saddle_normals(skel: TerrainSkeleton) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals of the ridge at every saddle (from its two refined neighbours)."""
+    n = skel.n_peaks
+    m = skel.node_xyz.shape[0] - n
+    seg = skel.ridges.segments
+    xy = skel.ridges.xy
+    nb = np.full((m, 2), -1, np.int64)
+    sid = np.concatenate([seg[:, 0], seg[:, 1]])
+    other = np.concatenate([seg[:, 1], seg[:, 0]])
+    is_s = (sid >= n) & (sid < n + m)
+    sid, other = sid[is_s] - n, other[is_s]
+    order = np.argsort(sid, kind="stable")
+    sid, other = sid[order], other[order]
+    if sid.size:
+        first = np.r_[True, sid[1:] != sid[:-1]]
+        last = np.r_[sid[1:] != sid[:-1], True]
+        nb[sid[first], 0] = other[first]
+        nb[sid[last], 1] = other[last]
+    sxy = skel.node_xyz[n:, :2]
+    p0 = np.where(nb[:, :1] >= 0, xy[np.maximum(nb[:, 0], 0)], sxy)
+    p1 = np.where(nb[:, 1:] >= 0, xy[np.maximum(nb[:, 1], 0)], sxy)
+    d = p1 - p0
+    norm = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-12)
+    return -d[:, 1] / norm, d[:, 0] / norm
+
+
+def enforce_orometry(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, label: np.ndarray | None = None,
+                     drop_m: float = 0.5, trench_m: float = 3000.0, max_rounds: int = 6) -> np.ndarray:
+    """Make the raster's orometry that of the tree (in place).
+
+    1. A trench perpendicular to the ridge through every saddle, just below it, until the
+       ground is lower (no path beside a saddle crosses the ridge above it); a trench
+       stops at a cell of another ridge (``label``: tree edge id of burnt ridge cells).
+    2. Peak and saddle cells get their exact elevations.
+    3. Rounds of basin checks (:func:`cap_basins`): hills without a tree peak are cut
+       down to their pass with a strictly ascending path (1 mm per cell) to a tree peak,
+       and every pass between the basins of two tree peaks that is higher than the
+       tree's bottleneck between them (the lowest saddle on the tree path) is lowered
+       ``drop_m`` below it, so the raster's Divide Tree is the tree.
+    """
+    n = skel.n_peaks
+    nodes = skel.node_xyz
+    if nodes.shape[0] > n:
+        nxv, nyv = _saddle_normals(skel)
+        s = nodes[n:]
+        _kernels.carve_saddles(z, float(grid.x0), float(grid.y0), float(grid.res),
+                               np.ascontiguousarray(s[:, 0]), np.ascontiguousarray(s[:, 1]),
+                               np.ascontiguousarray(s[:, 2]), nxv, nyv, float(trench_m), float(drop_m),
+                               label if label is not None else np.full(z.shape, -1, np.int32))
+    set_cells(z, grid, nodes[:, :2], nodes[:, 2])
+    # ridge cells may be lowered down to their own saddle, peak and saddle cells never
+    floor = np.full(z.shape, -np.inf, np.float32)
+    if label is not None and nodes.shape[0] > n:
+        on = label >= 0
+        floor[on] = nodes[n + label[on], 2]
+    row, col, ok = grid.cell_of(nodes[:, :2])
+    floor[row[ok], col[ok]] = np.inf
+    cap_basins(z, grid, skel, floor=floor, drop_m=drop_m, max_rounds=max_rounds)
+    set_cells(z, grid, nodes[:, :2], nodes[:, 2])
+    return z
+
+
+def _border_pairs(owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Flat indices ``(a, b)`` of 8-adjacent cells whose ``owner`` differs (both >= 0)."""
+    ny, nx = owner.shape
+    ia, ib = [], []
+    idx = np.arange(ny * nx, dtype=np.int64).reshape(ny, nx)
+    for dr, dc in ((0, 1), (1, -1), (1, 0), (1, 1)):
+        a = (slice(0, ny - dr), slice(max(0, -dc), nx - max(0, dc)))
+        b = (slice(dr, ny), slice(max(0, dc), nx - max(0, -dc)))
+        oa, ob = owner[a], owner[b]
+        m = (oa != ob) & (oa >= 0) & (ob >= 0)
+        ia.append(idx[a][m])
+        ib.append(idx[b][m])
+    return np.concatenate(ia), np.concatenate(ib)
+
+
+def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.ndarray, drop_m: float = 0.5,
+               max_rounds: int = 6) -> dict[str, int]:
+    """Rounds of spurious-hill cutting and pass capping on the raster's own basins (in place).
+
+    Each round labels the basins of steepest ascent with the orometry engine's own
+    kernels (:func:`orokit.topology.engine.steepest_ascent_basins`, so
+    the total order and tie-breaks are the engine's); basins whose maximum is not a tree peak are cut down (flooded from their
+    outside with a 1 mm per cell ascent); then every pair of 8-adjacent cells in the
+    basins of two tree peaks whose pass (the lower of the two) is above the tree's
+    bottleneck between the peaks (lowest saddle on the tree path) is lowered ``drop_m``
+    below it: the lower cell, or the higher one when the target is below the lower
+    cell's ``floor`` (a ridge cell's own saddle elevation, +inf at peaks and saddles).
+    Stops when a round changes nothing. ``z`` must be C-contiguous. Returns counters
+    (rounds, cells cut, cells capped, border pairs left above their bottleneck).
+    """
+    if not z.flags.c_contiguous:
+        raise ValueError("cap_basins works in place on a C-contiguous array; pass np.ascontiguousarray(z)")
+    n = skel.n_peaks
+    nodes = skel.node_xyz
+    e = skel.edges if skel.edges is not None else np.empty((0, 3), np.int64)
+    parent, height, depth = _kernels.merge_tree(
+        n, e[:, 0].astype(np.int64), e[:, 1].astype(np.int64),
+        nodes[n + e[:, 2], 2].astype(np.float64) if e.size else np.empty(0))
+    row, col, ok = grid.cell_of(nodes[:n, :2])
+    pid = np.flatnonzero(ok)
+    pid = pid[np.argsort(nodes[pid, 2], kind="stable")]  # the highest peak of a shared cell wins
+    cells = row[pid] * grid.nx + col[pid]
+    order = np.argsort(cells, kind="stable")
+    cells, pid = cells[order], pid[order]
+    last = np.r_[cells[1:] != cells[:-1], True] if cells.size else np.zeros(0, bool)
+    cells, pid = cells[last], pid[last]
+    zf = z.reshape(-1)
+    ff = floor.reshape(-1)
+    stats = {"rounds": 0, "cut": 0, "capped": 0, "left": 0}
+
+    if cells.size == 0:
+        return stats
+
+    def owners() -> np.ndarray:
+        """Tree peak owning each cell's basin (-1: a spurious maximum, -2: NaN)."""
+        lab, peak_cell = steepest_ascent_basins(z)
+        k = np.minimum(np.searchsorted(cells, peak_cell), cells.size - 1)
+        tid = np.where(cells[k] == peak_cell, pid[k], -1)
+        return np.where(lab >= 0, tid[np.maximum(lab, 0)], -2).reshape(z.shape)
+
+    for _ in range(max_rounds):
+        stats["rounds"] += 1
+        own = owners()
+        cut = 0
+        spurious = own == -1
+        spurious.reshape(-1)[cells] = False  # tree peaks seed the flood, never lowered
+        if spurious.any():
+            cut = _kernels.reconstruct_masked(z, spurious, 1e-3)
+            stats["cut"] += cut
+            own = owners()
+        ia, ib = _border_pairs(own)
+        ta, tb = own.reshape(-1)[ia], own.reshape(-1)[ib]
+        lo, hi = np.minimum(ta, tb), np.maximum(ta, tb)
+        keys, inv = np.unique(lo * n + hi, return_inverse=True)
+        bn = _kernels.bottlenecks(parent, height, depth, keys // n, keys % n)[inv.ravel()]
+        za, zb = zf[ia].astype(np.float64), zf[ib].astype(np.float64)
+        viol = (np.minimum(za, zb) > bn + 1e-3) & np.isfinite(bn)  # -inf: peaks of separate trees
+        stats["left"] = int(viol.sum())
+        if not viol.any():
+            break
+        ia, ib, za, zb, target = ia[viol], ib[viol], za[viol], zb[viol], bn[viol] - drop_m
+        low = np.where(za <= zb, ia, ib)
+        high = np.where(za <= zb, ib, ia)
+        # a cell may go down to max(target, its floor) if that floor is not above the bottleneck
+        # (ridge cells of the saddle itself end at the saddle's height: a tie, not a bypass)
+        lim = (bn[viol] + 1e-4).astype(zf.dtype)
+        pick = np.where(ff[low] <= lim, low, np.where(ff[high] <= lim, high, -1))
+        keep = pick >= 0
+        pick = pick[keep]
+        np.minimum.at(zf, pick, np.maximum(target[keep].astype(zf.dtype), ff[pick]))
+        stats["capped"] += int(keep.sum())
+        if not keep.any() and cut == 0:
+            break
+    logger.debug("basin capping: %s", stats)
+    return stats

@@ -1,0 +1,47 @@
+"""Parameters of the terrain renderer (:func:`orokit.raster.render.render_elevation`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["RenderParams"]
+
+
+@dataclass(frozen=True)
+class RenderParams:
+    """Parameters of the renderer (metres unless stated).
+
+    lam : meshing distance lambda (ridge/river pieces and Poisson-disk radius).
+    jitter : planar jitter of refined points, as a fraction of the piece length.
+    river_slope : minimum downstream slope of river beds (m/m).
+    river_margin : river beds lie at least this far below the ridges they face.
+    valley_coef : valley width ``w = valley_coef * A^0.4`` (A in m^2).
+    min_prominence : eps of the orometry to keep; noise amplitude is ``noise_ratio * eps``.
+    noise_ratio : noise amplitude as a fraction of eps (< 0.5 so no new peak reaches eps).
+    uplift_radius : R of the compensating uplift and noise mask around peaks and saddles.
+    erosion_scales : grid spacings of the erosion passes.
+    erosion_steps : erosion + uplift iterations per scale (one number or one per scale; fewer at the
+        fine, expensive scales).
+    erosion_k_dt : stream-power K * dt.
+    erosion_max_nodes : largest erosion grid (finer scales run coarser; bounds memory).
+    flank_slope, flank_ratio : flanks fall at least ``max(flank_slope, flank_ratio * ridge slope)``
+        from every ridge point (keeps saddles the highest passes).
+    """
+
+    lam: float = 200.0
+    jitter: float = 0.25
+    river_slope: float = 0.01
+    river_margin: float = 5.0
+    valley_coef: float = 0.15
+    min_prominence: float = 30.0
+    noise_ratio: float = 0.3
+    uplift_radius: float = 1500.0
+    erosion_scales: tuple[float, ...] = (100.0, 50.0, 30.0)
+    erosion_steps: int | tuple[int, ...] = (4, 3, 2)
+    erosion_k_dt: float = 0.02
+    erosion_max_nodes: int = 4_000_000
+    flank_slope: float = 0.15
+    flank_ratio: float = 1.5
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}

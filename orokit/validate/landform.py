@@ -1,0 +1,350 @@
+"""Landform statistics of a DEM and their distances between a real and a synthetic DEM.
+
+:func:`landform_statistics` summarises a DEM by the distributions and numbers a
+geomorphologist looks at (slope, flat share, local relief, hypsometry, Laplacian
+curvature, spectral slope, drainage); :func:`compare_landforms` gives the distance of
+each between two DEMs of the same cell size, beside its yardstick: the same distance
+between the north and south halves of the real DEM, and the target
+``max(2 x halves, floor)`` of issue 11.
+
+Distributions are kept as ``N_QUANTILES`` mid-point quantiles, so the 1-Wasserstein
+distance is the mean absolute difference of the two quantile functions
+(``W1 = integral_0^1 |F^-1(u) - G^-1(u)| du``) and the statistics fit in a JSON file.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+from orokit.errors import InputError
+from orokit.raster.shade import row_cell_sizes_m
+
+if TYPE_CHECKING:  # pragma: no cover
+    import pandas as pd
+    import xarray as xr
+
+__all__ = [
+    "FLOORS", "LandformStatistics", "compare_landforms", "landform_distances", "landform_statistics",
+    "spectral_slope", "split_halves",
+]
+
+#: number of mid-point quantiles kept per distribution
+N_QUANTILES = 512
+#: slope below which a cell counts as flat (degrees)
+FLAT_SLOPE_DEG = 2.0
+#: drainage area above which a cell counts as a channel (m^2)
+CHANNEL_AREA_M2 = 1.0e6
+#: floors of the distances (issue 11); the target is max(2 x halves, floor)
+FLOORS: dict[str, float] = {
+    "slope_deg": 4.0,
+    "curvature_per_km": 1.0,
+    "relief_1km": 0.35,
+    "spectral_slope": 0.3,
+    "flat_share": 0.06,
+    "hypsometry": 0.08,
+}
+#: what each distance measures (name -> description with units)
+DISTANCES: dict[str, str] = {
+    "slope_deg": "slope distribution, W1 (degrees)",
+    "flat_share": "share of cells with slope < 2 deg, |difference|",
+    "relief_1km": "local relief (max - min) in ~1 km windows, W1 / real median",
+    "relief_5km": "local relief in ~5 km windows, W1 / real median",
+    "hypsometry": "elevation normalised to [0, 1] by min/max, W1",
+    "curvature_per_km": "Laplacian curvature distribution, W1 (1/km)",
+    "spectral_slope": "spectral slope beta over 0.5-10 km wavelengths, |difference|",
+    "drainage_share": "share of cells draining > 1 km2, |difference|",
+    "drainage_density": "drainage density of channels > 1 km2, |difference| (km/km2)",
+}
+
+
+@dataclass(frozen=True)
+class LandformStatistics:
+    """Landform summary of one DEM (see :func:`landform_statistics`).
+
+    Distributions are ``N_QUANTILES`` mid-point quantiles; the scalars are plain numbers.
+    """
+
+    cell_size_m: float
+    shape: tuple[int, int]
+    slope_deg: NDArray[np.float64]
+    relief_1km: NDArray[np.float64]
+    relief_5km: NDArray[np.float64]
+    hypsometry: NDArray[np.float64]
+    curvature_per_km: NDArray[np.float64]
+    flat_share: float
+    spectral_slope: float
+    drainage_share: float
+    drainage_density: float
+    relief_window_m: tuple[float, float]
+
+    @property
+    def summary(self) -> dict[str, float]:
+        """Scalars a reader can compare by eye: means, medians and shares."""
+        return {
+            "mean_slope_deg": float(self.slope_deg.mean()),
+            "p90_slope_deg": float(np.quantile(self.slope_deg, 0.9)),
+            "flat_share": self.flat_share,
+            "median_relief_1km_m": float(np.median(self.relief_1km)),
+            "median_relief_5km_m": float(np.median(self.relief_5km)),
+            "mean_hypsometry": float(self.hypsometry.mean()),
+            "curvature_iqr_per_km": float(np.quantile(self.curvature_per_km, 0.75)
+                                          - np.quantile(self.curvature_per_km, 0.25)),
+            "spectral_slope": self.spectral_slope,
+            "drainage_share": self.drainage_share,
+            "drainage_density_km_per_km2": self.drainage_density,
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in d.items()}
+
+
+def _quantiles(v: NDArray[np.floating]) -> NDArray[np.float64]:
+    v = np.asarray(v, dtype=np.float64).ravel()
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return np.full(N_QUANTILES, np.nan)
+    u = (np.arange(N_QUANTILES) + 0.5) / N_QUANTILES
+    return np.quantile(v, u)
+
+
+def wasserstein(qa: NDArray[np.float64], qb: NDArray[np.float64]) -> float:
+    """1-Wasserstein distance between two distributions given as mid-point quantiles."""
+    return float(np.mean(np.abs(np.asarray(qa) - np.asarray(qb))))
+
+
+def _gradient(z: NDArray[np.float64], dx: NDArray[np.float64], dy: float) -> tuple[NDArray, NDArray]:
+    """dz/dx (east) and dz/dy (north) by central differences (one-sided at the edges)."""
+    if min(z.shape) < 2:
+        raise InputError(f"landform statistics need at least 2 x 2 cells; got {z.shape}")
+    dz_drow, dz_dcol = np.gradient(z)
+    return dz_dcol / dx[:, None], -dz_drow / dy
+
+
+def _laplacian(z: NDArray[np.float64], dx: NDArray[np.float64], dy: float) -> NDArray[np.float64]:
+    """5-point Laplacian (1/m) on interior cells; NaN on the border."""
+    out = np.full(z.shape, np.nan)
+    if min(z.shape) < 3:
+        return out
+    c = z[1:-1, 1:-1]
+    dxx = (z[1:-1, 2:] - 2 * c + z[1:-1, :-2]) / dx[1:-1, None] ** 2
+    dyy = (z[2:, 1:-1] - 2 * c + z[:-2, 1:-1]) / dy**2
+    out[1:-1, 1:-1] = dxx + dyy
+    return out
+
+
+def _relief(z: NDArray[np.float64], window_cells: tuple[int, int]) -> NDArray[np.float64]:
+    """max - min over a window centred on each cell (partial windows at the edges;
+    windows touching nodata are NaN)."""
+    nan = ~np.isfinite(z)
+    hi = ndimage.maximum_filter(np.where(nan, np.inf, z), size=window_cells, mode="nearest")
+    lo = ndimage.minimum_filter(np.where(nan, -np.inf, z), size=window_cells, mode="nearest")
+    r = hi - lo
+    r[~np.isfinite(r)] = np.nan
+    return r
+
+
+def spectral_slope(z: NDArray[np.floating], cell_size_m: tuple[float, float], *,
+                   wavelengths_m: tuple[float, float] = (500.0, 10_000.0), n_bins: int = 16) -> float:
+    """Spectral slope beta of the radially averaged power spectrum, ``P(k) ~ k^-beta``.
+
+    The grid (NaN filled with the mean) is detrended by a least-squares plane and
+    tapered by a 2-D Hann window; the power ``|FFT|^2`` is averaged in ``n_bins``
+    log-spaced wavenumber bins between ``1 / wavelengths_m[1]`` and
+    ``1 / wavelengths_m[0]`` (bins without a wavenumber are skipped), and beta is minus
+    the least-squares slope of log P against log k. ``cell_size_m`` is ``(dx, dy)``.
+    NaN when fewer than 3 bins hold a wavenumber (grid too small for the band).
+    """
+    z = np.asarray(z, dtype=np.float64)
+    ok = np.isfinite(z)
+    if not ok.any():
+        return float("nan")
+    z = np.where(ok, z, z[ok].mean())
+    ny, nx = z.shape
+    yy, xx = np.mgrid[0:ny, 0:nx]
+    a = np.column_stack([xx.ravel(), yy.ravel(), np.ones(z.size)])
+    coef, *_ = np.linalg.lstsq(a, z.ravel(), rcond=None)
+    z = z - (a @ coef).reshape(z.shape)
+    z *= np.outer(np.hanning(ny), np.hanning(nx))
+    power = np.abs(np.fft.rfft2(z)) ** 2
+    dx, dy = cell_size_m
+    kx = np.fft.rfftfreq(nx, dx)
+    ky = np.fft.fftfreq(ny, dy)
+    k = np.hypot(kx[None, :], ky[:, None])
+    kmin, kmax = 1.0 / wavelengths_m[1], 1.0 / wavelengths_m[0]
+    edges = np.geomspace(kmin, kmax, n_bins + 1)
+    sel = (k >= kmin) & (k <= kmax)
+    idx = np.clip(np.searchsorted(edges, k[sel], side="right") - 1, 0, n_bins - 1)
+    cnt = np.bincount(idx, minlength=n_bins)
+    psum = np.bincount(idx, weights=power[sel], minlength=n_bins)
+    ksum = np.bincount(idx, weights=k[sel], minlength=n_bins)
+    has = (cnt > 0) & (psum > 0)
+    if has.sum() < 3:
+        return float("nan")
+    lk = np.log10(ksum[has] / cnt[has])
+    lp = np.log10(psum[has] / cnt[has])
+    slope = np.polyfit(lk, lp, 1)[0]
+    return float(-slope)
+
+
+def _drainage(z: NDArray[np.float64], dx: float, dy: float) -> tuple[float, float]:
+    """Share of cells draining more than 1 km2 and drainage density (km / km2).
+
+    Single-direction flow routing with depressions resolved by priority flood
+    (fastscapelib ``SingleFlowRouter`` + ``PFloodSinkResolver``), outlets on the whole
+    border; a channel cell contributes the distance to its receiver.
+    """
+    import fastscapelib as fs
+
+    ny, nx = z.shape
+    grid = fs.RasterGrid([ny, nx], [dy, dx], fs.NodeStatus.FIXED_VALUE)
+    graph = fs.FlowGraph(grid, [fs.SingleFlowRouter(), fs.PFloodSinkResolver()])
+    filled = np.where(np.isfinite(z), z, np.nanmin(z) if np.isfinite(z).any() else 0.0)
+    graph.update_routes(np.ascontiguousarray(filled))
+    area = np.asarray(graph.accumulate(1.0)).reshape(-1)
+    chan = area > CHANNEL_AREA_M2
+    dist = np.asarray(graph.impl().receivers_distance)[:, 0]
+    length_km = float(dist[chan].sum()) / 1000.0
+    total_km2 = ny * nx * dx * dy / 1.0e6
+    return float(chan.mean()), length_km / total_km2
+
+
+def _window_cells(window_m: float, dx: float, dy: float) -> tuple[int, int]:
+    """Odd window size in cells (rows, cols) closest to ``window_m``, at least 3."""
+    def odd(n: float) -> int:
+        k = max(int(round(n)), 3)
+        return k if k % 2 else k + 1
+    return odd(window_m / dy), odd(window_m / dx)
+
+
+def landform_statistics(dem: xr.DataArray, *, relief_windows_m: tuple[float, float] = (1000.0, 5000.0)
+                        ) -> LandformStatistics:
+    """Landform statistics of a DEM (metres; projected, local metric or lon/lat grid).
+
+    Notes
+    -----
+    Cell sizes come from the grid (:class:`orokit.geodesy.CellMetric`: per row on lon/lat grids).
+
+    1. Slope (degrees) from central differences; flat share = slope < 2 deg.
+    2. Local relief (max - min) in windows of ~1 and ~5 km (odd cell counts; partial
+       windows at the edges; windows touching nodata left out).
+    3. Hypsometry: elevations normalised to [0, 1] by the DEM's min and max.
+    4. Laplacian curvature (5-point stencil, 1/km) on interior cells.
+    5. Spectral slope beta over wavelengths 0.5-10 km (:func:`spectral_slope`).
+    6. Drainage (fastscapelib flow routing): share of cells draining > 1 km2 and the
+       drainage density of those channels (km/km2).
+    NaN cells are left out of every distribution.
+    """
+    z = np.asarray(dem.values, dtype=np.float64)
+    if z.ndim != 2:
+        raise InputError(f"landform statistics need a 2-D DEM; got shape {z.shape}")
+    ok = np.isfinite(z)
+    if ok.sum() < 4:
+        raise InputError("landform statistics need a DEM with valid cells; this one is (almost) all nodata")
+    dxr, dy = row_cell_sizes_m(dem)
+    dxr = np.asarray(dxr, dtype=np.float64)
+    dx = float(np.mean(dxr))
+    gx, gy = _gradient(z, dxr, float(dy))
+    slope = np.degrees(np.arctan(np.hypot(gx, gy)))
+    rel = [_relief(z, _window_cells(w, dx, float(dy))) for w in relief_windows_m]
+    zmin, zmax = float(np.nanmin(z)), float(np.nanmax(z))
+    hyps = (z - zmin) / (zmax - zmin) if zmax > zmin else np.zeros_like(z)
+    lap = _laplacian(z, dxr, float(dy)) * 1000.0
+    dshare, ddens = _drainage(z, dx, float(dy))
+    return LandformStatistics(
+        cell_size_m=float(math.sqrt(dx * float(dy))),
+        shape=(int(z.shape[0]), int(z.shape[1])),
+        slope_deg=_quantiles(slope),
+        relief_1km=_quantiles(rel[0]),
+        relief_5km=_quantiles(rel[1]),
+        hypsometry=_quantiles(hyps),
+        curvature_per_km=_quantiles(lap),
+        flat_share=float(np.mean(slope[np.isfinite(slope)] < FLAT_SLOPE_DEG)),
+        spectral_slope=spectral_slope(z, (dx, float(dy))),
+        drainage_share=dshare,
+        drainage_density=ddens,
+        relief_window_m=(float(relief_windows_m[0]), float(relief_windows_m[1])),
+    )
+
+
+def landform_distances(a: LandformStatistics, b: LandformStatistics, *, relief_scale: LandformStatistics
+                       ) -> dict[str, float]:
+    """Distance of every statistic between ``a`` and ``b`` (keys of :data:`DISTANCES`).
+
+    Relief distances are divided by the median relief of ``relief_scale`` (the real DEM),
+    so they are symmetric in ``a`` and ``b``.
+    """
+    m1 = float(np.median(relief_scale.relief_1km))
+    m5 = float(np.median(relief_scale.relief_5km))
+    return {
+        "slope_deg": wasserstein(a.slope_deg, b.slope_deg),
+        "flat_share": abs(a.flat_share - b.flat_share),
+        "relief_1km": wasserstein(a.relief_1km, b.relief_1km) / max(m1, 1e-9),
+        "relief_5km": wasserstein(a.relief_5km, b.relief_5km) / max(m5, 1e-9),
+        "hypsometry": wasserstein(a.hypsometry, b.hypsometry),
+        "curvature_per_km": wasserstein(a.curvature_per_km, b.curvature_per_km),
+        "spectral_slope": abs(a.spectral_slope - b.spectral_slope),
+        "drainage_share": abs(a.drainage_share - b.drainage_share),
+        "drainage_density": abs(a.drainage_density - b.drainage_density),
+    }
+
+
+def split_halves(dem: xr.DataArray) -> tuple[xr.DataArray, xr.DataArray]:
+    """North and south halves of a DEM (rows split in the middle; the south half gets
+    the odd row), each a DEM with its own coordinates and transform."""
+    ny = dem.sizes["y"]
+    if ny < 4:
+        raise InputError(f"the real DEM needs at least 4 rows to split into halves; got {ny}")
+    h = ny // 2
+    return dem.isel(y=slice(0, h)), dem.isel(y=slice(h, None))
+
+
+def compare_landforms(real: xr.DataArray | LandformStatistics, synthetic: xr.DataArray | LandformStatistics, *,
+                      halves: tuple[LandformStatistics, LandformStatistics] | None = None,
+                      rel_tol_cell: float = 0.02) -> pd.DataFrame:
+    """Landform distances between a real and a synthetic DEM, with the real halves' yardstick.
+
+    Parameters
+    ----------
+    real, synthetic : DEMs (or their :func:`landform_statistics`) of the same cell size.
+    halves : statistics of the real DEM's north and south halves (computed from ``real``
+        when it is a DEM; required when ``real`` is already statistics).
+    rel_tol_cell : largest relative difference of the two cell sizes.
+
+    Returns
+    -------
+    DataFrame indexed by statistic (:data:`DISTANCES`) with columns ``distance``,
+    ``halves`` (north vs south of the real DEM), ``floor`` (NaN when the issue gives none),
+    ``target`` = max(2 x halves, floor) and ``ok`` (distance <= target).
+
+    Raises
+    ------
+    InputError : the cell sizes differ (resample one grid first), or halves are missing.
+    """
+    import pandas as pd
+
+    if halves is None:
+        if isinstance(real, LandformStatistics):
+            raise InputError("compare_landforms needs the real DEM (or halves=) to compute the halves yardstick")
+        halves = tuple(landform_statistics(h) for h in split_halves(real))  # type: ignore[assignment]
+    rs = real if isinstance(real, LandformStatistics) else landform_statistics(real)
+    ss = synthetic if isinstance(synthetic, LandformStatistics) else landform_statistics(synthetic)
+    if abs(rs.cell_size_m - ss.cell_size_m) > rel_tol_cell * rs.cell_size_m:
+        raise InputError(
+            f"landforms are compared at the same cell size; the real DEM has {rs.cell_size_m:.2f} m cells, the "
+            f"synthetic one {ss.cell_size_m:.2f} m: render or resample the synthetic DEM at the real cell size"
+        )
+    d = landform_distances(rs, ss, relief_scale=rs)
+    y = landform_distances(halves[0], halves[1], relief_scale=rs)  # type: ignore[index]
+    rows = []
+    for k in DISTANCES:
+        floor = FLOORS.get(k, float("nan"))
+        target = max(2.0 * y[k], floor) if math.isfinite(floor) else 2.0 * y[k]
+        rows.append({"statistic": k, "distance": d[k], "halves": y[k], "floor": floor, "target": target,
+                     "ok": bool(d[k] <= target)})
+    return pd.DataFrame(rows).set_index("statistic")

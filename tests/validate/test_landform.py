@@ -1,0 +1,159 @@
+"""Landform statistics on analytic surfaces, the halves yardstick, and the comparison table."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from orokit.errors import InputError
+from orokit.validate.landform import (
+    FLOORS,
+    compare_landforms,
+    landform_distances,
+    landform_statistics,
+    spectral_slope,
+    split_halves,
+)
+
+
+def _fbm(shape, res, beta, seed=0):
+    """Random-phase surface whose power spectrum is exactly ``|k|^-beta`` (a sum of sinusoids)."""
+    rng = np.random.default_rng(seed)
+    ny, nx = shape
+    ky = np.fft.fftfreq(ny, res)[:, None]
+    kx = np.fft.rfftfreq(nx, res)[None, :]
+    k = np.hypot(kx, ky)
+    k[0, 0] = np.inf
+    amp = k ** (-beta / 2.0)
+    phase = rng.uniform(0, 2 * np.pi, amp.shape)
+    return np.fft.irfft2(amp * np.exp(1j * phase), s=shape)
+
+
+def test_plane_of_known_slope(make_dem):
+    res, tan = 30.0, 0.1
+    y, x = np.mgrid[0:100, 0:120]
+    z = tan * x * res + 500.0
+    st = landform_statistics(make_dem(z, res=res))
+    assert st.cell_size_m == pytest.approx(res)
+    assert np.allclose(st.slope_deg, math.degrees(math.atan(tan)), atol=1e-9)
+    assert st.flat_share == 0.0
+    assert np.allclose(st.curvature_per_km, 0.0, atol=1e-9)
+    # hypsometry of a plane is uniform on [0, 1]: quantile u sits at u (to one column)
+    u = (np.arange(st.hypsometry.size) + 0.5) / st.hypsometry.size
+    assert np.abs(st.hypsometry - u).max() < 1.0 / 119 + 1e-9
+    # 1 km window = 33 cells: interior relief 32 cells x 30 m x 0.1 = 96 m
+    assert np.median(st.relief_1km) == pytest.approx(96.0)
+    # all water leaves across the low (west) edge row by row: no cell drains > 1 km2
+    assert st.drainage_share == 0.0 and st.drainage_density == 0.0
+
+
+def test_flat_ground_is_flat(make_dem):
+    st = landform_statistics(make_dem(np.full((40, 40), 12.0)))
+    assert st.flat_share == 1.0 and st.slope_deg.max() == 0.0
+    assert np.allclose(st.hypsometry, 0.0)
+
+
+def test_cone(make_dem):
+    """A cone of flank gradient s: slope atan(s) away from the apex, Laplacian -s / r."""
+    res, s = 30.0, 0.5
+    n = 121
+    y, x = np.mgrid[0:n, 0:n]
+    r = np.hypot(x - 60, y - 60) * res
+    st = landform_statistics(make_dem(2000.0 - s * r, res=res))
+    assert np.median(st.slope_deg) == pytest.approx(math.degrees(math.atan(s)), abs=0.2)
+    # median of -s/r over the interior cells, in 1/km (r in m): compare with the hand value
+    interior = np.zeros((n, n), bool)
+    interior[1:-1, 1:-1] = True
+    interior[60, 60] = False
+    expected = np.median(-s / r[interior]) * 1000.0
+    assert np.median(st.curvature_per_km) == pytest.approx(expected, rel=0.05)
+
+
+@pytest.mark.parametrize("beta", [2.0, 3.0])
+def test_spectral_slope_of_a_surface_with_known_spectrum(beta):
+    res = 30.0
+    z = _fbm((512, 512), res, beta, seed=1)
+    assert spectral_slope(z, (res, res)) == pytest.approx(beta, abs=0.2)
+
+
+def test_spectral_slope_ignores_scale_and_regional_tilt():
+    """beta is a property of the shape of the spectrum: x 3 and a tilted plane change nothing;
+    a grid smaller than the 0.5-10 km band gives NaN."""
+    res = 50.0
+    y, x = np.mgrid[0:300, 0:300]
+    z = _fbm((300, 300), res, 2.4, seed=3)
+    tilted = 3.0 * z + 0.05 * x * res - 0.02 * y * res
+    assert spectral_slope(tilted, (res, res)) == pytest.approx(spectral_slope(z, (res, res)), abs=1e-6)
+    assert np.isnan(spectral_slope(z[:5, :5], (res, res)))
+
+
+def test_valley_drainage(make_dem):
+    """A V-shaped valley draining south: the centre column carries (i + 1) rows of 61 cells."""
+    res = 30.0
+    ny, nx = 100, 61
+    y, x = np.mgrid[0:ny, 0:nx]
+    z = 0.3 * np.abs(x - 30) * res + 0.05 * (ny - y) * res
+    st = landform_statistics(make_dem(z, res=res))
+    row_area = nx * res * res
+    channel_rows = int(np.sum((np.arange(ny) + 1) * row_area > 1.0e6))
+    assert st.drainage_share == pytest.approx(channel_rows / z.size, abs=1.5 / z.size)
+    dens = channel_rows * res / 1000.0 / (z.size * res * res / 1e6)
+    assert st.drainage_density == pytest.approx(dens, rel=0.05)
+
+
+def test_halves_yardstick_is_symmetric_and_zero_against_itself(make_dem):
+    res = 30.0
+    z = _fbm((200, 160), res, 2.6, seed=5)
+    z = 1000 + 400 * z / z.std()
+    dem = make_dem(z, res=res)
+    north, south = (landform_statistics(h) for h in split_halves(dem))
+    full = landform_statistics(dem)
+    ab = landform_distances(north, south, relief_scale=full)
+    ba = landform_distances(south, north, relief_scale=full)
+    assert ab == ba
+    # the yardstick of the DEM flipped north-south swaps the halves: same numbers
+    flipped = make_dem(z[::-1].copy(), res=res)
+    t1 = compare_landforms(dem, dem)
+    t2 = compare_landforms(flipped, flipped)
+    assert np.allclose(t1["halves"], t2["halves"], rtol=1e-9, atol=1e-12)
+    assert (t1["distance"] == 0).all() and t1["ok"].all()
+    assert set(FLOORS) <= set(t1.index)
+    assert (t1.loc[list(FLOORS), "target"] >= pd_series(FLOORS)).all()
+
+
+def pd_series(d):
+    import pandas as pd
+
+    return pd.Series(d)
+
+
+def test_distance_grows_with_a_steeper_copy(make_dem):
+    res = 30.0
+    z = _fbm((128, 128), res, 2.5, seed=7)
+    z = 800 + 200 * z / z.std()
+    real = make_dem(z, res=res)
+    steep = make_dem(800 + 3 * (z - 800), res=res)
+    t = compare_landforms(real, steep)
+    assert t.loc["slope_deg", "distance"] > 5.0 and not t.loc["slope_deg", "ok"]
+    rq = landform_statistics(real).relief_1km  # 3 x the relief: W1 = mean(2 r), over the real median
+    assert t.loc["relief_1km", "distance"] == pytest.approx(2.0 * rq.mean() / np.median(rq), rel=1e-9)
+    assert t.loc["hypsometry", "distance"] < 1e-9  # a linear map keeps the normalised elevations
+
+
+def test_cell_sizes_must_match(make_dem):
+    z = np.random.default_rng(0).random((40, 40)) * 100
+    with pytest.raises(InputError, match="same cell size"):
+        compare_landforms(make_dem(z, res=30.0), make_dem(z, res=90.0))
+
+
+def test_lonlat_grid_uses_ground_cell_sizes(make_dem):
+    """The same plane on a lon/lat grid at 60 deg N: slopes from metre cell sizes."""
+    res_deg = 1.0 / 1200.0
+    lat0 = 60.0
+    dy_m = 6_371_000 * math.radians(res_deg)  # about 92.6 m
+    y, x = np.mgrid[0:60, 0:60]
+    z = 0.2 * (59 - y) * dy_m  # rises to the north
+    dem = make_dem(z, res=res_deg, crs="EPSG:4326", origin=(10.0, lat0 + 30 * res_deg))
+    st = landform_statistics(dem)
+    assert np.median(st.slope_deg) == pytest.approx(math.degrees(math.atan(0.2)), abs=0.3)
