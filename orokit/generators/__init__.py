@@ -117,7 +117,8 @@ def render_terrain(
     from orokit import __version__
     from orokit.generators.base import params_to_dict, tree_arrays, tree_rivers, tree_sha256
     from orokit.raster.rasterize import make_grid
-    from orokit.raster.render import resolve_seed, tree_extent
+    from orokit.raster.render import resolve_seed
+    from orokit.raster.skeleton import tree_extent
 
     spec = get_generator(generator)
     render, cls = spec.load()

@@ -48,10 +48,11 @@ def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generat
     """Elevation raster of a Divide Tree after Argudo et al. 2019, §6 (see
     :func:`orokit.raster.render.render_elevation`); ``rivers`` is not used."""
     from orokit.raster import render as _render
+    from orokit.raster.params import RenderParams
 
     params = params or ArgudoParams()
     kw = {f.name: getattr(params, f.name) for f in dataclasses.fields(params) if f.name != "erosion"}
-    rp = _render.RenderParams(**kw)
+    rp = RenderParams(**kw)
     da = _render.render_elevation(tree, resolution_m=grid.res, extent=grid.extent, erosion=params.erosion,
                                   params=rp, rng=rng)
     return da
