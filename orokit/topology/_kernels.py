@@ -386,3 +386,63 @@ def basin_min(z, label, npk):
         if lab >= 0 and zf[i] < out[lab]:
             out[lab] = zf[i]
     return out
+
+
+@njit(cache=True, nogil=True)
+def line_parents(rank, ea, eb):
+    """Line parent of every node of a tree (forest), in one Kruskal sweep.
+
+    ``rank`` orders the nodes (larger = higher, all distinct); ``ea``/``eb`` are the
+    tree edges sorted from the highest to the lowest saddle. When two components meet,
+    the one with the lower top loses: its top's line parent is the first node higher
+    than that top on the chain ``v, lp[v], lp[lp[v]], ...`` that starts at the edge's
+    endpoint ``v`` on the winning side. That chain is the walk along the ridge staying
+    as high as possible (each step leaves through the node's own key saddle), and it
+    ends at the winning top at the latest, so the loop terminates.
+
+    Returns ``(lp, steps)``: the line parent of every node (-1 for the top of each
+    tree) and the total number of chain steps taken (a cost diagnostic).
+    """
+    n = rank.size
+    uf = np.arange(n)
+    top = np.arange(n)
+    lp = np.full(n, -1, np.int64)
+    steps = 0
+    for e in range(ea.size):
+        u = ea[e]
+        v = eb[e]
+        ru = _find(uf, u)
+        rv = _find(uf, v)
+        if ru == rv:
+            continue
+        tu = top[ru]
+        tv = top[rv]
+        if rank[tu] < rank[tv]:
+            lose = tu
+            x = v
+            win = tv
+        else:
+            lose = tv
+            x = u
+            win = tu
+        while rank[x] <= rank[lose]:
+            x = lp[x]
+            steps += 1
+        lp[lose] = x
+        uf[rv] = ru
+        top[ru] = win
+    return lp, steps
+
+
+@njit(cache=True, nogil=True)
+def first_ancestor_above(lp, value, tie):
+    """For every node, the first node on the chain ``lp[i], lp[lp[i]], ...`` above it in
+    the order (``value``, then ``tie``), both larger = above (-1 when the chain ends first)."""
+    n = lp.size
+    out = np.full(n, -1, np.int64)
+    for i in range(n):
+        x = lp[i]
+        while x >= 0 and not (value[x] > value[i] or (value[x] == value[i] and tie[x] > tie[i])):
+            x = lp[x]
+        out[i] = x
+    return out

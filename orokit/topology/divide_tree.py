@@ -130,6 +130,75 @@ class DivideTree:
         """Prominence of every peak in metres (see :meth:`prominence_table`)."""
         return self.prominence_table()["prominence"].to_numpy()
 
+    def parents(self, table: pd.DataFrame | None = None) -> pd.DataFrame:
+        """Line parent and prominence parent of every peak of the tree.
+
+        Walk from a peak P down to its key saddle and up the ridge on the other side,
+        staying as high as possible: at each peak of the walk that is not yet higher
+        than P, leave through that peak's own key saddle (towards its higher ground).
+
+        - ``line_parent``: the first peak *higher* than P met on that walk;
+        - ``prominence_parent``: the first peak *more prominent* than P met on it (the
+          walk goes on through the line parents of the line parents).
+
+        Both are -1 for the highest peak of each connected part of the tree (a landmass
+        high point). Ties follow the tree's order: among equal elevations the lower id
+        counts as higher, and among equal prominences the higher peak counts as more
+        prominent; a landmass high point counts as more prominent than every other
+        peak of its landmass. So both parents lie beyond P's key saddle, at or before
+        the highest peak P meets there (its island parent), and the peaks between P
+        and either parent on the walk are lower and less prominent than P.
+
+        The parents are computed among the peaks *of this tree*: on a tree pruned at a
+        threshold eps, the walk only meets peaks with prominence >= eps, so line
+        parents (and, more rarely, prominence parents) depend on eps.
+
+        Parameters
+        ----------
+        table : the tree's :meth:`prominence_table`, when already computed.
+
+        Returns
+        -------
+        DataFrame aligned with ``peaks.index``: ``line_parent``, ``prominence_parent``
+        (peak ids, -1 for none).
+
+        Notes
+        -----
+        1. One Kruskal sweep over the ridges from the highest to the lowest saddle
+           (ties: lower saddle id first, then ridge order). When two parts meet, the
+           lower of their two tops gets its line parent: the first peak higher than it
+           on the chain of line parents that starts at the ridge's end on the other
+           side (that chain is the walk; every peak on it already has its line parent).
+        2. Prominence parent: the first peak on the chain of line parents that is more
+           prominent. No peak between two consecutive line parents can qualify (it is
+           lower and its key saddle is higher).
+
+        Examples
+        --------
+        A peak of 100 m joins, at a 50 m saddle, a 120 m peak that a 110 m saddle ties
+        to a 200 m summit: its line parent is the 120 m peak (prominence 10 m), its
+        prominence parent the summit.
+
+        >>> t = DivideTree.from_arrays([[0, 0, 100], [2, 0, 120], [4, 0, 200]],
+        ...                            [[1, 0, 50], [3, 0, 110]], [[0, 1, 0], [1, 2, 1]])
+        >>> p = t.parents()
+        >>> p["line_parent"].tolist(), p["prominence_parent"].tolist()
+        ([1, 2, -1], [2, 2, -1])
+        """
+        if table is None:
+            table = self.prominence_table()
+        n = self.n_peaks
+        a, b, _ = self._edge_arrays()
+        order = self._sorted_edges()
+        pz = self.peaks["elevation"].to_numpy(float)
+        rank = np.empty(n, np.int64)
+        rank[np.lexsort((-np.arange(n), pz))] = np.arange(n)  # larger = higher
+        lp, _ = _kernels.line_parents(rank, a[order], b[order])
+        prom = table["prominence"].to_numpy(float).copy()
+        prom[table["key_saddle"].to_numpy() < 0] = np.inf
+        pp = _kernels.first_ancestor_above(lp, prom, rank)
+        return pd.DataFrame({"line_parent": lp, "prominence_parent": pp}, index=self.peaks.index)
+
     # ----------------------------------------------------------------- pruning
     def prune(self, min_prominence: float) -> "DivideTree":
         """Keep the peaks with prominence >= ``min_prominence`` and rewire the ridges.
