@@ -17,7 +17,9 @@ __version__ = "0.1.0"
 # public name -> module that defines it
 _LAZY = {
     "analyze": "orokit.analysis",
-    "AnalysisResult": "orokit.analysis",
+    "AnalysisResult": "orokit.topology.tables",
+    "read_analysis": "orokit.analysis",
+    "write_analysis": "orokit.analysis",
     "DivideTree": "orokit.topology.divide_tree",
     "read_dem": "orokit.io.dem",
 }

@@ -7,10 +7,8 @@ holds the public function, the result object and its files.
 """
 from __future__ import annotations
 
-import json
 import logging
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -19,65 +17,25 @@ import pandas as pd
 
 from orokit import __version__
 from orokit.errors import InputError
-from orokit.topology.divide_tree import DivideTree
+from orokit.topology.tables import PEAK_COLUMNS, AnalysisResult
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["analyze", "AnalysisResult", "read_analysis", "PEAK_COLUMNS"]
-
-#: Columns of the peaks table, in order (metres; row/col 0-based, row 0 at the top).
-PEAK_COLUMNS = [
-    "row", "col", "x", "y", "lon", "lat", "elevation", "prominence",
-    "saddle_row", "saddle_col", "saddle_x", "saddle_y", "saddle_elevation",
-    "parent", "parent_row", "parent_col", "dominance",
-    "isolation", "isolation_row", "isolation_col", "isolation_x", "isolation_y",
-    "prominence_exact", "isolation_exact",
-]
+__all__ = ["analyze", "AnalysisResult", "read_analysis", "write_analysis", "PEAK_COLUMNS"]
 
 
-@dataclass
-class AnalysisResult:
-    """Output of :func:`analyze`.
-
-    Attributes
-    ----------
-    peaks : GeoDataFrame indexed by ``peak_id`` with :data:`PEAK_COLUMNS`.
-    saddles : GeoDataFrame indexed by ``saddle_id``: row, col, x, y, elevation of each
-        saddle of the Divide Tree, and key_of (a peak whose key saddle it is, -1 if
-        none; a monkey saddle can be the key saddle of several peaks).
-    divide_tree : the Divide Tree pruned at ``min_prominence`` (same ids).
-    crs : CRS of x/y (None for a local metric grid without CRS).
-    attrs : metadata (threshold, outside convention, units, source, dataset, shape,
-        ``transform`` (affine a, b, c, d, e, f of the grid), ``crs_geographic``, timings).
-
-    Integer columns use -1 for "none" (saddle_row/col and parent of domain roots,
-    isolation_row/col when nothing is higher); float columns use NaN.
-    """
-
-    peaks: Any
-    saddles: Any
-    divide_tree: DivideTree
-    crs: Any = None
-    attrs: dict = field(default_factory=dict)
-
-    def write(self, outdir, *, overwrite: bool = False) -> Path:
-        """Write peaks.csv, peaks.parquet, saddles.parquet, dividetree.gpkg, analysis.json."""
-        from orokit.io.analysis_io import write_analysis
-
-        return write_analysis(self, outdir, overwrite=overwrite)
-
-    def __repr__(self) -> str:  # pragma: no cover - cosmetic
-        return (
-            f"AnalysisResult({len(self.peaks)} peaks >= {self.attrs.get('min_prominence')} m, "
-            f"{len(self.saddles)} saddles, crs={self.crs})"
-        )
-
-
-def read_analysis(outdir) -> AnalysisResult:
-    """Read a folder written by :meth:`AnalysisResult.write` / ``orokit analyze``."""
+def read_analysis(outdir: str | Path) -> AnalysisResult:
+    """Read a folder written by :func:`write_analysis` / ``orokit analyze``."""
     from orokit.io.analysis_io import read_analysis as _read
 
     return _read(outdir)
+
+
+def write_analysis(result: AnalysisResult, outdir: str | Path, *, overwrite: bool = False) -> Path:
+    """Write peaks.csv, peaks.parquet, saddles.parquet, dividetree.gpkg, analysis.json into ``outdir``."""
+    from orokit.io.analysis_io import write_analysis as _write
+
+    return _write(result, outdir, overwrite=overwrite)
 
 
 def analyze(
@@ -179,15 +137,15 @@ def analyze(
             from orokit.metrics.isolation import GridMetric
 
             metric = GridMetric.from_grid(transform, crs) if isolation else None
-            core = tiled_orometry(data, min_prominence=min_prominence, outside=outside, scheduler=scheduler,
-                                  checkpoint=checkpoint, progress=progress, isolation_metric=metric)
+            tiled_core = tiled_orometry(data, min_prominence=min_prominence, outside=outside, scheduler=scheduler,
+                                        checkpoint=checkpoint, progress=progress, isolation_metric=metric)
+            core = tiled_core.orometry
             t_core = time.perf_counter()
             iso = None
             if isolation and core.n_kept:
                 iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform,
                                       crs=crs, compute=get_compute(scheduler),
-                                      chunk_stats=getattr(core, "chunk_stats", None),
-                                      known=getattr(core, "chunk_isolation", None))
+                                      chunk_stats=tiled_core.chunk_stats, known=tiled_core.chunk_isolation)
             t_iso = time.perf_counter()
         finally:
             if client is not None:
@@ -250,32 +208,23 @@ AUTO_CHUNK = 2048
 
 
 def available_memory() -> int:
-    """Available physical memory in bytes (Linux /proc/meminfo; else total pages)."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    import os
+    """Available physical memory in bytes (psutil)."""
+    import psutil
 
-    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    return int(psutil.virtual_memory().available)
 
 
-def plan_chunks(source, *, memory_fraction: float = 0.5) -> int | None:
+def plan_chunks(source: str | Path, *, memory_fraction: float = 0.5) -> int | None:
     """None (in memory) or a chunk size, from the raster's size and the free memory.
 
     A raster whose in-memory analysis would need more than ``memory_fraction`` of the
     available memory is analysed chunk by chunk (``AUTO_CHUNK`` cells per side); the
     plan is logged before any data is read.
     """
-    import rasterio
+    from orokit.io.dem import raster_cell_count
 
-    try:
-        with rasterio.open(str(source)) as ds:
-            cells = ds.width * ds.height
-    except Exception:  # noqa: BLE001 - let read_dem report unreadable inputs
+    cells = raster_cell_count(source)
+    if cells is None:
         return None
     need = cells * BYTES_PER_CELL_IN_MEMORY
     avail = available_memory()
@@ -325,11 +274,3 @@ def _advance(bar) -> None:
     if bar is not None:
         bar.update(1)
 
-
-def analysis_json(result: AnalysisResult) -> str:
-    """Metadata of a result as JSON text (written next to the tables)."""
-    meta = dict(result.attrs)
-    meta["crs"] = None if result.crs is None else result.crs.to_wkt()
-    meta["n_peaks"] = int(len(result.peaks))
-    meta["n_saddles"] = int(len(result.saddles))
-    return json.dumps(meta, indent=2, default=str)

@@ -71,7 +71,9 @@ def analyze(ctx: click.Context, dem: str, outdir: Path, min_prominence: float, z
         da = open_dataset_dem(dem, chunks=chunks)
     result = run(da, min_prominence=min_prominence, outside=outside, isolation=not no_isolation,
                  progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint)
-    result.write(outdir, overwrite=True)
+    from orokit.io.analysis_io import write_analysis
+
+    write_analysis(result, outdir, overwrite=True)
     n = len(result.peaks)
     if (ctx.find_root().obj or {}).get("quiet"):
         return

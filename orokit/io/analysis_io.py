@@ -14,18 +14,19 @@ import numpy as np
 import pandas as pd
 
 from orokit._typing import PathLike
-from orokit.errors import InputError, SchemaError
+from orokit.errors import InputError
 from orokit.io.atomic import atomic_path, write_text_atomic
+from orokit.topology.tables import AnalysisResult, validate_peak_table, validate_saddle_table
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["write_analysis", "read_analysis", "read_peaks", "ANALYSIS_FILES"]
+__all__ = ["write_analysis", "read_analysis", "read_peaks", "analysis_json", "ANALYSIS_FILES"]
 
 ANALYSIS_FILES = ("peaks.csv", "peaks.parquet", "saddles.parquet", "dividetree.gpkg", "analysis.json")
 
 
-def write_analysis(result, outdir: PathLike, *, overwrite: bool = False) -> Path:
-    """Write an :class:`~orokit.analysis.AnalysisResult` into ``outdir``.
+def write_analysis(result: AnalysisResult, outdir: PathLike, *, overwrite: bool = False) -> Path:
+    """Write an :class:`~orokit.topology.tables.AnalysisResult` into ``outdir``.
 
     A lock file keeps two processes from writing the same folder at once.
     """
@@ -42,10 +43,20 @@ def write_analysis(result, outdir: PathLike, *, overwrite: bool = False) -> Path
         raise InputError(f"another orokit process is writing to {out}; wait for it or choose another folder") from None
 
 
-def _write(result, out: Path) -> Path:
-    from orokit.analysis import analysis_json
+def analysis_json(result: AnalysisResult) -> str:
+    """Metadata of a result as JSON text (written next to the tables)."""
+    meta = dict(result.attrs)
+    meta["crs"] = None if result.crs is None else result.crs.to_wkt()
+    meta["n_peaks"] = int(len(result.peaks))
+    meta["n_saddles"] = int(len(result.saddles))
+    return json.dumps(meta, indent=2, default=str)
+
+
+def _write(result: AnalysisResult, out: Path) -> Path:
     from orokit.io.divide_tree_io import write_divide_tree_gpkg
 
+    validate_peak_table(result.peaks)
+    validate_saddle_table(result.saddles)
     (out / "analysis.json").unlink(missing_ok=True)
     peaks = result.peaks
     with atomic_path(out / "peaks.csv") as tmp:
@@ -61,11 +72,10 @@ def _write(result, out: Path) -> Path:
     return out
 
 
-def read_analysis(outdir: PathLike):
+def read_analysis(outdir: PathLike) -> AnalysisResult:
     """Read a folder written by :func:`write_analysis`."""
     import geopandas as gpd
 
-    from orokit.analysis import PEAK_COLUMNS, AnalysisResult
     from orokit.io.divide_tree_io import read_divide_tree_gpkg
 
     out = Path(outdir)
@@ -74,10 +84,9 @@ def read_analysis(outdir: PathLike):
         raise InputError(f"{out} is not a complete orokit analysis folder (no analysis.json); rerun `orokit analyze`")
     meta = json.loads(meta_path.read_text())
     peaks = gpd.read_parquet(out / "peaks.parquet")
-    missing = set(PEAK_COLUMNS) - set(peaks.columns)
-    if missing:
-        raise SchemaError(f"{out / 'peaks.parquet'} lacks columns {sorted(missing)}")
+    validate_peak_table(peaks, source=str(out / "peaks.parquet"))
     saddles = gpd.read_parquet(out / "saddles.parquet")
+    validate_saddle_table(saddles, source=str(out / "saddles.parquet"))
     tree = read_divide_tree_gpkg(out / "dividetree.gpkg")
     crs = peaks.crs
     meta.pop("crs", None)

@@ -34,7 +34,7 @@ from orokit.io._units import TO_METRES, is_known_units, normalize_units
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["read_dem"]
+__all__ = ["read_dem", "raster_cell_count"]
 
 ChunksLike = int | str | Sequence[int] | Mapping[str, int] | None
 CellSizeLike = float | tuple[float, float] | None
@@ -455,6 +455,15 @@ def read_dem(
         "" if chunks is None else f", chunks {tuple(len(c) for c in dem.chunks or ())} blocks",
     )
     return dem
+
+
+def raster_cell_count(path: PathLike) -> int | None:
+    """Number of cells of a raster file (header only), or None when GDAL cannot open it."""
+    try:
+        with rasterio.open(str(path)) as ds:
+            return int(ds.width) * int(ds.height)
+    except Exception:  # noqa: BLE001 - read_dem reports unreadable inputs with a proper message
+        return None
 
 
 def _all_nodata_message(path: str, nd: float | None) -> str:

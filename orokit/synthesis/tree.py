@@ -21,6 +21,7 @@ from orokit.errors import InputError, OrokitError
 from orokit.synthesis.controls import Domain, build_controls, make_domain
 from orokit.synthesis.terrain_type import TerrainType
 from orokit.topology.divide_tree import DivideTree
+from orokit.topology.tables import NONE_ID, validate_peak_table
 
 logger = logging.getLogger(__name__)
 
@@ -369,7 +370,8 @@ def _saddle_targets(types, ptype: np.ndarray, z: np.ndarray, use_bands: bool):
 def peaks_table(tree: DivideTree):
     """Peaks GeoDataFrame with the columns of ``orokit analyze`` (index ``peak_id``).
 
-    Raster columns (row, col, saddle_row...) are NaN: a synthesized tree has no grid.
+    Follows :data:`orokit.topology.tables.PEAK_SCHEMA`. Raster columns (row, col,
+    saddle_row...) are -1 (none): a synthesized tree has no grid.
     Isolation is measured to the nearest higher peak of the tree; ``lon``/``lat`` are
     filled when the tree has a real CRS.
     """
@@ -382,6 +384,7 @@ def peaks_table(tree: DivideTree):
     y = tree.peaks["y"].to_numpy(float)
     n = x.size
     nan = np.full(n, np.nan)
+    none = np.full(n, NONE_ID, np.int64)
     lon, lat = nan.copy(), nan.copy()
     if tree.crs is not None:
         from pyproj import Transformer
@@ -390,16 +393,16 @@ def peaks_table(tree: DivideTree):
     parent = o["parent"].to_numpy(np.int64)
     frame = pd.DataFrame(
         {
-            "row": nan, "col": nan, "x": x, "y": y, "lon": lon, "lat": lat,
+            "row": none, "col": none, "x": x, "y": y, "lon": np.asarray(lon, float), "lat": np.asarray(lat, float),
             "elevation": tree.peaks["elevation"].to_numpy(float),
             "prominence": o["prominence"].to_numpy(float),
-            "saddle_row": nan, "saddle_col": nan,
+            "saddle_row": none, "saddle_col": none,
             "saddle_x": o["saddle_x"].to_numpy(float), "saddle_y": o["saddle_y"].to_numpy(float),
             "saddle_elevation": o["saddle_elevation"].to_numpy(float),
-            "parent": parent, "parent_row": nan, "parent_col": nan,
+            "parent": parent, "parent_row": none, "parent_col": none,
             "dominance": o["dominance"].to_numpy(float),
             "isolation": o["isolation"].to_numpy(float),
-            "isolation_row": nan, "isolation_col": nan,
+            "isolation_row": none, "isolation_col": none,
             "isolation_x": o["isolation_x"].to_numpy(float), "isolation_y": o["isolation_y"].to_numpy(float),
             "prominence_exact": np.ones(n, bool),
             "isolation_exact": np.isfinite(o["isolation"].to_numpy(float)),
@@ -409,4 +412,6 @@ def peaks_table(tree: DivideTree):
     for extra in ("type", "fixed"):
         if extra in tree.peaks.columns:
             frame[extra] = tree.peaks[extra].to_numpy()
-    return gpd.GeoDataFrame(frame, geometry=gpd.points_from_xy(x, y), crs=tree.crs)
+    table = gpd.GeoDataFrame(frame, geometry=gpd.points_from_xy(x, y), crs=tree.crs)
+    validate_peak_table(table)
+    return table

@@ -12,20 +12,40 @@ written atomically); a rerun with the same folder reuses the finished chunks.
 from __future__ import annotations
 
 import hashlib
-import json
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from orokit.errors import TilingError
+from orokit.io.checkpoint_io import chunk_path, open_checkpoint, read_chunk, write_chunk
+from orokit.tiling.isolation import block_stats, chunk_isolation
 from orokit.tiling.summary import ChunkSummary, chunk_summary, finalize_summary, merge_summaries
 from orokit.topology.engine import Orometry
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["tiled_orometry", "get_compute"]
+__all__ = ["tiled_orometry", "get_compute", "TiledOrometry"]
+
+
+@dataclass(frozen=True)
+class TiledOrometry:
+    """Output of :func:`tiled_orometry`.
+
+    Attributes
+    ----------
+    orometry : the exact engine output, equal to the in-memory engine's.
+    chunk_stats : (chunk rows, chunk cols, 2) array: maximum of each chunk (-inf if
+        empty) and 1.0 if it holds a NaN; the isolation search skips chunks with it.
+    chunk_isolation : isolation settled inside the chunks (arrays ``key``, ``best``,
+        ``cand``, ``nan``), or None without an isolation metric.
+    """
+
+    orometry: Orometry
+    chunk_stats: np.ndarray
+    chunk_isolation: dict | None
 
 
 def get_compute(scheduler: Any = None):
@@ -52,9 +72,9 @@ _ISO_FIELDS = ("key", "best", "cand", "nan")
 
 
 def _load_summary(path: str) -> tuple[ChunkSummary, dict | None]:
-    with np.load(path) as data:
-        iso = {f: data[f"iso_{f}"] for f in _ISO_FIELDS} if "iso_key" in data else None
-        return ChunkSummary.from_npz(data), iso
+    data = read_chunk(path)
+    iso = {f: data[f"iso_{f}"] for f in _ISO_FIELDS} if "iso_key" in data else None
+    return ChunkSummary.from_npz(data), iso
 
 
 def _tile_task(block: np.ndarray, row0: int, col0: int, shape, min_prominence: float,
@@ -63,17 +83,11 @@ def _tile_task(block: np.ndarray, row0: int, col0: int, shape, min_prominence: f
     summary = chunk_summary(block, row0, col0, shape, min_prominence)
     iso = None
     if metric is not None:
-        from orokit.tiling.isolation import chunk_isolation
-
         iso = chunk_isolation(np.ascontiguousarray(block[1:-1, 1:-1]), row0, col0, shape,
                               summary.key[summary.ismax], metric)
     if path is not None:
-        from orokit.io.atomic import atomic_path
-
         extra = {} if iso is None else {f"iso_{f}": v for f, v in iso.items()}
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **summary.to_npz(), **extra)
+        write_chunk(path, {**summary.to_npz(), **extra})
     return summary, iso
 
 
@@ -91,8 +105,6 @@ def _merge_iso(parts: list) -> dict | None:
 def _checkpoint_dir(checkpoint, data, min_prominence: float) -> Path | None:
     if checkpoint is None:
         return None
-    root = Path(checkpoint)
-    root.mkdir(parents=True, exist_ok=True)
     fingerprint = {
         "shape": list(data.shape),
         "chunks": [list(c) for c in data.chunks],
@@ -100,29 +112,17 @@ def _checkpoint_dir(checkpoint, data, min_prominence: float) -> Path | None:
         "graph": data.name,  # dask name: a hash of the source and its processing
         "format": 1,
     }
-    meta = root / "checkpoint.json"
-    if meta.exists():
-        old = json.loads(meta.read_text())
-        if old != fingerprint:
-            raise TilingError(
-                f"checkpoint folder {root} belongs to another run (different input, chunks or threshold); "
-                "use a new folder or delete it"
-            )
-    else:
-        from orokit.io.atomic import write_text_atomic
-
-        write_text_atomic(meta, json.dumps(fingerprint, indent=1))
-    return root
+    return open_checkpoint(checkpoint, fingerprint)
 
 
 def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", scheduler: Any = None,
-                   checkpoint=None, progress: bool = False, isolation_metric=None) -> Orometry:
+                   checkpoint=None, progress: bool = False, isolation_metric=None) -> TiledOrometry:
     """Exact orometry of a 2-D dask array (NaN = nodata), chunk by chunk.
 
-    Gives exactly the :class:`~orokit.topology.engine.Orometry` of the in-memory
-    engine (same peaks, prominences, key saddles, parents, flags and ridge saddles).
-    With ``isolation_metric`` (a :class:`~orokit.metrics.isolation.GridMetric`), each
-    chunk also settles the isolation of its candidate peaks whose higher ground lies
+    ``result.orometry`` is exactly the :class:`~orokit.topology.engine.Orometry` of the
+    in-memory engine (same peaks, prominences, key saddles, parents, flags and ridge
+    saddles). With ``isolation_metric`` (a :class:`~orokit.metrics.isolation.GridMetric`),
+    each chunk also settles the isolation of its candidate peaks whose higher ground lies
     inside it (``result.chunk_isolation``), so the cross-chunk search reads few chunks.
     """
     import dask
@@ -143,7 +143,7 @@ def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", sch
     reused = 0
     for i in range(len(rb) - 1):
         for j in range(len(cb) - 1):
-            path = None if ckpt is None else str(ckpt / f"chunk_{i:05d}_{j:05d}.npz")
+            path = None if ckpt is None else str(chunk_path(ckpt, i, j))
             if path is not None and Path(path).exists():
                 task = dask.delayed(_load_summary, nout=2)(path, dask_key_name=f"orokit-load-{i}-{j}-{_h(path)}")
                 reused += 1
@@ -174,7 +174,7 @@ def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", sch
     # per-chunk maximum and "has NaN" for the isolation search, from the same reads
     raw = data.to_delayed()
     stats = dask.delayed(np.array)(
-        [[dask.delayed(chunk_stats)(raw[i, j]) for j in range(len(cb) - 1)] for i in range(len(rb) - 1)]
+        [[dask.delayed(block_stats)(raw[i, j]) for j in range(len(cb) - 1)] for i in range(len(rb) - 1)]
     )
     iso = dask.delayed(_merge_iso)(list(isos.values()))
     compute = get_compute(scheduler)
@@ -186,15 +186,7 @@ def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", sch
             result, st, iso = compute([final, stats, iso])
     else:
         result, st, iso = compute([final, stats, iso])
-    result.chunk_stats = st  # (nby, nbx, 2): max (-inf if empty), has NaN
-    result.chunk_isolation = iso
-    return result
-
-
-def chunk_stats(block: np.ndarray) -> tuple[float, float]:
-    """Maximum of a chunk (-inf when all NaN) and 1.0 if it holds a NaN."""
-    valid = ~np.isnan(block)
-    return (float(block[valid].max()) if valid.any() else -np.inf), float((~valid).any())
+    return TiledOrometry(orometry=result, chunk_stats=st, chunk_isolation=iso)
 
 
 def _h(text: str) -> str:

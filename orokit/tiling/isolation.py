@@ -20,7 +20,7 @@ from orokit.metrics.isolation import GridMetric, finish_isolation
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["tiled_isolation", "chunk_isolation"]
+__all__ = ["tiled_isolation", "chunk_isolation", "block_stats"]
 
 _BATCH = 4096
 
@@ -104,6 +104,12 @@ def chunk_isolation(core: np.ndarray, row0: int, col0: int, shape: tuple[int, in
     return {"key": keys[ok], "best": best[ok], "cand": gc, "nan": nan}
 
 
+def block_stats(block: np.ndarray) -> tuple[float, float]:
+    """Maximum of a chunk (-inf when all NaN) and 1.0 if it holds a NaN."""
+    valid = ~np.isnan(block)
+    return (float(block[valid].max()) if valid.any() else -np.inf), float((~valid).any())
+
+
 def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk_stats=None,
                     known: dict[str, np.ndarray] | None = None) -> pd.DataFrame:
     """Isolation of peaks at (rows, cols) with elevations pz on a dask array.
@@ -128,10 +134,8 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
     nby, nbx = len(rb) - 1, len(cb) - 1
     blocks = data.to_delayed()
     if chunk_stats is None:
-        from orokit.tiling.engine import chunk_stats as _stats
-
         (chunk_stats,) = compute([dask.delayed(np.array)(
-            [[dask.delayed(_stats)(blocks[i, j]) for j in range(nbx)] for i in range(nby)])])
+            [[dask.delayed(block_stats)(blocks[i, j]) for j in range(nbx)] for i in range(nby)])])
     chunk_stats = np.asarray(chunk_stats, dtype=float).reshape(nby * nbx, 2)
     cmax = chunk_stats[:, 0]
     cnan = chunk_stats[:, 1] > 0.5

@@ -23,6 +23,7 @@ import pandas as pd
 from orokit.errors import InputError
 from orokit.topology import _kernels
 from orokit.topology.divide_tree import DivideTree
+from orokit.topology.tables import PEAK_COLUMNS, SADDLE_COLUMNS, AnalysisResult, validate_peak_table, validate_saddle_table
 
 
 @dataclass
@@ -185,11 +186,9 @@ def finalize_graph(
     )
 
 
-def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | None):
+def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | None) -> AnalysisResult:
     """Peaks/saddles GeoDataFrames and the DivideTree from the raw engine output."""
     import geopandas as gpd
-
-    from orokit.analysis import PEAK_COLUMNS, AnalysisResult
 
     H, W = core.shape
     def xy(rows, cols):
@@ -286,5 +285,7 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
         {"units": "m"},
     )
     peaks_gdf = gpd.GeoDataFrame(peaks, geometry=gpd.points_from_xy(x, y), crs=crs)
-    saddles_gdf = gpd.GeoDataFrame(saddles, geometry=gpd.points_from_xy(s_x, s_y), crs=crs)
+    saddles_gdf = gpd.GeoDataFrame(saddles[SADDLE_COLUMNS], geometry=gpd.points_from_xy(s_x, s_y), crs=crs)
+    validate_peak_table(peaks_gdf)
+    validate_saddle_table(saddles_gdf)
     return AnalysisResult(peaks_gdf, saddles_gdf, tree, crs, {})

@@ -11,6 +11,7 @@ import shapely
 from click.testing import CliRunner
 from pyproj import Geod, Transformer
 
+from orokit.analysis import write_analysis
 from orokit.classify.features import concat_features, feature_table, write_features
 from orokit.classify.peaklist import peak_geometry
 from orokit.classify.train import evaluate, metric_coordinates, spatial_split
@@ -158,7 +159,7 @@ def _geographic_analysis(make_dem, tmp_path, *, dataset: str = ""):
     if dataset:
         dem.attrs["dataset"] = dataset
     out = tmp_path / "ana"
-    orokit.analyze(dem, min_prominence=30.0).write(out)
+    write_analysis(orokit.analyze(dem, min_prominence=30.0), out)
     return dem, out
 
 

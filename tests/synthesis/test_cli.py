@@ -8,6 +8,7 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
+from orokit.analysis import write_analysis
 from orokit.cli.main import cli
 from orokit.cli.synthesize_tree import parse_size
 from orokit.synthesis.terrain_type import load_terrain_type
@@ -93,7 +94,7 @@ def test_type_from_analysis_folder_with_edit(tmp_path, make_dem):
     for _ in range(60):
         cy, cx, h, w = rng.uniform(0, 96), rng.uniform(0, 96), rng.uniform(50, 400), rng.uniform(2, 6)
         z += h * np.exp(-((yy - cy) ** 2 + (xx - cx) ** 2) / (2 * w**2))
-    analyze(make_dem(z + 100.0, res=50.0), min_prominence=30.0).write(tmp_path / "ana")
+    write_analysis(analyze(make_dem(z + 100.0, res=50.0), min_prominence=30.0), tmp_path / "ana")
     out = tmp_path / "t.json"
     res = CliRunner().invoke(cli, ["type", str(tmp_path / "ana"), "-o", str(out), "--scale-prominence", "2"])
     assert res.exit_code == 0, res.output

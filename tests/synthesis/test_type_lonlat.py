@@ -12,6 +12,7 @@ import pytest
 from pyproj import Transformer
 
 import orokit
+from orokit.analysis import write_analysis
 from orokit.errors import OrokitError
 from orokit.synthesis.terrain_type import TerrainType
 from orokit.synthesis.tree import MAX_PEAKS, synthesize_divide_tree
@@ -63,7 +64,7 @@ def _build_types(build_dem, tmp_path_factory):
 
     t_utm = TerrainType.from_analysis(orokit.analyze(dem_u, min_prominence=30.0))
     folder = tmp_path_factory.mktemp("geo") / "analysis"
-    orokit.analyze(dem_g, min_prominence=30.0).write(folder)
+    write_analysis(orokit.analyze(dem_g, min_prominence=30.0), folder)
     t_geo = TerrainType.from_analysis(folder)  # through analysis.json: recorded transform and CRS
     return t_utm, t_geo
 

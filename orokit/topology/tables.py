@@ -1,0 +1,163 @@
+"""Result types and table schemas of the orometry (a leaf module: imports nothing above it).
+
+The peaks table is written by the raster analysis (:func:`orokit.analyze`), by Divide
+Tree synthesis (:func:`orokit.synthesis.peaks_table`) and read back from files; its
+columns, dtypes, units and "none" values are defined here once (:data:`PEAK_SCHEMA`)
+and checked by :func:`validate_peak_table`.
+
+"None" values: integer columns (raster cells and peak ids) hold ``-1``
+(:data:`NONE_ID`), float columns hold NaN. A synthesized tree has no raster, so its
+``row``/``col`` columns are -1 throughout.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import pandas as pd
+
+from orokit.errors import SchemaError
+from orokit.topology.divide_tree import DivideTree
+
+__all__ = [
+    "Column", "PEAK_SCHEMA", "PEAK_COLUMNS", "SADDLE_SCHEMA", "SADDLE_COLUMNS", "NONE_ID",
+    "AnalysisResult", "validate_peak_table", "validate_saddle_table",
+]
+
+#: "none" of every integer column (raster cell, peak id)
+NONE_ID = -1
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column of a table schema."""
+
+    name: str
+    dtype: Literal["int64", "float64", "bool"]
+    unit: str
+    doc: str
+
+    @property
+    def none(self) -> float | int | None:
+        """The value meaning "none" in this column (-1, NaN, or None for flags)."""
+        return {"int64": NONE_ID, "float64": float("nan")}.get(self.dtype)
+
+
+#: Columns of the peaks table, in order (index ``peak_id``, int64, 0..n-1).
+#: Coordinates are cell centres; row/col are 0-based with row 0 at the top.
+PEAK_SCHEMA: tuple[Column, ...] = (
+    Column("row", "int64", "cell", "raster row of the peak (first cell in raster order of a flat summit)"),
+    Column("col", "int64", "cell", "raster column of the peak"),
+    Column("x", "float64", "crs", "x of the peak in the table's CRS"),
+    Column("y", "float64", "crs", "y of the peak in the table's CRS"),
+    Column("lon", "float64", "deg", "WGS84 longitude (NaN without CRS)"),
+    Column("lat", "float64", "deg", "WGS84 latitude (NaN without CRS)"),
+    Column("elevation", "float64", "m", "elevation of the peak"),
+    Column("prominence", "float64", "m", "elder-rule prominence (elevation for a domain's highest peak)"),
+    Column("saddle_row", "int64", "cell", "raster row of the key saddle"),
+    Column("saddle_col", "int64", "cell", "raster column of the key saddle"),
+    Column("saddle_x", "float64", "crs", "x of the key saddle"),
+    Column("saddle_y", "float64", "crs", "y of the key saddle"),
+    Column("saddle_elevation", "float64", "m", "elevation of the key saddle"),
+    Column("parent", "int64", "peak_id", "prominence parent (highest peak joined at the key saddle)"),
+    Column("parent_row", "int64", "cell", "raster row of the parent"),
+    Column("parent_col", "int64", "cell", "raster column of the parent"),
+    Column("dominance", "float64", "1", "prominence / elevation (NaN when elevation <= 0)"),
+    Column("isolation", "float64", "m", "distance to the nearest strictly higher ground"),
+    Column("isolation_row", "int64", "cell", "raster row of that higher ground"),
+    Column("isolation_col", "int64", "cell", "raster column of that higher ground"),
+    Column("isolation_x", "float64", "crs", "x of that higher ground"),
+    Column("isolation_y", "float64", "crs", "y of that higher ground"),
+    Column("prominence_exact", "bool", "", "False when terrain outside the data could lower the prominence"),
+    Column("isolation_exact", "bool", "", "False when the edge or nodata is closer than the higher ground"),
+)
+PEAK_COLUMNS: list[str] = [c.name for c in PEAK_SCHEMA]
+
+#: Columns of the saddles table (index ``saddle_id``): the saddles of the pruned Divide Tree.
+SADDLE_SCHEMA: tuple[Column, ...] = (
+    Column("row", "int64", "cell", "raster row of the saddle"),
+    Column("col", "int64", "cell", "raster column of the saddle"),
+    Column("x", "float64", "crs", "x of the saddle"),
+    Column("y", "float64", "crs", "y of the saddle"),
+    Column("elevation", "float64", "m", "elevation of the saddle"),
+    Column("key_of", "int64", "peak_id", "a peak whose key saddle it is (a monkey saddle may serve several)"),
+)
+SADDLE_COLUMNS: list[str] = [c.name for c in SADDLE_SCHEMA]
+
+
+def _validate(table: Any, schema: tuple[Column, ...], index: str, what: str, source: str | None) -> None:
+    where = f"{source}: " if source else ""
+    if not isinstance(table, pd.DataFrame):
+        raise SchemaError(f"{where}the {what} table must be a (Geo)DataFrame, got {type(table).__name__}")
+    missing = [c.name for c in schema if c.name not in table.columns]
+    if missing:
+        raise SchemaError(f"{where}the {what} table lacks columns {missing}; "
+                          f"re-create it with this orokit version (e.g. rerun `orokit analyze`)")
+    if table.index.name != index:
+        raise SchemaError(f"{where}the {what} table must be indexed by {index!r}, got {table.index.name!r}")
+    bad = []
+    for c in schema:
+        s = table[c.name]
+        ok = {"int64": pd.api.types.is_integer_dtype, "float64": pd.api.types.is_float_dtype,
+              "bool": pd.api.types.is_bool_dtype}[c.dtype](s.dtype)
+        if not ok:
+            bad.append(f"{c.name} ({s.dtype}, expected {c.dtype})")
+        elif c.dtype == "int64" and len(s) and int(s.min()) < NONE_ID:
+            bad.append(f"{c.name} (value {int(s.min())} below the 'none' value {NONE_ID})")
+    if bad:
+        raise SchemaError(f"{where}the {what} table has bad columns: {', '.join(bad)}")
+
+
+def validate_peak_table(peaks: Any, *, source: str | None = None) -> None:
+    """Check a peaks table against :data:`PEAK_SCHEMA` (columns, dtypes, "none" values).
+
+    Extra columns are allowed. ``source`` (a file name) is named in the error.
+
+    Raises
+    ------
+    SchemaError
+        A column is missing or has the wrong dtype, an id is below -1, or the index
+        is not ``peak_id``.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> validate_peak_table(pd.DataFrame({"row": [0]}), source="p.csv")
+    Traceback (most recent call last):
+    ...
+    orokit.errors.SchemaError: p.csv: the peaks table lacks columns ['col', ...
+    """
+    _validate(peaks, PEAK_SCHEMA, "peak_id", "peaks", source)
+
+
+def validate_saddle_table(saddles: Any, *, source: str | None = None) -> None:
+    """Check a saddles table against :data:`SADDLE_SCHEMA` (see :func:`validate_peak_table`)."""
+    _validate(saddles, SADDLE_SCHEMA, "saddle_id", "saddles", source)
+
+
+@dataclass
+class AnalysisResult:
+    """Output of :func:`orokit.analyze` (write it with :func:`orokit.write_analysis`).
+
+    Attributes
+    ----------
+    peaks : GeoDataFrame indexed by ``peak_id`` with :data:`PEAK_COLUMNS` (:data:`PEAK_SCHEMA`).
+    saddles : GeoDataFrame indexed by ``saddle_id`` with :data:`SADDLE_COLUMNS`.
+    divide_tree : the Divide Tree pruned at the threshold (same ids).
+    crs : CRS of x/y (None for a local metric grid without CRS).
+    attrs : metadata (threshold, outside convention, units, source, dataset, shape,
+        ``transform`` (affine a, b, c, d, e, f of the grid), ``crs_geographic``, timings).
+    """
+
+    peaks: Any
+    saddles: Any
+    divide_tree: DivideTree
+    crs: Any = None
+    attrs: dict = field(default_factory=dict)
+
+    def __repr__(self) -> str:  # pragma: no cover - cosmetic
+        return (
+            f"AnalysisResult({len(self.peaks)} peaks >= {self.attrs.get('min_prominence')} m, "
+            f"{len(self.saddles)} saddles, crs={self.crs})"
+        )
+

@@ -1,0 +1,78 @@
+"""The peak/saddle table schema (orokit.topology.tables): one definition, checked everywhere."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import orokit
+from orokit.errors import SchemaError
+from orokit.topology.tables import NONE_ID, PEAK_COLUMNS, PEAK_SCHEMA, validate_peak_table, validate_saddle_table
+
+
+@pytest.fixture(scope="module")
+def result():
+    rng = np.random.default_rng(3)
+    z = rng.integers(0, 40, (30, 40)).astype(np.float32)
+    z[5:8, 5:9] = np.nan
+    import rioxarray  # noqa: F401 - registers .rio
+    import xarray as xr
+
+    dem = xr.DataArray(z, dims=("y", "x"), coords={"y": 30.0 * np.arange(30)[::-1] + 15, "x": 30.0 * np.arange(40) + 15})
+    dem = dem.rio.write_crs("EPSG:32633")
+    return orokit.analyze(dem, min_prominence=5.0)
+
+
+def test_analysis_tables_follow_the_schema(result):
+    p = result.peaks
+    validate_peak_table(p)
+    validate_saddle_table(result.saddles)
+    assert list(p.columns[: len(PEAK_COLUMNS)]) == PEAK_COLUMNS
+    for c in PEAK_SCHEMA:
+        assert str(p[c.name].dtype) == c.dtype, c.name
+    roots = p["parent"] == NONE_ID
+    assert roots.any() and (p.loc[roots, "saddle_row"] == NONE_ID).all()
+    assert p.loc[roots, "saddle_elevation"].isna().all()
+
+
+def test_validation_names_the_problem(result):
+    p = result.peaks
+    with pytest.raises(SchemaError, match=r"x\.parquet: the peaks table lacks columns \['dominance'\]"):
+        validate_peak_table(p.drop(columns="dominance"), source="x.parquet")
+    bad = p.copy()
+    bad["row"] = bad["row"].astype(float)
+    with pytest.raises(SchemaError, match=r"row \(float64, expected int64\)"):
+        validate_peak_table(bad)
+    bad = p.copy()
+    bad.loc[bad.index[0], "parent"] = -5
+    with pytest.raises(SchemaError, match="below the 'none' value -1"):
+        validate_peak_table(bad)
+    with pytest.raises(SchemaError, match="indexed by 'peak_id'"):
+        validate_peak_table(p.reset_index(drop=True))
+    with pytest.raises(SchemaError, match="must be a"):
+        validate_peak_table(p.to_numpy())
+
+
+def test_synthesized_peaks_table_uses_the_same_none(result):
+    from orokit.synthesis.tree import peaks_table
+
+    table = peaks_table(result.divide_tree)
+    validate_peak_table(table)
+    for c in ("row", "col", "saddle_row", "saddle_col", "parent_row", "parent_col", "isolation_row", "isolation_col"):
+        assert (table[c] == NONE_ID).all(), c
+    # the tree alone gives the raster analysis' prominences and parents
+    assert np.array_equal(table["prominence"].to_numpy(), result.peaks["prominence"].to_numpy())
+    assert np.array_equal(table["parent"].to_numpy(), result.peaks["parent"].to_numpy())
+
+
+def test_written_tables_are_validated_on_read(result, tmp_path):
+    from orokit.analysis import read_analysis, write_analysis
+
+    write_analysis(result, tmp_path / "a")
+    back = read_analysis(tmp_path / "a")
+    assert back.peaks.drop(columns="geometry").equals(result.peaks.drop(columns="geometry"))
+    import geopandas as gpd
+
+    broken = gpd.read_parquet(tmp_path / "a" / "peaks.parquet").drop(columns="isolation_exact")
+    broken.to_parquet(tmp_path / "a" / "peaks.parquet")
+    with pytest.raises(SchemaError, match="peaks.parquet: the peaks table lacks columns"):
+        read_analysis(tmp_path / "a")
