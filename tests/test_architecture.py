@@ -22,18 +22,20 @@ SHELLS = ("io", "cli", "reports", "data")
 
 #: calls that open, read, write or remove files (attribute names; plus the builtin open)
 FILE_CALLS = {
-    "to_file", "to_parquet", "to_csv", "to_raster", "to_netcdf", "to_zarr",
+    "to_file", "to_parquet", "to_csv", "to_raster", "to_netcdf", "to_zarr", "savefig",
     "write_text", "read_text", "write_bytes", "read_bytes", "mkdir", "unlink", "rmdir",
-    "save", "savez", "savez_compressed", "load", "read_parquet", "read_file", "read_csv",
-    "open", "open_rasterio", "open_dataset",
+    "savez", "savez_compressed", "read_parquet", "read_file", "read_csv", "open_rasterio", "open_dataset",
 }
+#: generic method names that open files only on these modules (``np.load``, ``rasterio.open``...)
+GENERIC_CALLS = {"open", "load", "save", "dump"}
+FILE_MODULES = {"np", "numpy", "json", "pickle", "joblib", "rasterio", "Image", "gzip", "zipfile", "tarfile",
+                "shutil", "skops", "sio", "yaml", "os"}
 
 #: algorithm modules that still open files, and who moves that IO to orokit/io
 KNOWN_FILE_ACCESS = {
     "classify/inputs.py": "issue 12 (classify): feature-table / analysis-folder IO -> io",
     "classify/model.py": "issue 12 (classify): model IO -> io/model_io.py",
     "classify/peaklist.py": "issue 12 (classify): peak-list readers -> io",
-    "raster/render.py": "issue 11 (realism): COG/PNG/PLY writers -> io/raster_io.py",
     "synthesis/controls.py": "issue 14: control rasters read through io",
     "synthesis/output.py": "issue 14: synthesis outputs written by io",
     "synthesis/terrain_type.py": "issue 14: terrain-type JSON read by io",
@@ -119,13 +121,23 @@ def _file_calls(path: Path) -> list[str]:
         if not isinstance(node, ast.Call):
             continue
         f = node.func
-        if isinstance(f, ast.Name) and f.id == "open" or isinstance(f, ast.Attribute) and f.attr in FILE_CALLS:
+        if isinstance(f, ast.Name):
+            hit = f.id == "open"
+        elif isinstance(f, ast.Attribute):
+            hit = f.attr in FILE_CALLS or (
+                f.attr in GENERIC_CALLS and isinstance(f.value, ast.Name) and f.value.id in FILE_MODULES)
+        else:
+            hit = False
+        if hit:
             hits.append(f"{path.name}:{node.lineno}: {ast.unparse(f)}")
     return hits
 
 
-def test_file_call_detector():
+def test_file_call_detector(tmp_path):
     assert _file_calls(PKG / "io" / "analysis_io.py")  # the writers are seen
+    src = tmp_path / "m.py"
+    src.write_text("import numpy as np\nnp.load('a')\nopen('b')\nspec.load()\nframe.to_csv('c')\n")
+    assert [h.split(": ")[1] for h in _file_calls(src)] == ["np.load", "open", "frame.to_csv"]
 
 
 ALGORITHM_MODULES = sorted(p for p in PKG.rglob("*.py") if p.relative_to(PKG).parts[0] not in SHELLS)
