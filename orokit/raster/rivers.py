@@ -127,9 +127,11 @@ def river_network(
        elevation of both end vertices by the ridge elevation at the crossing.
     3. Vertices outside the domain are outlets. A priority flood from the outlets,
        lowest bound first, gives every reachable vertex one receiver: a forest.
-    4. Bed elevations: ``min(bound - margin, donor - slope * length)`` swept from the
-       sources down, never below ``base_elevation``; vertices with no bound start at
-       ``base_elevation + slope * flow distance``.
+    4. Bed elevations: ``min(bound - margin, cap - margin, donor - slope * length)`` swept
+       from the sources down, never below ``base_elevation``. A vertex whose edges cross
+       no ridge has no bound and starts at ``cap - margin`` (the ground the ridges around it
+       allow); only without ``cap`` does it start at ``base_elevation + slope * flow
+       distance`` (which pinned most river beds near the domain minimum, issue 11).
     """
     xmin, ymin, xmax, ymax = extent
     width, height = xmax - xmin, ymax - ymin
@@ -227,9 +229,10 @@ def river_network(
     has = receiver >= 0
     length[has] = np.hypot(*(xy[has] - xy[receiver[has]]).T)
 
-    h0 = np.where(np.isfinite(bnd), bnd - margin_m, base_elevation + slope * flowdist)
+    h0 = np.where(np.isfinite(bnd), bnd - margin_m, np.inf)
     if cap is not None and xy.shape[0]:
         h0 = np.minimum(h0, np.asarray(cap(xy), float) - margin_m)
+    h0 = np.where(np.isfinite(h0), h0, base_elevation + slope * flowdist)
     h0[outlet] = np.minimum(h0[outlet], base_elevation)
     h = _kernels.river_elevations(order_arr, receiver, length, h0, float(slope), float(base_elevation))
     logger.info("rivers: %d nodes, %d outlets", h.size, int(outlet.sum()))

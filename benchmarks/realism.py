@@ -1,0 +1,172 @@
+"""Landform realism of rendered terrain: real DEM vs render of its real tree vs free twin.
+
+For every shared DEM (the manifest's 13 region crops), at the DEM's own cell size:
+
+- *render*: the real DEM's own Divide Tree (``orokit.analyze``, eps 30 m) rendered on the
+  DEM's extent (what ``orokit render TREE --like DEM`` does, default parameters);
+- *twin*: a tree synthesized from the region's terrain type on a domain of the DEM's size
+  (what ``orokit synthesize --type T --like DEM`` does), rendered with the defaults.
+
+Each is compared with the real DEM by :func:`orokit.validate.landform.compare_landforms`
+(distance, real north/south halves yardstick, target = max(2 x halves, floor)), and
+re-analysed for the orometry (tree peaks recovered, extra peaks). Regions are split in
+two fixed groups: ``tune`` (used while choosing renderer defaults) and ``hold`` (only
+checked), reported apart. Results: ``reports/benchmarks/realism.json``.
+
+    python benchmarks/realism.py [--regions a,b] [--group tune|hold|all] [--figures DIR] [--no-erosion]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+#: fixed before any tuning: defaults are chosen on TUNE only, HOLD is checked afterwards
+TUNE = ("alaska", "andes-chile", "appalachians", "gobi", "himalaya-everest", "norway")
+HOLD = ("andes-aconcagua", "highlands", "himalaya-annapurna", "karakoram", "pyrenees", "rockies", "sahara")
+EPS = 30.0
+
+
+def _extent(dem) -> tuple[float, float, float, float]:
+    t = dem.rio.transform()
+    ny, nx = dem.shape
+    xs, ys = (t.c, t.c + t.a * nx), (t.f, t.f + t.e * ny)
+    return (min(xs), min(ys), max(xs), max(ys))
+
+
+def _table(df) -> dict:
+    return {k: {c: (bool(v) if c == "ok" else float(v)) for c, v in row.items()} for k, row in df.iterrows()}
+
+
+def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, params=None) -> dict:
+    import orokit
+    from orokit.data import open_dataset_dem
+    from orokit.raster.params import RenderParams
+    from orokit.raster.render import render_elevation
+    from orokit.raster.skeleton import tree_extent
+    from orokit.synthesis.terrain_type import TerrainType
+    from orokit.synthesis.tree import synthesize_divide_tree
+    from orokit.validate.landform import compare_landforms, landform_statistics, split_halves
+    from orokit.validate.roundtrip import roundtrip
+
+    params = params or RenderParams(min_prominence=EPS)
+    dem = open_dataset_dem(name)
+    res = abs(float(dem.rio.transform().a))
+    ny, nx = dem.shape
+    real = landform_statistics(dem)
+    halves = tuple(landform_statistics(h) for h in split_halves(dem))
+    result = orokit.analyze(dem, min_prominence=EPS)
+    tree = result.divide_tree
+    out: dict = {"shape": [ny, nx], "cell_size_m": res, "real": real.summary, "tree_peaks": int(tree.n_peaks)}
+
+    t0 = time.perf_counter()
+    ren = render_elevation(tree, resolution_m=res, extent=_extent(dem), erosion=erosion, params=params, rng=seed)
+    t_render = time.perf_counter() - t0
+    rs = landform_statistics(ren)
+    rt = roundtrip(ren, tree, min_prominence=EPS).summary()
+    out["render"] = {"time_s": t_render, "summary": rs.summary,
+                     "landform": _table(compare_landforms(real, rs, halves=halves)),
+                     "recovered": rt.get("recovered_share"), "extra": rt.get("extra_share")}
+
+    ttype = TerrainType.from_analysis(result, name=name)
+    t0 = time.perf_counter()
+    ttree = synthesize_divide_tree(ttype, size_m=(nx * res, ny * res), rng=seed)
+    twin = render_elevation(ttree, resolution_m=res, extent=tree_extent(ttree), erosion=erosion, params=params,
+                            rng=seed)
+    t_twin = time.perf_counter() - t0
+    ts = landform_statistics(twin)
+    rt2 = roundtrip(twin, ttree, min_prominence=EPS).summary()
+    out["twin"] = {"time_s": t_twin, "summary": ts.summary,
+                   "landform": _table(compare_landforms(real, ts, halves=halves)),
+                   "recovered": rt2.get("recovered_share"), "extra": rt2.get("extra_share")}
+    if figures is not None:
+        _figure(figures / f"{name}.png", name, dem, ren, twin)
+    return out
+
+
+def _figure(path: Path, name: str, real, ren, twin) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from orokit.raster.shade import hillshade
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(1, 3, figsize=(15, 5.2), dpi=110)
+    for ax, da, label in zip(axes, (real, ren, twin), ("real", "render of the real tree", "free twin")):
+        ax.imshow(hillshade(da), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+        ax.set_title(f"{name}: {label}")
+        ax.set_axis_off()
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _markdown(results: dict) -> str:
+    from orokit.validate.landform import FLOORS
+
+    stats = list(FLOORS) + ["relief_5km", "drainage_share", "drainage_density"]
+    lines = []
+    for kind in ("render", "twin"):
+        lines.append(f"\n### {kind}: distance / target (x = over target)\n")
+        lines.append("| region | group | " + " | ".join(stats) + " | recovered | extra | s |")
+        lines.append("|---|---|" + "---:|" * (len(stats) + 3))
+        for name, r in results.items():
+            lf = r[kind]["landform"]
+            cells = [f"{lf[s]['distance']:.3g}/{lf[s]['target']:.3g}{'' if lf[s]['ok'] else ' x'}" for s in stats]
+            lines.append(f"| {name} | {r['group']} | " + " | ".join(cells)
+                         + f" | {100 * (r[kind]['recovered'] or 0):.1f} | {100 * (r[kind]['extra'] or 0):.1f}"
+                         + f" | {r[kind]['time_s']:.1f} |")
+        for grp in ("tune", "hold"):
+            rows = [r for r in results.values() if r["group"] == grp]
+            if rows:
+                met = [sum(r[kind]["landform"][s]["ok"] for r in rows) for s in stats]
+                lines.append(f"| **{grp}: regions within target** | | " + " | ".join(f"{m}/{len(rows)}" for m in met)
+                             + " | | | |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--regions", default=None, help="comma-separated dataset names (default: the group)")
+    ap.add_argument("--group", choices=("tune", "hold", "all"), default="all")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--no-erosion", dest="erosion", action="store_false")
+    ap.add_argument("--figures", type=Path, default=None, help="write real / render / twin hillshades here")
+    ap.add_argument("--no-record", dest="record", action="store_false",
+                    help="do not write reports/benchmarks/realism.json")
+    ap.add_argument("--json", type=Path, default=None, help="also write the results to this file")
+    a = ap.parse_args(argv)
+    groups = {"tune": TUNE, "hold": HOLD, "all": TUNE + HOLD}
+    names = a.regions.split(",") if a.regions else list(groups[a.group])
+    results = {}
+    for name in names:
+        t0 = time.perf_counter()
+        r = run_region(name, seed=a.seed, erosion=a.erosion, figures=a.figures)
+        r["group"] = "tune" if name in TUNE else "hold" if name in HOLD else "other"
+        r["load_average_1_5_15"] = list(os.getloadavg())
+        results[name] = r
+        print(f"{name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+    md = _markdown(results)
+    print(md)
+    doc = {"seed": a.seed, "erosion": a.erosion, "eps_m": EPS, "tune": list(TUNE), "hold": list(HOLD),
+           "regions": results, "table_markdown": md}
+    if a.json is not None:
+        a.json.write_text(json.dumps(doc, indent=1, default=float))
+    if a.record and not a.regions:
+        from _record import record
+
+        print(f"recorded {record('realism', doc)}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
