@@ -34,6 +34,10 @@ class SchemaError(OrokitError, ValueError):
     """A table, model or type file does not have the expected columns/version."""
 
 
+class OutputError(OrokitError):
+    """An output cannot be written: another orokit process is writing it, or no space is left."""
+
+
 class DataError(OrokitError):
     """Dataset manifest, download or checksum problem."""
 

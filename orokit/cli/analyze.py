@@ -46,6 +46,10 @@ def analyze(ctx: click.Context, dem: str, outdir: Path, min_prominence: float, z
     from orokit.analysis import analyze as run
     from orokit.io.dem import read_dem
 
+    from orokit.cli.outputs import claim_outputs
+    from orokit.io.analysis_io import ANALYSIS_FILES
+
+    claim_outputs(outdir, names=ANALYSIS_FILES)  # locked for the whole run
     if (outdir / "analysis.json").exists() and not overwrite:
         raise click.UsageError(f"{outdir} already holds an analysis; pass --overwrite to replace it")
     t0 = time.perf_counter()

@@ -30,6 +30,9 @@ def classify(model_path, source, z_units, cell_size, region, isolation, min_peak
     from orokit.classify.predict import classify_input
     from orokit.io.atomic import atomic_path
 
+    from orokit.cli.outputs import claim_outputs
+
+    claim_outputs(output)  # locked for the whole run
     if output is not None and output.exists() and not overwrite:
         raise click.UsageError(f"{output} exists; pass --overwrite to replace it")
     model = load_model(model_path)

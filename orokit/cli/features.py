@@ -48,6 +48,9 @@ def features(inputs, output, radius, min_prominence, min_peaks, max_disks, separ
     from orokit.classify.features import concat_features, write_features
     from orokit.classify.inputs import features_for_input
 
+    from orokit.cli.outputs import claim_outputs
+
+    claim_outputs(output)  # locked for the whole run
     if output.exists() and not overwrite:
         raise click.UsageError(f"{output} exists; pass --overwrite to replace it")
     if labels and len(labels) not in (1, len(inputs)):

@@ -47,16 +47,53 @@ class LazyGroup(click.Group):
         module, attr = target.split(":")
         return getattr(importlib.import_module(module), attr)
 
-    def invoke(self, ctx: click.Context):  # noqa: D102 - one-line errors for OrokitError
+    def invoke(self, ctx: click.Context):  # noqa: D102 - one-line errors, "interrupted" on Ctrl-C
         from orokit.errors import OrokitError
 
+        verbose = bool(ctx.obj and ctx.obj.get("verbose", 0) >= 2)
         try:
             return super().invoke(ctx)
         except OrokitError as exc:
-            if ctx.obj and ctx.obj.get("verbose", 0) >= 2:
+            if verbose:
                 raise
             click.echo(f"Error: {exc}", err=True)
             sys.exit(1)
+        except (KeyboardInterrupt, SystemError) as exc:
+            # Ctrl-C inside a numba/C stage may surface as a SystemError whose context is the
+            # KeyboardInterrupt; either way the outputs were left as they were (staged writes)
+            if isinstance(exc, SystemError) and not _caused_by(exc, KeyboardInterrupt):
+                raise
+            if verbose:
+                raise
+            click.echo("interrupted", err=True)
+            sys.exit(130)
+        except Exception as exc:
+            from orokit.io.atomic import is_no_space_error, no_space_error
+
+            if verbose or not is_no_space_error(exc):
+                raise
+            click.echo(f"Error: {no_space_error(_where(ctx, exc), exc)}", err=True)
+            sys.exit(1)
+
+
+def _caused_by(exc: BaseException, kind: type[BaseException]) -> bool:
+    e: BaseException | None = exc
+    for _ in range(5):
+        if e is None:
+            return False
+        if isinstance(e, kind):
+            return True
+        e = e.__cause__ or e.__context__
+    return False
+
+
+def _where(ctx: click.Context, exc: BaseException) -> str:
+    """Where a full disk was hit: the first output of the command, else the file."""
+    outputs = (ctx.obj or {}).get("outputs") or []
+    if outputs:
+        return str(outputs[0].resolve())
+    name = getattr(exc, "filename", None)
+    return str(name) if name else "the output disk"
 
 
 @click.group(cls=LazyGroup)

@@ -39,10 +39,12 @@ def extent_like(path: Path, *, cell_size: float | None = None) -> tuple[float, f
 def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None, skeleton=None) -> None:
     """Write the raster, then the TIN, then the hillshade preview (each atomically; the
     preview last, so it marks a complete set)."""
+    from orokit.cli.generator_options import EXTRA_TAGS
+    from orokit.io.atomic import check_free_space
     from orokit.io.raster_io import write_cog, write_hillshade_png, write_tin_ply
 
-    from orokit.cli.generator_options import EXTRA_TAGS
-
+    # float32 cells + overviews + the COG driver's temporary copy (about a third)
+    check_free_space(out, dem.size * 4 * 1.7, what=f"{Path(out).name} ({dem.shape[1]} x {dem.shape[0]} cells)")
     write_cog(dem, out, tags={k: v for k, v in dem.attrs.items() if k in EXTRA_TAGS})
     if tin_path is not None and skeleton is not None:
         write_tin_ply(skeleton.tin, tin_path)
@@ -83,9 +85,11 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
     """
     import time
 
+    from orokit.cli.outputs import claim_outputs
     from orokit.raster.params import RenderParams
     from orokit.raster.render import render_elevation
 
+    stage = claim_outputs(out, preview, tin_path)  # locked for the whole run
     for p in (out, preview, tin_path):
         if p is not None and p.exists() and not overwrite:
             raise click.UsageError(f"{p} exists; pass --overwrite to replace it")
@@ -115,6 +119,9 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
     t0 = time.perf_counter()
     dem, skel = render_elevation(t, resolution_m=res, extent=extent, erosion=erosion, params=params,
                                  return_skeleton=True, rng=seed)
-    write_outputs(dem, out, preview=preview, tin_path=tin_path, skeleton=skel)
+    # staged: the old outputs are replaced only once every new one is written
+    write_outputs(dem, stage.file(out), preview=None if preview is None else stage.file(preview),
+                  tin_path=None if tin_path is None else stage.file(tin_path), skeleton=skel)
+    stage.commit()
     click.echo(f"{dem.shape[1]} x {dem.shape[0]} cells at {res:g} m from {t.n_peaks} peaks "
                f"in {time.perf_counter() - t0:.1f} s (seed {dem.attrs['seed']}) -> {out}")

@@ -74,10 +74,10 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
                outdir, overwrite, progress, generator, params, exemplar) -> None:
     """Synthesize a Divide Tree following a terrain type and render it to a raster.
 
-    With --overwrite an interrupted run never leaves old and new files side by side: the
-    old outputs are removed (the marker hillshade.png first) once the new terrain is
-    computed, then every file is written atomically, the tree files, dem.tif and, last,
-    hillshade.png.
+    OUTPUT is locked for the whole run. The new files are written into a hidden folder
+    beside OUTPUT and moved in only when all are complete (hillshade.png, the marker of a
+    complete folder, last), so an interrupted or failed run (disk full) keeps the previous
+    outputs unchanged and never leaves old and new files side by side.
     """
     import json
     import time
@@ -95,7 +95,10 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
     from orokit.synthesis.terrain_type import load_terrain_type
     from orokit.synthesis.tree import synthesize_divide_tree
 
+    from orokit.cli.outputs import claim_outputs
+
     outputs = (MARKER,) + tuple(f for f in SYNTHESIS_FILES + TERRAIN_FILES + ("tin.ply",) if f != MARKER)
+    stage = claim_outputs(outdir, names=outputs + STALE_FILES)  # locked for the whole run
     existing = [f for f in outputs if (outdir / f).exists()]
     if existing and not overwrite:
         raise click.UsageError(f"{outdir} already holds {', '.join(existing)}; pass --overwrite to replace them")
@@ -148,17 +151,18 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
                                seed=seed, exemplar=exemplar)
     if bar is not None:
         bar.update(1)
-    outdir.mkdir(parents=True, exist_ok=True)
-    for f in outputs + STALE_FILES:  # marker first: from here on the folder reads as incomplete
-        (outdir / f).unlink(missing_ok=True)
+    # the new files go to a hidden folder beside OUTPUT and replace the old ones only when all
+    # are written (the marker first removed, moved in last; the old ones not rewritten removed)
+    new = stage.folder(outdir, marker=MARKER, stale=outputs + STALE_FILES)
     extra = {"seed": seed, "types": [str(type_file)], "resolution_m": res, "erosion": bool(erosion), "like": like,
              "generator": generator, "generator_parameters": json.loads(dem.attrs.get("parameters", "{}")),
              "control_elevation": None if control_elevation is None else str(control_elevation),
              "render_timings_s": json.loads(dem.attrs.get("timings", "{}")),
              "fidelity": compare_to_type(tree, ttype).reset_index().to_dict(orient="records")}
-    write_synthesis(tree, outdir, extra=extra)
-    write_outputs(dem, outdir / "dem.tif", preview=outdir / "hillshade.png",
-                  tin_path=outdir / "tin.ply" if write_tin else None, skeleton=skel)
+    write_synthesis(tree, new, extra=extra)
+    write_outputs(dem, new / "dem.tif", preview=new / "hillshade.png",
+                  tin_path=new / "tin.ply" if write_tin else None, skeleton=skel)
+    stage.commit()
     if bar is not None:
         bar.update(1)
         bar.close()

@@ -57,6 +57,9 @@ def synthesize_tree(type_files, size, n_peaks, control_elevation, control_densit
     from orokit.synthesis.terrain_type import load_terrain_type
     from orokit.synthesis.tree import synthesize_divide_tree
 
+    from orokit.cli.outputs import claim_outputs
+
+    claim_outputs(outdir, names=SYNTHESIS_FILES)  # locked for the whole run
     existing = [f for f in SYNTHESIS_FILES if (outdir / f).exists()]
     if existing and not overwrite:
         raise click.UsageError(f"{outdir} already holds {', '.join(existing)}; pass --overwrite to replace them")

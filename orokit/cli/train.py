@@ -53,6 +53,9 @@ def train(features_path, output, runs, feature_runs, split, buffer_radii, trees,
         from orokit.reports.classification import training_report_files
 
         outputs += training_report_files(radius, kinds, report_dir)
+    from orokit.cli.outputs import claim_outputs
+
+    claim_outputs(output, report_dir)  # locked for the whole run
     existing = [str(p) for p in outputs if p.exists()]
     if existing and not overwrite:  # checked before the (long) training runs
         raise click.UsageError(f"{', '.join(existing)} exist(s); pass --overwrite to replace them")

@@ -40,6 +40,9 @@ def type_cmd(source: Path, output: Path, name: str | None, min_prominence: float
     """
     from orokit.synthesis.terrain_type import TerrainType
 
+    from orokit.cli.outputs import claim_outputs
+
+    claim_outputs(output)  # locked for the whole run
     if output.exists() and not overwrite:
         raise click.UsageError(f"{output} exists; pass --overwrite to replace it")
     if source.is_dir():

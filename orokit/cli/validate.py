@@ -54,6 +54,9 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, z_uni
     raster = folder / "dem.tif" if folder else out
     if json_path is None and folder is not None:
         json_path = folder / "validation.json"
+    from orokit.cli.outputs import claim_outputs
+
+    claim_outputs(json_path, append_to)  # locked for the whole run
     if json_path is not None and json_path.exists() and not overwrite:
         raise click.UsageError(f"{json_path} exists; pass --overwrite to replace it")
     if append_to is not None and append_to.exists() and append_to.is_dir():

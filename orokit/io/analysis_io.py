@@ -15,7 +15,7 @@ import pandas as pd
 
 from orokit._typing import PathLike
 from orokit.errors import InputError
-from orokit.io.atomic import atomic_path, write_text_atomic
+from orokit.io.atomic import atomic_path, staged_folder, write_text_atomic
 from orokit.topology.tables import AnalysisResult, validate_peak_table, validate_saddle_table
 
 logger = logging.getLogger(__name__)
@@ -28,19 +28,18 @@ ANALYSIS_FILES = ("peaks.csv", "peaks.parquet", "saddles.parquet", "dividetree.g
 def write_analysis(result: AnalysisResult, outdir: PathLike, *, overwrite: bool = False) -> Path:
     """Write an :class:`~orokit.topology.tables.AnalysisResult` into ``outdir``.
 
-    A lock file keeps two processes from writing the same folder at once.
+    The folder is locked while it is written (another process writing it gets
+    :class:`~orokit.errors.OutputError`). The files are written into a hidden folder
+    beside ``outdir`` and moved in only when all are complete, ``analysis.json`` last, so
+    a failure (disk full, Ctrl-C) keeps a previous analysis byte-identical.
     """
-    from filelock import FileLock, Timeout
-
     out = Path(outdir)
-    if (out / "analysis.json").exists() and not overwrite:
-        raise InputError(f"{out} already holds an analysis; pass overwrite=True (CLI: --overwrite)")
-    out.mkdir(parents=True, exist_ok=True)
-    try:
-        with FileLock(str(out / ".orokit.lock"), timeout=0):
-            return _write(result, out)
-    except Timeout:
-        raise InputError(f"another orokit process is writing to {out}; wait for it or choose another folder") from None
+    with staged_folder(out, marker="analysis.json", names=ANALYSIS_FILES) as stage:
+        if (out / "analysis.json").exists() and not overwrite:
+            raise InputError(f"{out} already holds an analysis; pass overwrite=True (CLI: --overwrite)")
+        _write(result, stage)
+    logger.info("wrote %s", out)
+    return out
 
 
 def analysis_json(result: AnalysisResult) -> str:
@@ -57,7 +56,6 @@ def _write(result: AnalysisResult, out: Path) -> Path:
 
     validate_peak_table(result.peaks)
     validate_saddle_table(result.saddles)
-    (out / "analysis.json").unlink(missing_ok=True)
     peaks = result.peaks
     with atomic_path(out / "peaks.csv") as tmp:
         pd.DataFrame(peaks.drop(columns="geometry")).to_csv(tmp, float_format="%.10g")
@@ -68,7 +66,6 @@ def _write(result: AnalysisResult, out: Path) -> Path:
     tree = result.divide_tree
     write_divide_tree_gpkg(tree, out / "dividetree.gpkg")
     write_text_atomic(out / "analysis.json", analysis_json(result))
-    logger.info("wrote %s", out)
     return out
 
 

@@ -1,12 +1,20 @@
-"""Atomic file output: write to a temporary file beside the target, then rename.
+"""Safe output: atomic files, a lock per output for a whole run, staged output sets.
 
 Every orokit writer goes through :func:`atomic_path` (or the small wrappers below), so
 an interrupted or failed write never leaves a half-written file under the final name
 and an older file at that name stays intact until the new one is complete.
+
+A command that writes several files uses :func:`output_lock` for its whole run (a
+second writer of the same output fails at once with :class:`~orokit.errors.OutputError`),
+removes what a killed run left with :func:`remove_stale_temps`, and writes through a
+:class:`Staging`: every new file goes to a hidden temporary path (a folder output to a
+hidden folder beside it) and replaces the old one only when all are complete, so a
+failure (disk full, Ctrl-C) keeps the previous output byte-identical.
 """
 from __future__ import annotations
 
 import contextlib
+import errno
 import logging
 import os
 import shutil
@@ -16,11 +24,13 @@ from pathlib import Path
 from typing import IO, Any
 
 from orokit._typing import PathLike
-from orokit.errors import OrokitError
+from orokit.errors import OrokitError, OutputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["atomic_path", "atomic_open", "write_text_atomic", "write_bytes_atomic", "temp_path_for"]
+__all__ = ["atomic_path", "atomic_open", "write_text_atomic", "write_bytes_atomic", "temp_path_for",
+           "output_lock", "lock_path_for", "remove_stale_temps", "Staging", "staged_folder", "is_no_space_error", "no_space_error",
+           "check_free_space"]
 
 
 def temp_path_for(final_path: PathLike) -> Path:
@@ -153,3 +163,262 @@ def write_bytes_atomic(final_path: PathLike, data: bytes) -> Path:
     with atomic_open(final_path, "wb") as fh:
         fh.write(data)
     return Path(final_path)
+
+
+# --- locks --------------------------------------------------------------------------------
+
+#: locks held by this process: lock file -> (fd, depth); a command that holds the lock of
+#: its output may call library writers that take it again
+_HELD: dict[Path, list[int]] = {}
+
+
+def lock_path_for(target: PathLike) -> Path:
+    """The lock file of an output (file or folder): hidden, beside it, ``.NAME.lock``."""
+    t = Path(os.path.abspath(target))
+    return t.with_name(f".{t.name}.lock")
+
+
+def _holder(lock: Path) -> str:
+    try:
+        text = lock.read_text(encoding="utf-8", errors="replace").strip()
+    except OSError:
+        return ""
+    return f" ({text})" if text else ""
+
+
+def _acquire(target: Path) -> Path:
+    import fcntl
+
+    lock = lock_path_for(target)
+    held = _HELD.get(lock)
+    if held is not None:
+        held[1] += 1
+        return lock
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OutputError(
+                f"{target} is being written by another orokit process{_holder(lock)}; wait for it to finish, "
+                f"or write to another output (if no orokit process is running, remove {lock})"
+            ) from None
+        try:  # the previous holder may have removed the file between our open and flock
+            same = os.fstat(fd).st_ino == os.stat(lock).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    import sys
+
+    os.ftruncate(fd, 0)
+    os.write(fd, f"pid {os.getpid()}: {' '.join(sys.argv[:3])}".encode())
+    _HELD[lock] = [fd, 1]
+    return lock
+
+
+def _release(lock: Path) -> None:
+    held = _HELD.get(lock)
+    if held is None:
+        return
+    held[1] -= 1
+    if held[1] > 0:
+        return
+    del _HELD[lock]
+    with contextlib.suppress(FileNotFoundError):
+        lock.unlink()  # while still holding it: a waiting process re-checks the inode
+    os.close(held[0])
+
+
+@contextlib.contextmanager
+def output_lock(*targets: PathLike | None) -> Iterator[None]:
+    """Hold the lock of every output in ``targets`` (``None`` entries are skipped).
+
+    The lock is an exclusive ``flock`` on a hidden file beside each output
+    (``.NAME.lock``), so it is released by the kernel even when the process is killed;
+    the file is removed when the lock is released. Re-entrant within one process.
+
+    Raises
+    ------
+    OutputError
+        If another process holds the lock of one of them (nothing is waited for).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> with output_lock(d / "out"):
+    ...     (d / ".out.lock").exists()
+    True
+    >>> (d / ".out.lock").exists()
+    False
+    """
+    taken: list[Path] = []
+    try:
+        for t in sorted({Path(os.path.abspath(t)) for t in targets if t is not None}):
+            taken.append(_acquire(t))
+        yield
+    finally:
+        for lock in reversed(taken):
+            _release(lock)
+
+
+def remove_stale_temps(target: PathLike, *, names: tuple[str, ...] | None = None) -> list[Path]:
+    """Remove the temporary files/folders an interrupted run left for ``target``.
+
+    Call it only while holding :func:`output_lock` of ``target``. Removes hidden
+    ``.NAME.tmp-*`` beside ``target`` and, if ``target`` is a folder, the hidden
+    ``.FILE.tmp-*`` of the files inside it (only of ``names`` when given).
+    """
+    t = Path(target)
+    found = list(t.parent.glob(f".{t.name}.tmp-*")) if t.parent.is_dir() else []
+    if t.is_dir():
+        inside = t.glob(".*.tmp-*")
+        if names is not None:
+            inside = (p for p in inside if any(p.name.startswith(f".{n}.tmp-") for n in names))
+        found.extend(inside)
+    for p in found:
+        logger.info("removing %s, left by an interrupted run", p)
+        _remove(p)
+    return found
+
+
+# --- staged output sets -------------------------------------------------------------------
+
+class Staging:
+    """New outputs written to temporary paths, moved to their final names together.
+
+    :meth:`file` gives a temporary path for one output file, :meth:`folder` a hidden
+    temporary folder for a folder output. Nothing under a final name changes until
+    :meth:`commit`, which only renames (so it needs no disk space): the folder's
+    ``marker`` is removed first and moved in last, and the ``stale`` files of the old
+    output are removed. :meth:`abort` removes everything that was staged.
+    """
+
+    def __init__(self) -> None:
+        self._files: list[tuple[Path, Path]] = []
+        self._folders: list[tuple[Path, Path, str | None, tuple[str, ...]]] = []
+        self.committed = False
+
+    def file(self, final: PathLike) -> Path:
+        """A temporary path (same folder and suffix) whose content becomes ``final``."""
+        final_p = Path(final)
+        final_p.parent.mkdir(parents=True, exist_ok=True)
+        tmp = temp_path_for(final_p)
+        self._files.append((tmp, final_p))
+        return tmp
+
+    def folder(self, final: PathLike, *, marker: str | None = None, stale: tuple[str, ...] = ()) -> Path:
+        """A hidden, empty folder beside ``final``; its files replace those in ``final``."""
+        final_p = Path(os.path.abspath(final))
+        final_p.parent.mkdir(parents=True, exist_ok=True)
+        tmp = final_p.with_name(f".{final_p.name}.tmp-{uuid.uuid4().hex[:12]}")
+        tmp.mkdir()
+        self._folders.append((tmp, final_p, marker, stale))
+        return tmp
+
+    def commit(self) -> None:
+        """Move every staged output to its final name."""
+        for tmp, final, marker, stale in self._folders:
+            if final.exists() and not final.is_dir():
+                raise OutputError(f"{final} is a file, not a folder; remove it or choose another output folder")
+            final.mkdir(parents=True, exist_ok=True)
+            new = sorted(p.name for p in tmp.iterdir())
+            if marker is not None:  # first: from here on the folder reads as incomplete
+                with contextlib.suppress(FileNotFoundError):
+                    (final / marker).unlink()
+                if marker in new:  # ... until the marker is moved in, last
+                    new.remove(marker)
+                    new.append(marker)
+            for name in stale:
+                if name not in new:
+                    with contextlib.suppress(FileNotFoundError):
+                        (final / name).unlink()
+            for name in new:
+                _fsync_file(tmp / name)
+                os.replace(tmp / name, final / name)
+            _fsync_dir(final)
+            tmp.rmdir()
+        for tmp, final in self._files:
+            if tmp.exists():
+                _fsync_file(tmp)
+                os.replace(tmp, final)
+                _fsync_dir(final.parent)
+        self.committed = True
+
+    def abort(self) -> None:
+        """Remove whatever was staged and not committed."""
+        for tmp, *_ in self._folders:
+            _remove(tmp)
+        for tmp, _ in self._files:
+            _remove(tmp)
+
+
+@contextlib.contextmanager
+def staged_folder(final: PathLike, *, marker: str | None = None, stale: tuple[str, ...] = (),
+                  names: tuple[str, ...] | None = None) -> Iterator[Path]:
+    """Lock the folder ``final``, yield a hidden folder beside it, then move its files in.
+
+    Stale temporary files of ``names`` (see :func:`remove_stale_temps`) are removed first.
+    On any failure the staged files are removed and ``final`` is left as it was; a full
+    disk raises :class:`~orokit.errors.OutputError` ``no space left on <final>``.
+    """
+    with output_lock(final):
+        remove_stale_temps(final, names=names)
+        stage = Staging()
+        try:
+            yield stage.folder(final, marker=marker, stale=stale)
+            stage.commit()
+        except Exception as exc:
+            stage.abort()
+            if is_no_space_error(exc) and not isinstance(exc, OutputError):
+                raise no_space_error(final, exc) from exc
+            raise
+        except BaseException:
+            stage.abort()
+            raise
+
+
+# --- disk space ---------------------------------------------------------------------------
+
+_NO_SPACE = ("no space left on device", "disk quota exceeded", "free disk space available")
+
+
+def is_no_space_error(exc: BaseException) -> bool:
+    """True if ``exc`` (or its cause) says the disk is full (ENOSPC/EDQUOT or GDAL's text)."""
+    seen = 0
+    e: BaseException | None = exc
+    while e is not None and seen < 5:
+        if isinstance(e, OSError) and e.errno in (errno.ENOSPC, errno.EDQUOT):
+            return True
+        if any(s in str(e).lower() for s in _NO_SPACE):
+            return True
+        e = e.__cause__ or e.__context__
+        seen += 1
+    return False
+
+
+def no_space_error(where: PathLike, exc: BaseException | None = None) -> OutputError:
+    """The one message for a full disk: ``no space left on <path>``."""
+    detail = f" ({exc})" if exc is not None and str(exc) else ""
+    return OutputError(
+        f"no space left on {where}{detail}; the previous outputs were kept unchanged. "
+        "Free some space (or write elsewhere) and run again."
+    )
+
+
+def check_free_space(target: PathLike, need_bytes: float, *, what: str = "the output") -> None:
+    """Refuse (``no space left on <folder>``) when the folder of ``target`` has less free
+    space than ``need_bytes``."""
+    folder = Path(os.path.abspath(target)).parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    free = shutil.disk_usage(folder).free
+    if free < need_bytes:
+        raise OutputError(
+            f"no space left on {folder}: {what} needs about {need_bytes / 1e6:.0f} MB, "
+            f"{free / 1e6:.0f} MB are free. Free some space (or write elsewhere) and run again."
+        )

@@ -20,19 +20,26 @@ SYNTHESIS_FILES = ("dividetree.gpkg", "dividetree.txt", "peaks.csv", "synthesis.
 
 def write_synthesis(tree: DivideTree, outdir: PathLike, *, txt_cell_m: float = 30.0,
                     extra: dict | None = None) -> Path:
-    """Write ``tree`` into ``outdir`` (each file atomically).
+    """Write ``tree`` into ``outdir`` (locked; staged beside it and moved in when complete).
 
     Files: ``dividetree.gpkg`` (layers peaks, saddles, ridges), ``dividetree.txt``
     (reference TXT format, elevations in feet, pixel coordinates on a virtual grid of
     ``txt_cell_m`` cells with the origin at the domain's north-west corner),
     ``peaks.csv`` (the columns of ``orokit analyze``), ``synthesis.json`` (attrs).
     """
+    from orokit.io.atomic import staged_folder
+
+    with staged_folder(outdir, marker="synthesis.json", names=SYNTHESIS_FILES) as stage:
+        _write(tree, stage, txt_cell_m=txt_cell_m, extra=extra)
+    logger.info("wrote %s", outdir)
+    return Path(outdir)
+
+
+def _write(tree: DivideTree, out: Path, *, txt_cell_m: float, extra: dict | None) -> None:
     from orokit.io.atomic import atomic_path, write_text_atomic
     from orokit.io.divide_tree_io import write_divide_tree_gpkg, write_divide_tree_txt
     from orokit.synthesis.tree import peaks_table
 
-    out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
     write_divide_tree_gpkg(tree, out / "dividetree.gpkg")
     dom = tree.attrs.get("domain") or {}
     x0 = float(dom.get("x0", tree.peaks["x"].min()))
@@ -55,5 +62,3 @@ def write_synthesis(tree: DivideTree, outdir: PathLike, *, txt_cell_m: float = 3
     meta["txt_cell_m"] = txt_cell_m
     meta.update(extra or {})
     write_text_atomic(out / "synthesis.json", json.dumps(meta, indent=2, default=str))
-    logger.info("wrote %s", out)
-    return out

@@ -199,15 +199,20 @@ def test_large_rasters_are_planned_chunked(tmp_path, monkeypatch):
 
 
 def test_concurrent_writers_are_refused(make_dem, tmp_path):
-    from filelock import FileLock
+    import fcntl
+    import os
 
-    from orokit.errors import InputError
+    from orokit.errors import OutputError
+    from orokit.io.atomic import lock_path_for
 
     r = orokit.analyze(make_dem(np.arange(30.0).reshape(5, 6) % 7), min_prominence=0)
     out = tmp_path / "out"
-    out.mkdir()
-    with FileLock(str(out / ".orokit.lock")):
-        with pytest.raises(InputError, match="another orokit process"):
+    fd = os.open(lock_path_for(out), os.O_RDWR | os.O_CREAT)  # held as by another process
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        with pytest.raises(OutputError, match="another orokit process"):
             write_analysis(r, out)
+    finally:
+        os.close(fd)
     write_analysis(r, out)
     assert (out / "analysis.json").exists()

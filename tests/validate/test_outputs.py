@@ -57,26 +57,27 @@ def test_synthesized_dem_reads_back_without_flags(twin, small_type_file, tmp_pat
     assert read_dem(str(out / "dem.tif")).rio.crs.to_epsg() == 32633
 
 
-def test_interrupted_overwrite_leaves_no_old_file_behind(small_type_file, tmp_path, monkeypatch):
+def test_failed_overwrite_keeps_the_previous_terrain_byte_identical(small_type_file, tmp_path, monkeypatch):
     out = tmp_path / "twin"
     assert synthesize(out, small_type_file, "--seed", "1").exit_code == 0
     (out / "validation.json").write_text("{}")  # a validation of the old terrain
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
 
     def disk_full(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(raster_io, "write_cog", disk_full)
     r = synthesize(out, small_type_file, "--seed", "2", "--overwrite")
-    assert r.exit_code != 0
-    left = sorted(p.name for p in out.iterdir())
-    # no old raster beside the new tree, no completion marker, no stale validation, no temp file
-    assert "dem.tif" not in left and "hillshade.png" not in left and "validation.json" not in left
-    assert not [n for n in left if n.startswith(".")]
-    if "synthesis.json" in left:
-        assert json.loads((out / "synthesis.json").read_text())["seed"] == 2
+    assert r.exit_code == 1
+    assert f"no space left on {out.resolve()}" in r.output and "Traceback" not in r.output
+    # the new tree was written (staged) but nothing of the old terrain changed, no temp file left
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
     monkeypatch.undo()
     r = synthesize(out, small_type_file, "--seed", "2", "--overwrite")
     assert r.exit_code == 0, r.output
+    assert json.loads((out / "synthesis.json").read_text())["seed"] == 2
+    assert not (out / "validation.json").exists()  # it described the old terrain
     mtimes = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
     assert max(mtimes, key=mtimes.get) == "hillshade.png"  # the marker is written last
 

@@ -1,0 +1,56 @@
+"""What every writing command does with its outputs, for the whole run.
+
+:func:`claim_outputs` is called at the start of a command, before it checks whether its
+outputs exist: it takes the lock of each output until the command ends (a second
+``orokit`` writing the same output fails at once), removes the hidden temporary files an
+interrupted run left for them, and returns a :class:`~orokit.io.atomic.Staging` through
+which new files are written and that the command commits at its very end. If the command
+fails (an error, disk full, Ctrl-C), whatever was staged is removed and the previous
+outputs stay as they were.
+"""
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+
+import click
+
+from orokit.io.atomic import Staging, output_lock, remove_stale_temps
+
+__all__ = ["claim_outputs", "claimed_outputs"]
+
+
+@contextlib.contextmanager
+def _claimed(paths: list[Path], names: tuple[str, ...] | None, stage: Staging) -> Iterator[Staging]:
+    with output_lock(*paths):
+        for p in paths:
+            remove_stale_temps(p, names=names)
+        try:
+            yield stage
+        finally:
+            if not stage.committed:
+                stage.abort()
+
+
+def claim_outputs(*paths: Path | str | None, names: tuple[str, ...] | None = None) -> Staging:
+    """Lock ``paths`` (files or folders; ``None`` skipped) until the current command ends.
+
+    ``names``: for folder outputs, the file names the command writes inside them (stale
+    temporary files of only those are removed); ``None`` removes every stale one.
+    Raises :class:`~orokit.errors.OutputError` when another process writes one of them.
+    """
+    ctx = click.get_current_context()
+    chosen = [Path(p) for p in paths if p is not None]
+    root = ctx.find_root()
+    if isinstance(root.obj, dict):
+        root.obj.setdefault("outputs", []).extend(chosen)
+    return ctx.with_resource(_claimed(chosen, names, Staging()))
+
+
+def claimed_outputs() -> list[Path]:
+    """The outputs claimed by the running command (for error messages)."""
+    ctx = click.get_current_context(silent=True)
+    if ctx is None or not isinstance(ctx.find_root().obj, dict):
+        return []
+    return list(ctx.find_root().obj.get("outputs", []))

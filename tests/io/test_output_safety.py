@@ -1,0 +1,312 @@
+"""Outputs survive concurrent writers, full disks, Ctrl-C and killed runs (issue 15).
+
+Every writing command locks its output for the whole run, removes the temporary files an
+interrupted run left for it, and replaces the previous output only once the new one is
+complete. Tests go through the CLI (CliRunner, or a subprocess where a second process or a
+signal is needed).
+"""
+from __future__ import annotations
+
+import errno
+import fcntl
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from orokit.cli.main import cli
+from orokit.errors import OutputError
+from orokit.io.atomic import Staging, lock_path_for, output_lock, remove_stale_temps, staged_folder
+
+ANALYSIS = ["peaks.csv", "peaks.parquet", "saddles.parquet", "dividetree.gpkg", "analysis.json"]
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def _leftovers(*folders: Path) -> list[str]:
+    """Hidden temporary files / folders / locks in ``folders``."""
+    return sorted(p.name for f in folders if f.is_dir() for p in f.iterdir() if p.name.startswith("."))
+
+
+@pytest.fixture()
+def dem_tif(tmp_path, make_dem):
+    rng = np.random.default_rng(3)
+    z = np.cumsum(np.cumsum(rng.normal(size=(40, 50)), 0), 1) * 5 + 1000
+    path = tmp_path / "dem.tif"
+    make_dem(z.astype("float32")).rio.to_raster(path)
+    return path
+
+
+@pytest.fixture()
+def dem_tif_b(tmp_path, make_dem):
+    rng = np.random.default_rng(4)
+    z = np.cumsum(np.cumsum(rng.normal(size=(30, 30)), 0), 1) * 5 + 500
+    path = tmp_path / "dem_b.tif"
+    make_dem(z.astype("float32")).rio.to_raster(path)
+    return path
+
+
+def _analyze(dem: Path, out: Path, *extra: str):
+    return CliRunner().invoke(cli, ["analyze", str(dem), "-o", str(out), "--no-progress",
+                                    "--min-prominence", "5", *extra])
+
+
+class _OtherProcessLock:
+    """The output lock held by another process (a real one: flock is per process here)."""
+
+    def __init__(self, target: Path):
+        code = textwrap.dedent(f"""
+            import sys
+            from orokit.io.atomic import output_lock
+            with output_lock({str(target)!r}):
+                print("locked", flush=True)
+                sys.stdin.read()
+        """)
+        self.proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     text=True)
+        assert self.proc.stdout.readline().strip() == "locked"
+
+    def release(self):
+        self.proc.stdin.close()
+        assert self.proc.wait(timeout=60) == 0
+
+
+# --- locks ------------------------------------------------------------------------------
+
+def test_lock_is_refused_while_another_process_holds_it_and_leaves_no_file(tmp_path):
+    out = tmp_path / "out"
+    other = _OtherProcessLock(out)
+    try:
+        with pytest.raises(OutputError, match="being written by another orokit process.*pid"):
+            with output_lock(out):
+                pass
+    finally:
+        other.release()
+    assert not lock_path_for(out).exists()  # the holder removed its lock file
+    with output_lock(out):
+        with output_lock(out):  # re-entrant within one process
+            assert lock_path_for(out).exists()
+    assert list(tmp_path.iterdir()) == []  # no zero-byte lock file after a clean run
+
+
+def test_lock_survives_a_holder_removing_the_file_between_open_and_flock(tmp_path):
+    """A stale lock file (a killed holder) does not block; the lock is the flock, not the file."""
+    out = tmp_path / "out"
+    lock_path_for(out).write_text("pid 999999: killed run")
+    with output_lock(out):
+        pass
+    assert not lock_path_for(out).exists()
+
+
+def test_concurrent_analyze_into_one_folder_is_refused(tmp_path, dem_tif, dem_tif_b):
+    out = tmp_path / "out"
+    assert _analyze(dem_tif, out).exit_code == 0
+    before = _snapshot(out)
+    other = _OtherProcessLock(out)  # another orokit process is writing `out`
+    try:
+        res = _analyze(dem_tif_b, out, "--overwrite")
+    finally:
+        other.release()
+    assert res.exit_code == 1, res.output
+    assert "being written by another orokit process" in res.output and str(out) in res.output
+    assert "Traceback" not in res.output
+    assert _snapshot(out) == before  # the finished analysis is intact
+    # once the other run is over, the overwrite goes through, and leaves no lock or temp file
+    assert _analyze(dem_tif_b, out, "--overwrite").exit_code == 0
+    assert _snapshot(out) != before
+    assert _leftovers(out, tmp_path) == []
+
+
+@pytest.mark.parametrize("command", ["type", "features"])
+def test_single_file_commands_take_the_lock(tmp_path, dem_tif, command):
+    out = tmp_path / ("t.json" if command == "type" else "f.parquet")
+    other = _OtherProcessLock(out)
+    try:
+        res = CliRunner().invoke(cli, [command, str(dem_tif), "-o", str(out), "--z-units", "m"])
+    finally:
+        other.release()
+    assert res.exit_code == 1 and "being written by another orokit process" in res.output, res.output
+    assert not out.exists()
+
+
+def test_library_write_takes_the_lock(tmp_path, make_dem):
+    import orokit
+    from orokit.analysis import write_analysis
+
+    r = orokit.analyze(make_dem(np.arange(30.0).reshape(5, 6) % 7), min_prominence=0)
+    out = tmp_path / "out"
+    fd = os.open(lock_path_for(out), os.O_RDWR | os.O_CREAT)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # another open file description: as another process
+        with pytest.raises(OutputError, match="another orokit process"):
+            write_analysis(r, out)
+    finally:
+        os.close(fd)
+        lock_path_for(out).unlink()
+    write_analysis(r, out)
+    assert (out / "analysis.json").exists()
+    assert _leftovers(out, tmp_path) == []
+
+
+# --- stale temporary files ----------------------------------------------------------------
+
+def test_rerun_removes_stale_temporary_files_of_the_same_output(tmp_path, dem_tif):
+    out = tmp_path / "out"
+    assert _analyze(dem_tif, out).exit_code == 0
+    stale = [out / ".peaks.csv.tmp-0123456789ab.csv", out / ".dividetree.gpkg.tmp-ba9876543210.gpkg"]
+    for p in stale:
+        p.write_bytes(b"half")
+    staging = tmp_path / ".out.tmp-aaaaaaaaaaaa"
+    staging.mkdir()
+    (staging / "peaks.csv").write_text("half")
+    keep = [out / ".notes.txt", tmp_path / ".other.tmp-0123456789ab"]  # not ours
+    for p in keep:
+        p.write_text("keep")
+    assert _analyze(dem_tif, out, "--overwrite").exit_code == 0
+    assert not any(p.exists() for p in stale) and not staging.exists()
+    assert all(p.exists() for p in keep)
+
+
+def test_remove_stale_temps_only_for_given_names(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".dem.tif.tmp-0123456789ab.tif").write_bytes(b"x")
+    (out / ".validation.json.tmp-0123456789ab.json").write_bytes(b"x")
+    removed = remove_stale_temps(out, names=("dem.tif",))
+    assert [p.name for p in removed] == [".dem.tif.tmp-0123456789ab.tif"]
+    assert (out / ".validation.json.tmp-0123456789ab.json").exists()
+
+
+# --- staged writes, disk full -------------------------------------------------------------
+
+def _enospc_after(n_bytes: int):
+    """A writer that writes ``n_bytes`` to its target, then fails as a full disk does."""
+
+    def writer(obj, path, *args, **kwargs):
+        with open(path, "wb") as fh:
+            fh.write(b"\0" * n_bytes)
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    return writer
+
+
+def test_staged_folder_keeps_the_old_output_on_failure(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "a.txt").write_text("old a")
+    (out / "done").write_text("old marker")
+    with pytest.raises(OutputError, match=f"no space left on {out}"):
+        with staged_folder(out, marker="done") as stage:
+            (stage / "a.txt").write_text("new a")
+            raise OSError(errno.ENOSPC, "No space left on device")
+    assert _snapshot(out) == {"a.txt": b"old a", "done": b"old marker"}
+    assert _leftovers(tmp_path) == []
+    with staged_folder(out, marker="done", stale=("b.txt",)) as stage:
+        (stage / "a.txt").write_text("new a")
+        (stage / "done").write_text("new marker")
+    assert _snapshot(out) == {"a.txt": b"new a", "done": b"new marker"}
+
+
+def test_staging_of_files_in_several_folders(tmp_path):
+    a, b = tmp_path / "x" / "a.tif", tmp_path / "y" / "b.png"
+    stage = Staging()
+    stage.file(a).write_text("A")
+    stage.file(b).write_text("B")
+    assert not a.exists() and not b.exists()
+    stage.commit()
+    assert a.read_text() == "A" and b.read_text() == "B"
+    assert _leftovers(a.parent, b.parent) == []
+
+
+@pytest.mark.parametrize("n_bytes", [0, 4096])
+def test_analyze_disk_full_keeps_previous_analysis(tmp_path, dem_tif, dem_tif_b, monkeypatch, n_bytes):
+    import orokit.io.divide_tree_io as dtio
+
+    out = tmp_path / "out"
+    assert _analyze(dem_tif, out).exit_code == 0
+    before = _snapshot(out)
+    monkeypatch.setattr(dtio, "write_divide_tree_gpkg", _enospc_after(n_bytes))
+    res = _analyze(dem_tif_b, out, "--overwrite")
+    assert res.exit_code == 1
+    assert f"no space left on {out.resolve()}" in res.output and "Traceback" not in res.output
+    assert _snapshot(out) == before  # byte-identical
+    assert _leftovers(out, tmp_path) == []
+
+
+def test_render_disk_full_keeps_previous_raster(tmp_path, monkeypatch):
+    import orokit.io.raster_io as raster_io
+    from orokit.topology.divide_tree import DivideTree
+
+    tree = DivideTree.from_arrays([[1000.0, 1000.0, 600.0], [3000.0, 1000.0, 550.0]], [[2000.0, 1000.0, 450.0]],
+                                  [[0, 1, 0]], crs=None, attrs={"extent": [0.0, 0.0, 4000.0, 2000.0]})
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+
+    gpkg = tmp_path / "tree.gpkg"
+    write_divide_tree_gpkg(tree, gpkg)
+    tif, png = tmp_path / "dem.tif", tmp_path / "hs.png"
+    args = ["render", str(gpkg), "-o", str(tif), "--preview", str(png), "--resolution", "100m", "--no-erosion",
+            "--seed", "1"]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    before = (tif.read_bytes(), png.read_bytes())
+    # the raster is complete, the preview hits a full disk: neither old file may change
+    monkeypatch.setattr(raster_io, "write_hillshade_png", _enospc_after(100))
+    res = CliRunner().invoke(cli, args[:-1] + ["2", "--overwrite"])
+    assert res.exit_code == 1 and "no space left on" in res.output and "Traceback" not in res.output, res.output
+    assert (tif.read_bytes(), png.read_bytes()) == before
+    assert _leftovers(tmp_path) == []
+
+
+def test_render_checks_free_space_before_writing(tmp_path, monkeypatch):
+    import shutil
+    from collections import namedtuple
+
+    from orokit.io.atomic import check_free_space
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**9, 10**9 - 1000, 1000))
+    with pytest.raises(OutputError, match=r"no space left on .*needs about 2 MB, 0 MB are free"):
+        check_free_space(tmp_path / "x.tif", 2e6, what="x.tif")
+
+
+# --- Ctrl-C ---------------------------------------------------------------------------------
+
+def test_ctrl_c_during_the_numba_stage_exits_130_without_traceback(tmp_path, dem_tif):
+    """SIGINT arrives while the engine's numba kernels run (injected there, so the test is
+    deterministic); the previous analysis stays and no temporary file is left."""
+    out = tmp_path / "out"
+    assert _analyze(dem_tif, out).exit_code == 0
+    before = _snapshot(out)
+    # patch every numba kernel the engine calls: the first one called sends the signal
+    code = textwrap.dedent("""
+        import os, signal, sys
+        import orokit.topology._kernels as k
+        import orokit.topology.engine as e
+        fired = []
+        def wrap(f):
+            def g(*a, **kw):
+                if not fired:
+                    fired.append(1)
+                    os.kill(os.getpid(), signal.SIGINT)
+                return f(*a, **kw)
+            return g
+        for mod in (k, e):
+            for n in dir(mod):
+                f = getattr(mod, n)
+                if hasattr(f, "py_func"):
+                    setattr(mod, n, wrap(f))
+        from orokit.cli.main import cli
+        cli(sys.argv[1:])
+    """)
+    proc = subprocess.run([sys.executable, "-c", code, "analyze", str(dem_tif), "-o", str(out), "--overwrite",
+                           "--no-progress", "--min-prominence", "5"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 130, proc.stderr
+    assert "interrupted" in proc.stderr and "Traceback" not in proc.stderr
+    assert _snapshot(out) == before
+    assert _leftovers(out, tmp_path) == []
