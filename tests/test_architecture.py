@@ -37,7 +37,6 @@ KNOWN_FILE_ACCESS = {
     "classify/model.py": "issue 12 (classify): model IO -> io/model_io.py",
     "classify/peaklist.py": "issue 12 (classify): peak-list readers -> io",
     "synthesis/controls.py": "issue 14: control rasters read through io",
-    "synthesis/output.py": "issue 14: synthesis outputs written by io",
     "synthesis/terrain_type.py": "issue 14: terrain-type JSON read by io",
 }
 
@@ -113,6 +112,18 @@ def test_no_import_cycle():
     assert graph["orokit.analysis"] >= {"orokit.topology.tables", "orokit.topology.engine"}
     cycle = _find_cycle(graph)
     assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
+
+
+def test_no_package_cycle():
+    """Also between sub-packages (orokit.io, orokit.synthesis, ...): io never imports an algorithm package."""
+    mods = _modules()
+    graph: dict[str, set[str]] = {}
+    for m, p in mods.items():
+        top = ".".join(m.split(".")[:2])
+        targets = {".".join(t.split(".")[:2]) for t in _imports(m, p, set(mods))}
+        graph.setdefault(top, set()).update(targets - {top, "orokit"})
+    cycle = _find_cycle(graph)
+    assert cycle is None, "package import cycle: " + " -> ".join(cycle or [])
 
 
 def _file_calls(path: Path) -> list[str]:

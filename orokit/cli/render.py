@@ -14,14 +14,9 @@ LENGTH = Length(allow_bare=True)
 
 def read_tree(path: Path, *, cell_size: float | None = None):
     """A Divide Tree from .gpkg, reference .txt, or a folder holding dividetree.gpkg."""
-    from orokit.io.divide_tree_io import read_divide_tree_gpkg, read_divide_tree_txt
+    from orokit.io.divide_tree_io import read_divide_tree
 
-    path = Path(path)
-    if path.is_dir():
-        path = path / "dividetree.gpkg"
-    if path.suffix.lower() == ".txt":
-        return read_divide_tree_txt(path, cell_size=cell_size)
-    return read_divide_tree_gpkg(path)
+    return read_divide_tree(path, cell_size=cell_size)
 
 
 def extent_like(path: Path, *, cell_size: float | None = None) -> tuple[float, float, float, float]:

@@ -91,7 +91,7 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
     from orokit.raster.render import render_elevation
     from orokit.raster.skeleton import tree_extent
     from orokit.synthesis.fidelity import compare_to_type
-    from orokit.synthesis.output import SYNTHESIS_FILES, write_synthesis
+    from orokit.io.synthesis_io import SYNTHESIS_FILES, write_synthesis
     from orokit.synthesis.terrain_type import load_terrain_type
     from orokit.synthesis.tree import synthesize_divide_tree
 
@@ -159,7 +159,9 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
              "control_elevation": None if control_elevation is None else str(control_elevation),
              "render_timings_s": json.loads(dem.attrs.get("timings", "{}")),
              "fidelity": compare_to_type(tree, ttype).reset_index().to_dict(orient="records")}
-    write_synthesis(tree, new, extra=extra)
+    from orokit.synthesis.tree import peaks_table
+
+    write_synthesis(tree, new, peaks=peaks_table(tree), extra=extra)
     write_outputs(dem, new / "dem.tif", preview=new / "hillshade.png",
                   tin_path=new / "tin.ply" if write_tin else None, skeleton=skel)
     stage.commit()

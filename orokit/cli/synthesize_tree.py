@@ -53,7 +53,7 @@ def synthesize_tree(type_files, size, n_peaks, control_elevation, control_densit
     import time
 
     from orokit.synthesis.fidelity import compare_to_type
-    from orokit.synthesis.output import SYNTHESIS_FILES, write_synthesis
+    from orokit.io.synthesis_io import SYNTHESIS_FILES, write_synthesis
     from orokit.synthesis.terrain_type import load_terrain_type
     from orokit.synthesis.tree import synthesize_divide_tree
 
@@ -87,7 +87,9 @@ def synthesize_tree(type_files, size, n_peaks, control_elevation, control_densit
     extra = {"seed": seed, "types": [str(p) for p in type_files]}
     if len(types) == 1:
         extra["fidelity"] = compare_to_type(tree, types[0]).reset_index().to_dict(orient="records")
-    write_synthesis(tree, outdir, txt_cell_m=txt_cell_size, extra=extra)
+    from orokit.synthesis.tree import peaks_table
+
+    write_synthesis(tree, outdir, peaks=peaks_table(tree), txt_cell_m=txt_cell_size, extra=extra)
     if bar is not None:
         bar.update(1)
         bar.close()
@@ -117,8 +119,6 @@ def _has_layer(path: Path, name: str) -> bool:
 
 
 def _read_tree(path: Path):
-    from orokit.io.divide_tree_io import read_divide_tree_gpkg, read_divide_tree_txt
+    from orokit.io.divide_tree_io import read_divide_tree
 
-    if path.suffix.lower() == ".txt":
-        return read_divide_tree_txt(path)
-    return read_divide_tree_gpkg(path)
+    return read_divide_tree(path)

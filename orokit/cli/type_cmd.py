@@ -49,12 +49,9 @@ def type_cmd(source: Path, output: Path, name: str | None, min_prominence: float
         tt = TerrainType.from_analysis(source, min_prominence_m=min_prominence, name=name,
                                        isolation_basis=isolation_basis, rho=rho)
     elif source.suffix.lower() in (".txt", ".gpkg"):
-        from orokit.io.divide_tree_io import read_divide_tree_gpkg, read_divide_tree_txt
+        from orokit.io.divide_tree_io import read_divide_tree
 
-        if source.suffix.lower() == ".txt":
-            tree = read_divide_tree_txt(source, cell_size=cell_size, z_units=z_units or "ft")
-        else:
-            tree = read_divide_tree_gpkg(source)
+        tree = read_divide_tree(source, cell_size=cell_size, z_units=z_units or "ft")
         area = area_km2 if area_km2 is not None else _tree_area_km2(tree)
         eps = 30.0 if min_prominence is None else min_prominence
         tt = TerrainType.from_divide_tree(tree, area_km2=area, min_prominence_m=eps,

@@ -5,8 +5,9 @@ Public API (imported lazily)::
     TerrainType, load_terrain_type        # orokit.synthesis.terrain_type
     synthesize_divide_tree, peaks_table   # orokit.synthesis.tree
     compare_to_type                       # orokit.synthesis.fidelity
-    write_synthesis                       # orokit.synthesis.output
     edit                                  # editing operations (add/move/delete ...)
+
+Writing a synthesized tree: :func:`orokit.io.synthesis_io.write_synthesis`.
 """
 from __future__ import annotations
 
@@ -19,7 +20,6 @@ _LAZY = {
     "synthesize_divide_tree": "orokit.synthesis.tree",
     "peaks_table": "orokit.synthesis.tree",
     "compare_to_type": "orokit.synthesis.fidelity",
-    "write_synthesis": "orokit.synthesis.output",
 }
 
 __all__ = [*_LAZY, "edit"]

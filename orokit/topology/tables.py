@@ -20,7 +20,7 @@ from orokit.errors import SchemaError
 from orokit.topology.divide_tree import DivideTree
 
 __all__ = [
-    "Column", "PEAK_SCHEMA", "PEAK_COLUMNS", "SADDLE_SCHEMA", "SADDLE_COLUMNS", "NONE_ID",
+    "Column", "PEAK_SCHEMA", "PEAK_COLUMNS", "OROMETRY_COLUMNS", "SADDLE_SCHEMA", "SADDLE_COLUMNS", "NONE_ID",
     "AnalysisResult", "validate_peak_table", "validate_saddle_table",
 ]
 
@@ -72,6 +72,8 @@ PEAK_SCHEMA: tuple[Column, ...] = (
     Column("isolation_exact", "bool", "", "False when the edge or nodata is closer than the higher ground"),
 )
 PEAK_COLUMNS: list[str] = [c.name for c in PEAK_SCHEMA]
+#: the columns derived from the tree and the raster (everything but the peak's own place and height)
+OROMETRY_COLUMNS: list[str] = [c for c in PEAK_COLUMNS if c not in ("row", "col", "x", "y", "elevation")]
 
 #: Columns of the saddles table (index ``saddle_id``): the saddles of the pruned Divide Tree.
 SADDLE_SCHEMA: tuple[Column, ...] = (

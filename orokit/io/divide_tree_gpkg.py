@@ -1,0 +1,155 @@
+"""Divide Tree files as GeoPackage layers (``peaks``, ``saddles``, ``ridges``)."""
+from __future__ import annotations
+
+import json
+import logging
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from orokit._typing import PathLike
+from orokit.errors import InputError
+from orokit.io.atomic import atomic_path
+from orokit.topology.divide_tree import DivideTree
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["write_divide_tree_gpkg", "read_divide_tree_gpkg"]
+
+
+def _json_attrs(attrs: dict) -> dict:
+    out = {}
+    for k, v in attrs.items():
+        if isinstance(v, (pd.DataFrame, pd.Series)):
+            continue
+        if isinstance(v, np.generic):
+            v = v.item()
+        try:
+            json.dumps(v)
+        except (TypeError, ValueError):
+            logger.debug("attribute %r (%s) is not JSON-serialisable; not written", k, type(v).__name__)
+            continue
+        out[k] = v
+    return out
+
+
+def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFrame | None = None) -> Path:
+    """Write ``tree`` as a GeoPackage with layers ``peaks``, ``saddles`` and ``ridges``.
+
+    ``ridges`` holds LineStrings peak_a -> saddle -> peak_b with the columns
+    ``peak_a``, ``peak_b``, ``saddle`` (0-based ids into the ``peak_id``/``saddle_id``
+    columns of the point layers). Runoffs and basin saddles kept in ``tree.attrs`` go
+    to layers ``runoffs`` and ``basin_saddles``; the JSON-serialisable attrs go to the
+    dataset metadata (key ``orokit_attrs``). The file is written atomically.
+
+    ``peaks``: the peaks table of the same tree (same ids, :data:`~orokit.topology.tables.PEAK_SCHEMA`,
+    e.g. ``AnalysisResult.peaks``); its orometry columns (prominence, key saddle, parent,
+    dominance, isolation, exactness flags) are added to the ``peaks`` layer, so a GIS user
+    needs no join. :func:`read_divide_tree_gpkg` leaves them out of the tree (they are
+    derived: ``tree.prominence_table()`` recomputes them).
+    """
+    import geopandas as gpd
+
+    from orokit.topology.tables import OROMETRY_COLUMNS, validate_peak_table
+
+    path = Path(path)
+    tree.validate(check_elevations=False)
+    peak_layer = tree.peaks
+    added: list[str] = []
+    if peaks is not None:
+        validate_peak_table(peaks)
+        if len(peaks) != tree.n_peaks:
+            raise InputError(f"the peaks table has {len(peaks)} rows but the tree {tree.n_peaks} peaks; "
+                             "pass the table of the same tree")
+        added = [c for c in OROMETRY_COLUMNS if c not in tree.peaks.columns]
+        peak_layer = pd.concat([tree.peaks.reset_index(drop=True),
+                                pd.DataFrame(peaks[added]).reset_index(drop=True)], axis=1)
+    meta = {"orokit_attrs": json.dumps(_json_attrs(tree.attrs)), "orometry_columns": json.dumps(added)}
+
+    def points(frame: pd.DataFrame, id_name: str) -> gpd.GeoDataFrame:
+        f = frame.copy()
+        f.insert(0, id_name, np.arange(len(f), dtype=np.int64))
+        return gpd.GeoDataFrame(f.reset_index(drop=True), geometry=gpd.points_from_xy(f["x"], f["y"]), crs=tree.crs)
+
+    with atomic_path(path) as tmp, warnings.catch_warnings():
+        # a tree on a local grid has no CRS: that is recorded in attrs, not a problem
+        warnings.filterwarnings("ignore", message="'crs' was not provided", category=UserWarning)
+        points(peak_layer, "peak_id").to_file(tmp, layer="peaks", driver="GPKG", engine="pyogrio")
+        points(tree.saddles, "saddle_id").to_file(tmp, layer="saddles", driver="GPKG", engine="pyogrio")
+        ridges = tree.ridges()
+        if ridges.crs is None and tree.crs is not None:
+            ridges = ridges.set_crs(tree.crs)
+        ridges.to_file(tmp, layer="ridges", driver="GPKG", engine="pyogrio", geometry_type="LineString")
+        for key in ("runoffs", "basin_saddles"):
+            extra = tree.attrs.get(key)
+            if isinstance(extra, pd.DataFrame):
+                points(extra, "point_id").to_file(tmp, layer=key, driver="GPKG", engine="pyogrio", geometry_type="Point")
+        import pyogrio
+
+        # attrs go to a small non-spatial table (portable across GDAL versions)
+        frame = pd.DataFrame({"key": list(meta), "value": list(meta.values())})
+        pyogrio.write_dataframe(frame, tmp, layer="orokit_metadata", driver="GPKG")
+    logger.info("wrote %s: %d peaks, %d ridges", path, tree.n_peaks, len(tree.edges))
+    return path
+
+
+def read_divide_tree_gpkg(path: PathLike) -> DivideTree:
+    """Read a Divide Tree written by :func:`write_divide_tree_gpkg`.
+
+    Raises
+    ------
+    InputError
+        If the file does not exist or lacks the ``peaks``, ``saddles`` or ``ridges``
+        layers or their id columns.
+    """
+    import geopandas as gpd
+    import pyogrio
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"Divide Tree GeoPackage {path} does not exist or is not a file")
+    try:
+        layers = {name for name, _ in pyogrio.list_layers(path)}
+    except Exception as exc:  # pyogrio raises DataSourceError and friends
+        raise InputError(f"{path} is not a readable GeoPackage: {exc}") from None
+    missing = {"peaks", "saddles", "ridges"} - layers
+    if missing:
+        raise InputError(
+            f"{path} lacks the layers {sorted(missing)} (found {sorted(layers)}); "
+            "write it with orokit.io.divide_tree_io.write_divide_tree_gpkg"
+        )
+
+    def frame(layer: str, id_name: str) -> tuple[pd.DataFrame, Any]:
+        g = gpd.read_file(path, layer=layer, engine="pyogrio")
+        if id_name not in g.columns:
+            raise InputError(f"{path}: layer {layer!r} lacks the column {id_name!r}")
+        crs = g.crs
+        f = pd.DataFrame(g.drop(columns="geometry")).sort_values(id_name).reset_index(drop=True)
+        if not np.array_equal(f[id_name].to_numpy(), np.arange(len(f))):
+            raise InputError(f"{path}: layer {layer!r} column {id_name!r} is not 0..n-1")
+        return f.drop(columns=id_name), crs
+
+    peaks, crs = frame("peaks", "peak_id")
+    saddles, _ = frame("saddles", "saddle_id")
+    r = gpd.read_file(path, layer="ridges", engine="pyogrio")
+    missing_cols = {"peak_a", "peak_b", "saddle"} - set(r.columns)
+    if missing_cols:
+        raise InputError(f"{path}: layer 'ridges' lacks the columns {sorted(missing_cols)}")
+    edges = pd.DataFrame(r[["peak_a", "peak_b", "saddle"]]).astype(np.int64).reset_index(drop=True)
+    attrs: dict[str, Any] = {}
+    if "orokit_metadata" in layers:
+        meta = pyogrio.read_dataframe(path, layer="orokit_metadata")
+        for k, v in zip(meta["key"], meta["value"]):
+            if k == "orokit_attrs":
+                attrs.update(json.loads(v))
+            elif k == "orometry_columns":  # derived columns for GIS users, not part of the tree
+                peaks = peaks.drop(columns=[c for c in json.loads(v) if c in peaks.columns])
+    for key in ("runoffs", "basin_saddles"):
+        if key in layers:
+            attrs[key], _ = frame(key, "point_id")
+    tree = DivideTree(peaks, saddles, edges, crs, attrs)
+    tree.validate(check_elevations=False)
+    return tree
