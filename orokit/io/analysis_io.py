@@ -52,7 +52,7 @@ def analysis_json(result: AnalysisResult) -> str:
 
 
 def _write(result: AnalysisResult, out: Path) -> Path:
-    from orokit.io.divide_tree_gpkg import write_divide_tree_gpkg
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
 
     validate_peak_table(result.peaks)
     validate_saddle_table(result.saddles)
@@ -73,7 +73,7 @@ def read_analysis(outdir: PathLike) -> AnalysisResult:
     """Read a folder written by :func:`write_analysis`."""
     import geopandas as gpd
 
-    from orokit.io.divide_tree_gpkg import read_divide_tree_gpkg
+    from orokit.io.divide_tree_io import read_divide_tree_gpkg
 
     out = Path(outdir)
     meta_path = out / "analysis.json"
