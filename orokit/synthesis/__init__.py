@@ -3,7 +3,7 @@
 Public API (imported lazily)::
 
     TerrainType, load_terrain_type        # orokit.synthesis.terrain_type
-    synthesize_divide_tree, peaks_table   # orokit.synthesis.tree
+    synthesize_divide_tree, SynthesisParams, peaks_table   # orokit.synthesis.tree
     compare_to_type                       # orokit.synthesis.fidelity
     edit                                  # editing operations (add/move/delete ...)
 
@@ -18,6 +18,7 @@ _LAZY = {
     "TerrainType": "orokit.synthesis.terrain_type",
     "load_terrain_type": "orokit.synthesis.terrain_type",
     "synthesize_divide_tree": "orokit.synthesis.tree",
+    "SynthesisParams": "orokit.synthesis.tree",
     "peaks_table": "orokit.synthesis.tree",
     "compare_to_type": "orokit.synthesis.fidelity",
 }

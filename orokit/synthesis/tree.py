@@ -11,7 +11,8 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
-from typing import Any
+from dataclasses import dataclass, replace
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -25,7 +26,7 @@ from orokit.topology.tables import NONE_ID, validate_peak_table
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["synthesize_divide_tree", "peaks_table", "MAX_PEAKS"]
+__all__ = ["synthesize_divide_tree", "SynthesisParams", "peaks_table", "MAX_PEAKS"]
 
 #: refuse to synthesize more peaks than this (the arrays of the dart throwing and the
 #: optimal transport grow faster than linearly; real 90 km regions hold a few thousand)
@@ -48,27 +49,75 @@ def _fixed_frame(fixed_peaks: Any) -> pd.DataFrame:
     return frame[["x", "y", "elevation"]].astype(float).reset_index(drop=True)
 
 
+@dataclass(frozen=True)
+class SynthesisParams:
+    """Parameters of :func:`synthesize_divide_tree` (how to synthesize, not what).
+
+    n_passes : multi-pass count (each pass holds twice as many peaks as the previous).
+    n_candidates : dart candidates per peak.
+    max_ot_iterations : bound on the alternating dominance / prominence rounds.
+    saddle_placement : "targeted" (key-saddle distance and direction follow the
+        type) or "paper" (random split point with a small perpendicular jitter).
+    grid_cells : cells along the longer side of the control grid.
+    auto_elevation_m : without a C_H, use a smooth random C_H with this correlation
+        length (metres) following the elevation histogram, so peak elevations are
+        spatially correlated as in real ranges (None: no C_H term).
+    use_bands : draw prominence/dominance targets per elevation band of the type
+        (True), from its marginal histograms (False), or "auto": run both and keep the
+        saddles whose dominance and prominence histograms match the type better.
+    """
+
+    n_passes: int = 4
+    n_candidates: int = 96
+    max_ot_iterations: int = 16
+    saddle_placement: Literal["targeted", "paper"] = "targeted"
+    grid_cells: int = 256
+    auto_elevation_m: float | None = 8000.0
+    use_bands: bool | Literal["auto"] = "auto"
+
+    def __post_init__(self) -> None:
+        if self.use_bands not in ("auto", True, False):
+            raise InputError(f"use_bands must be 'auto', True or False, got {self.use_bands!r}")
+        if self.saddle_placement not in ("targeted", "paper"):
+            raise InputError(f"saddle_placement must be 'targeted' or 'paper', got {self.saddle_placement!r}")
+        for name in ("n_passes", "n_candidates", "max_ot_iterations"):
+            if int(getattr(self, name)) < 1:
+                raise InputError(f"{name} must be >= 1, got {getattr(self, name)!r}")
+        if self.auto_elevation_m is not None and not float(self.auto_elevation_m) > 0:
+            raise InputError(f"auto_elevation_m must be > 0 metres or None, got {self.auto_elevation_m!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+@dataclass
+class _PeakSet:
+    """Peak elevations and types, highest first, with the fixed ones and the fragment's forced ridges."""
+
+    z: np.ndarray
+    ptype: np.ndarray
+    fixed: np.ndarray
+    fxy: np.ndarray
+    rho: np.ndarray
+    forced: tuple[np.ndarray, np.ndarray] | None
+    frag_edges: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+
+
 def synthesize_divide_tree(
     terrain_type: TerrainType | Sequence[TerrainType],
     *,
-    size_m: float | tuple[float, float] = 90_000.0,
+    size_m: float | tuple[float, float] | None = None,
     n_peaks: int | None = None,
     crs: Any = None,
     center: tuple[float, float] | None = None,
+    domain: Domain | None = None,
     control_elevation: Any = None,
     control_density: Any = None,
     type_map: Any = None,
     fixed_peaks: Any = None,
     fragment: DivideTree | None = None,
     fragment_offset: tuple[float, float] = (0.0, 0.0),
-    n_passes: int = 4,
-    n_candidates: int = 96,
-    max_ot_iterations: int = 16,
-    saddle_placement: str = "targeted",
-    grid_cells: int = 256,
-    auto_elevation_m: float | None = 8000.0,
-    use_bands: bool | str = "auto",
-    domain: Domain | None = None,
+    params: SynthesisParams | None = None,
     rng: SeedLike = None,
 ) -> DivideTree:
     """Synthesize a Divide Tree whose orometry follows ``terrain_type``.
@@ -76,30 +125,24 @@ def synthesize_divide_tree(
     Parameters
     ----------
     terrain_type : one type, or a list of types mixed by ``type_map``.
-    size_m : domain size in metres (scalar for a square, or (width, height)).
+    size_m : domain size in metres (scalar for a square, or (width, height));
+        default 90 km.
     n_peaks : total number of peaks; default: each type's density x its area (cells
         where the density control is > 0), fixed and fragment peaks included.
     crs, center : output CRS (projected, metres) and domain centre (lon, lat);
         only ``center`` -> a local azimuthal equidistant projection centred there;
         neither -> a local frame with the south-west corner at (0, 0).
+    domain : a ready :class:`~orokit.synthesis.controls.Domain` (from
+        :func:`~orokit.synthesis.controls.make_domain`) instead of ``size_m``, ``crs``
+        and ``center``; giving both is an error.
     control_elevation, control_density, type_map : C_H (m), C_P (>= 0, 0 = no
         peaks: sea, lakes) and C_T (type index) as raster paths, DataArrays (any CRS,
         resampled) or arrays (stretched over the domain, row 0 north).
     fixed_peaks : table (x, y, elevation) of user peaks kept as given.
     fragment : a real Divide Tree fragment (same metres frame, shifted by
         ``fragment_offset``) kept as is; the rest is completed around it.
-    n_passes : multi-pass count (each pass holds twice as many peaks as the previous).
-    n_candidates : dart candidates per peak.
-    max_ot_iterations : bound on the alternating dominance / prominence rounds.
-    saddle_placement : "targeted" (key-saddle distance and direction follow the
-        type) or "paper" (random split point with a small perpendicular jitter).
-    grid_cells : cells along the longer side of the control grid.
-    auto_elevation_m : without ``control_elevation``, use a smooth random C_H with
-        this correlation length (metres) following the elevation histogram, so peak
-        elevations are spatially correlated as in real ranges (None: no C_H term).
-    use_bands : draw prominence/dominance targets per elevation band of the type
-        (True), from its marginal histograms (False), or "auto": run both and keep the
-        saddles whose dominance and prominence histograms match the type better.
+    params : :class:`SynthesisParams` (passes, candidates, OT rounds, saddle placement,
+        control grid, automatic C_H, elevation-band targets).
     rng : seed or Generator; the same seed gives the same tree.
 
     Returns
@@ -112,7 +155,8 @@ def synthesize_divide_tree(
     ------
     InputError
         No room for peaks, more fixed peaks than the domain holds, fixed peaks
-        outside the domain, control rasters not overlapping the domain.
+        outside the domain, control rasters not overlapping the domain, ``domain``
+        together with ``size_m``/``crs``/``center``.
 
     Notes
     -----
@@ -142,39 +186,111 @@ def synthesize_divide_tree(
     >>> tree.validate(); tree.n_peaks == round(t.peak_density_per_km2 * 400)
     True
     """
+    p = SynthesisParams() if params is None else params
+    if not isinstance(p, SynthesisParams):
+        raise InputError(f"params must be a SynthesisParams, got {type(p).__name__}")
     rng = np.random.default_rng(rng)
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     types = [terrain_type] if isinstance(terrain_type, TerrainType) else list(terrain_type)
     if not types or not all(isinstance(t, TerrainType) for t in types):
         raise InputError("terrain_type must be a TerrainType or a non-empty list of them")
-    if use_bands not in ("auto", True, False):
-        raise InputError(f"use_bands must be 'auto', True or False, got {use_bands!r}")
-    if saddle_placement not in ("targeted", "paper"):
-        raise InputError(f"saddle_placement must be 'targeted' or 'paper', got {saddle_placement!r}")
-    if domain is None:
-        domain = make_domain(size_m, crs=crs, center=center, grid_cells=grid_cells)
+    domain = _resolve_domain(domain, size_m=size_m, crs=crs, center=center, grid_cells=p.grid_cells)
     controls = build_controls(domain, control_density=control_density, control_elevation=control_elevation,
                               type_map=type_map, n_types=len(types))
     eps = max(t.min_prominence_m for t in types)
-    if controls.elevation is None and auto_elevation_m and len(types) == 1:
-        from dataclasses import replace
-
+    if controls.elevation is None and p.auto_elevation_m and len(types) == 1:
         from orokit.synthesis.controls import random_elevation_field
 
         controls = replace(controls, elevation=random_elevation_field(
-            domain, types[0].histograms["elevation"], correlation_m=float(auto_elevation_m), rng=rng))
+            domain, types[0].histograms["elevation"], correlation_m=float(p.auto_elevation_m), rng=rng))
+    fixed_xyz, fixed_type = _fixed_peaks(fixed_peaks, fragment, fragment_offset, domain, controls)
+    free_t = _free_peak_counts(types, controls, domain, n_peaks, fixed_xyz, fixed_type)
+    peaks = _peak_elevations(types, free_t, fixed_xyz, fixed_type, fragment, eps, rng)
+    timings["elevations"] = time.perf_counter() - t0
 
-    # ---- fixed peaks (user + fragment)
+    t1 = time.perf_counter()
+    from orokit.synthesis.darts import place_peaks
+
+    px, py, dart_info = place_peaks(
+        peaks.z, peaks.ptype, peaks.fixed, peaks.fxy, controls, domain,
+        [t.histograms["isolation_distance"] for t in types], [t.histograms["isolation_direction"] for t in types],
+        peaks.rho, n_passes=p.n_passes, n_candidates=p.n_candidates, forced=peaks.forced, rng=rng,
+    )
+    timings["dart_throwing"] = time.perf_counter() - t1
+
+    t1 = time.perf_counter()
+    a, b, sx, sy, sz, movable = _ridges(px, py, peaks, fragment, fragment_offset, rng)
+    timings["ridges"] = time.perf_counter() - t1
+
+    t1 = time.perf_counter()
+    sz, ot_info, below, band_mode = _saddle_elevations(types, peaks, px, py, a, b, sz, movable, eps, p, rng)
+    timings["saddle_elevations"] = time.perf_counter() - t1
+
+    t1 = time.perf_counter()
+    if p.saddle_placement == "targeted":
+        from orokit.synthesis.saddles import place_key_saddles
+
+        nx_, ny_ = place_key_saddles(
+            px, py, peaks.z, a, b, sz, peaks.ptype,
+            [t.histograms["saddle_distance"] for t in types], [t.histograms["saddle_direction"] for t in types],
+            movable=movable, rng=rng,
+        )
+        sx = np.where(movable, nx_, sx)
+        sy = np.where(movable, ny_, sy)
+    timings["saddle_positions"] = time.perf_counter() - t1
+    timings["total"] = time.perf_counter() - t0
+
+    tree = DivideTree(
+        pd.DataFrame({"x": px, "y": py, "elevation": peaks.z, "type": peaks.ptype, "fixed": peaks.fixed}),
+        pd.DataFrame({"x": sx, "y": sy, "elevation": sz}),
+        pd.DataFrame({"peak_a": a, "peak_b": b, "saddle": np.arange(a.size, dtype=np.int64)}),
+        domain.crs,
+        {
+            "units": "m",
+            "min_prominence": float(eps),
+            "terrain_types": [t.name for t in types],
+            "rho": [float(t.rho) for t in types],
+            "domain": {"x0": domain.x0, "y0": domain.y0, "width": domain.width, "height": domain.height},
+            "local_grid": domain.crs is None,
+            "n_passes": len(dart_info["passes"]),
+            "ot_iterations": int(ot_info["iterations"]),
+            "ot_errors": ot_info["errors"],
+            "peaks_below_eps": int(below),
+            "saddle_placement": p.saddle_placement,
+            "saddle_targets": "elevation bands" if band_mode else "marginal",
+            "timings_s": {k: round(v, 4) for k, v in timings.items()},
+            "isolation": "nearest higher peak of the tree",
+        },
+    )
+    logger.info("synthesized %d peaks, %d ridges in %.2f s (OT rounds %d)", tree.n_peaks, a.size,
+                timings["total"], ot_info["iterations"])
+    return tree
+
+
+def _resolve_domain(domain: Domain | None, *, size_m: Any, crs: Any, center: Any, grid_cells: int) -> Domain:
+    """The output domain: ``domain`` as given, or built from size, CRS and centre (never both)."""
+    if domain is None:
+        return make_domain(90_000.0 if size_m is None else size_m, crs=crs, center=center, grid_cells=grid_cells)
+    given = [name for name, v in (("size_m", size_m), ("crs", crs), ("center", center)) if v is not None]
+    if given:
+        raise InputError(f"pass either domain= or {', '.join(given)}, not both: the domain already fixes its size, "
+                         "CRS and position")
+    if not isinstance(domain, Domain):
+        raise InputError(f"domain must be an orokit.synthesis.controls.Domain (see make_domain), got "
+                         f"{type(domain).__name__}")
+    return domain
+
+
+def _fixed_peaks(fixed_peaks: Any, fragment: DivideTree | None, offset: tuple[float, float], domain: Domain,
+                 controls: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) x, y, elevation of the fragment's then the user's fixed peaks, and their type index."""
     user = _fixed_frame(fixed_peaks)
-    frag_edges = None
-    n_frag = 0
     if fragment is not None:
         fragment.validate()
         fp = fragment.peaks[["x", "y", "elevation"]].astype(float).copy()
-        fp["x"] += fragment_offset[0]
-        fp["y"] += fragment_offset[1]
-        n_frag = len(fp)
+        fp["x"] += offset[0]
+        fp["y"] += offset[1]
         user = pd.concat([fp, user], ignore_index=True)
     fixed_xyz = user.to_numpy(float).reshape(-1, 3)
     if fixed_xyz.size and not domain.contains(fixed_xyz[:, 0], fixed_xyz[:, 1]).all():
@@ -184,9 +300,12 @@ def synthesize_divide_tree(
     if fixed_xyz.size and (fixed_xyz[:, 2] <= 0).any():
         raise InputError("fixed peaks need elevations > 0 m")
     fr, fc = domain.cell_index(fixed_xyz[:, 0], fixed_xyz[:, 1])
-    fixed_type = controls.type_index[fr, fc]
+    return fixed_xyz, controls.type_index[fr, fc]
 
-    # ---- peak counts per type
+
+def _free_peak_counts(types: list[TerrainType], controls: Any, domain: Domain, n_peaks: int | None,
+                      fixed_xyz: np.ndarray, fixed_type: np.ndarray) -> np.ndarray:
+    """Peaks to place per type, fixed peaks deducted (checks the limits before allocating)."""
     cell_km2 = domain.cell[0] * domain.cell[1] / 1e6
     area_t = np.array([((controls.type_index == t) & (controls.density > 0)).sum() * cell_km2 for t in range(len(types))])
     dens_t = np.array([t.peak_density_per_km2 for t in types])
@@ -220,8 +339,12 @@ def synthesize_divide_tree(
             f"the domain holds {int(n_t.sum())} peaks at the type density ({domain.area_km2:.1f} km2): "
             "too few for a Divide Tree; enlarge size_m or pass n_peaks >= 2"
         )
+    return free_t
 
-    # ---- elevations (stratified samples), sorted highest first
+
+def _peak_elevations(types: list[TerrainType], free_t: np.ndarray, fixed_xyz: np.ndarray, fixed_type: np.ndarray,
+                     fragment: DivideTree | None, eps: float, rng: np.random.Generator) -> _PeakSet:
+    """Stratified elevation samples per type plus the fixed peaks, sorted highest first."""
     z_parts, t_parts = [], []
     for t, typ in enumerate(types):
         zt = typ.histograms["elevation"].sample(int(free_t[t]), rng)
@@ -237,112 +360,63 @@ def synthesize_divide_tree(
     fxy[: len(fixed_xyz)] = fixed_xyz[:, :2]
     src_id = np.arange(z_all.size)  # index before sorting
     order = np.lexsort((src_id, -z_all))
-    z, ptype, fixed, fxy, src_id = z_all[order], ptype[order], fixed[order], fxy[order], src_id[order]
+    z, ptype, fixed, fxy = z_all[order], ptype[order], fixed[order], fxy[order]
     new_of_src = np.empty_like(order)
     new_of_src[order] = np.arange(order.size)
-    forced = None
+    forced = frag_edges = None
     if fragment is not None and len(fragment.edges):
         fa = new_of_src[fragment.edges["peak_a"].to_numpy(np.int64)]
         fb = new_of_src[fragment.edges["peak_b"].to_numpy(np.int64)]
         forced = (fa, fb)
         frag_edges = (fa, fb, fragment.edges["saddle"].to_numpy(np.int64))
     rho = np.array([types[t].rho for t in ptype], float)
-    timings["elevations"] = time.perf_counter() - t0
+    return _PeakSet(z, ptype, fixed, fxy, rho, forced, frag_edges)
 
-    # ---- peaks
-    from orokit.synthesis.darts import place_peaks
 
-    t1 = time.perf_counter()
-    px, py, dart_info = place_peaks(
-        z, ptype, fixed, fxy, controls, domain,
-        [t.histograms["isolation_distance"] for t in types], [t.histograms["isolation_direction"] for t in types],
-        rho, n_passes=n_passes, n_candidates=n_candidates, forced=forced, rng=rng,
-    )
-    timings["dart_throwing"] = time.perf_counter() - t1
-
-    # ---- ridges
+def _ridges(px: np.ndarray, py: np.ndarray, peaks: _PeakSet, fragment: DivideTree | None,
+            offset: tuple[float, float], rng: np.random.Generator):
+    """Delaunay-MST ridges, initial saddles at min(h_a, h_b), the fragment's saddles frozen."""
     from orokit.synthesis.ridges import delaunay_mst, place_saddles_on_ridges
 
-    t1 = time.perf_counter()
-    a, b = delaunay_mst(px, py, z, rho=rho, forced=forced)
+    z = peaks.z
+    a, b = delaunay_mst(px, py, z, rho=peaks.rho, forced=peaks.forced)
     sx, sy, _ = place_saddles_on_ridges(px, py, a, b, rng=rng)
     sz = np.minimum(z[a], z[b])
     movable = np.ones(a.size, bool)
-    if frag_edges is not None:
-        key = {(min(i, j), max(i, j)): s for i, j, s in zip(*frag_edges)}
+    if peaks.frag_edges is not None and fragment is not None:
+        key = {(min(i, j), max(i, j)): s for i, j, s in zip(*peaks.frag_edges)}
         fs = fragment.saddles
         for e_i, (i, j) in enumerate(zip(a.tolist(), b.tolist())):
             s = key.get((min(i, j), max(i, j)))
             if s is not None:
                 movable[e_i] = False
-                sx[e_i] = float(fs["x"].iloc[s]) + fragment_offset[0]
-                sy[e_i] = float(fs["y"].iloc[s]) + fragment_offset[1]
+                sx[e_i] = float(fs["x"].iloc[s]) + offset[0]
+                sy[e_i] = float(fs["y"].iloc[s]) + offset[1]
                 sz[e_i] = float(fs["elevation"].iloc[s])
-    timings["ridges"] = time.perf_counter() - t1
+    return a, b, sx, sy, sz, movable
 
-    # ---- saddle elevations
-    from orokit.synthesis.saddles import (
-        SaddleTargets,
-        assign_saddle_elevations,
-        enforce_min_prominence,
-        place_key_saddles,
-    )
 
-    t1 = time.perf_counter()
-    from orokit.synthesis.saddles import max_bin_errors
+def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray, py: np.ndarray, a: np.ndarray,
+                       b: np.ndarray, sz0: np.ndarray, movable: np.ndarray, eps: float, p: SynthesisParams,
+                       rng: np.random.Generator):
+    """OT saddle elevations; with use_bands="auto", the target set that matches the type's marginals better."""
+    from orokit.synthesis.saddles import assign_saddle_elevations, enforce_min_prominence, max_bin_errors
 
+    z, ptype = peaks.z, peaks.ptype
     marginal = _saddle_targets(types, ptype, z, False)
     has_bands = any(t.bands is not None for t in types)
-    modes = {"auto": [False, True] if has_bands else [False], True: [True], False: [False]}[use_bands]
-    sz0 = sz
+    modes = {"auto": [False, True] if has_bands else [False], True: [True], False: [False]}[p.use_bands]
     best = None
-    for mode in modes:  # "auto": keep whichever target set matches the type's marginals better
+    for mode in modes:
         cand, info = assign_saddle_elevations(z, px, py, a, b, sz0, _saddle_targets(types, ptype, z, mode),
-                                              movable=movable, max_iterations=max_ot_iterations, rng=rng)
+                                              movable=movable, max_iterations=p.max_ot_iterations, rng=rng)
         cand, below_c = enforce_min_prominence(z, a, b, cand, eps)
         score = max(max_bin_errors(z, a, b, cand, marginal))
         logger.debug("saddle targets %s: worst max-bin error %.4f", "per band" if mode else "marginal", score)
         if best is None or score < best[0]:
             best = (score, cand, info, below_c, mode)
     _, sz, ot_info, below, band_mode = best
-    timings["saddle_elevations"] = time.perf_counter() - t1
-
-    # ---- saddle positions
-    t1 = time.perf_counter()
-    if saddle_placement == "targeted":
-        nx_, ny_ = place_key_saddles(
-            px, py, z, a, b, sz, ptype,
-            [t.histograms["saddle_distance"] for t in types], [t.histograms["saddle_direction"] for t in types],
-            movable=movable, rng=rng,
-        )
-        sx = np.where(movable, nx_, sx)
-        sy = np.where(movable, ny_, sy)
-    timings["saddle_positions"] = time.perf_counter() - t1
-    timings["total"] = time.perf_counter() - t0
-
-    peaks = pd.DataFrame({"x": px, "y": py, "elevation": z, "type": ptype, "fixed": fixed})
-    saddles = pd.DataFrame({"x": sx, "y": sy, "elevation": sz})
-    edges = pd.DataFrame({"peak_a": a, "peak_b": b, "saddle": np.arange(a.size, dtype=np.int64)})
-    attrs = {
-        "units": "m",
-        "min_prominence": float(eps),
-        "terrain_types": [t.name for t in types],
-        "rho": [float(t.rho) for t in types],
-        "domain": {"x0": domain.x0, "y0": domain.y0, "width": domain.width, "height": domain.height},
-        "local_grid": domain.crs is None,
-        "n_passes": len(dart_info["passes"]),
-        "ot_iterations": int(ot_info["iterations"]),
-        "ot_errors": ot_info["errors"],
-        "peaks_below_eps": int(below),
-        "saddle_placement": saddle_placement,
-        "saddle_targets": "elevation bands" if band_mode else "marginal",
-        "timings_s": {k: round(v, 4) for k, v in timings.items()},
-        "isolation": "nearest higher peak of the tree",
-    }
-    tree = DivideTree(peaks, saddles, edges, domain.crs, attrs)
-    logger.info("synthesized %d peaks, %d ridges in %.2f s (OT rounds %d)", tree.n_peaks, a.size,
-                timings["total"], ot_info["iterations"])
-    return tree
+    return sz, ot_info, below, band_mode
 
 
 def _saddle_targets(types, ptype: np.ndarray, z: np.ndarray, use_bands: bool):

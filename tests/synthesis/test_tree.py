@@ -7,7 +7,7 @@ import pytest
 
 from orokit.errors import CRSError, InputError
 from orokit.synthesis.orometry import nearest_higher_peak, tree_orometry
-from orokit.synthesis.tree import peaks_table, synthesize_divide_tree
+from orokit.synthesis.tree import SynthesisParams, peaks_table, synthesize_divide_tree
 
 SIZE = 25_000.0  # ~ 150 peaks at the test type's density: fast
 
@@ -153,7 +153,7 @@ def test_same_seed_same_tree_other_seed_other_tree(small_type, tree):
 
 
 def test_given_peak_count_and_paper_mode(small_type):
-    t = synthesize_divide_tree(small_type, size_m=SIZE, n_peaks=60, saddle_placement="paper", rng=1)
+    t = synthesize_divide_tree(small_type, size_m=SIZE, n_peaks=60, params=SynthesisParams(saddle_placement="paper"), rng=1)
     t.validate()
     assert t.n_peaks == 60
 
@@ -176,7 +176,7 @@ def test_elevation_control_is_honoured(small_type):
     t = synthesize_divide_tree(small_type, size_m=SIZE, control_elevation=ch, rng=5)
     x, z = t.peaks["x"].to_numpy(), t.peaks["elevation"].to_numpy()
     assert np.corrcoef(x, z)[0, 1] > 0.6
-    free = synthesize_divide_tree(small_type, size_m=SIZE, auto_elevation_m=None, rng=5)
+    free = synthesize_divide_tree(small_type, size_m=SIZE, params=SynthesisParams(auto_elevation_m=None), rng=5)
     assert abs(np.corrcoef(free.peaks["x"], free.peaks["elevation"])[0, 1]) < 0.4
 
 
@@ -292,7 +292,7 @@ from hypothesis import strategies as st  # noqa: E402
 @example(n=2, seed=0, rho=0.0, passes=2, scale=1.0)  # a first pass of one peak has no ridge
 def test_any_synthesis_is_a_valid_tree(small_type, n, seed, rho, passes, scale):
     t = small_type.with_rho(rho).scaled("prominence", scale)
-    tree = synthesize_divide_tree(t, size_m=SIZE, n_peaks=n, n_passes=passes, rng=seed)
+    tree = synthesize_divide_tree(t, size_m=SIZE, n_peaks=n, params=SynthesisParams(n_passes=passes), rng=seed)
     tree.validate()
     assert tree.n_peaks == n and len(tree.edges) == n - 1 and _components(tree) == 1
     table = tree.prominence_table()
@@ -300,3 +300,34 @@ def test_any_synthesis_is_a_valid_tree(small_type, n, seed, rho, passes, scale):
     assert (table.loc[table["key_saddle"] >= 0, "prominence"] >= eps - 1e-9).all()
     x, y = tree.peaks["x"].to_numpy(), tree.peaks["y"].to_numpy()
     assert ((x >= 0) & (x <= SIZE) & (y >= 0) & (y <= SIZE)).all()
+
+
+def test_domain_conflicts_with_size_crs_center(small_type):
+    from orokit.synthesis.controls import make_domain
+
+    dom = make_domain(SIZE, crs="EPSG:32633")
+    tree = synthesize_divide_tree(small_type, domain=dom, n_peaks=30, rng=2)
+    assert tree.crs.to_epsg() == 32633 and tree.attrs["domain"]["width"] == dom.width
+    for kw in ({"size_m": SIZE}, {"crs": "EPSG:32633"}, {"center": (7.0, 46.0)}):
+        with pytest.raises(InputError, match=f"either domain= or {next(iter(kw))}, not both"):
+            synthesize_divide_tree(small_type, domain=dom, n_peaks=30, rng=2, **kw)
+    with pytest.raises(InputError, match="domain must be"):
+        synthesize_divide_tree(small_type, domain=(0, 0, 10, 10), n_peaks=30, rng=2)
+
+
+@pytest.mark.parametrize("kw, msg", [({"saddle_placement": "random"}, "saddle_placement"),
+                                     ({"use_bands": "yes"}, "use_bands"), ({"n_passes": 0}, "n_passes must be >= 1"),
+                                     ({"auto_elevation_m": -5.0}, "auto_elevation_m")])
+def test_synthesis_params_are_checked(kw, msg):
+    with pytest.raises(InputError, match=msg):
+        SynthesisParams(**kw)
+
+
+def test_synthesis_params_are_frozen_and_typed(small_type):
+    import dataclasses
+
+    p = SynthesisParams(n_candidates=8)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        p.n_candidates = 9  # type: ignore[misc]
+    with pytest.raises(InputError, match="params must be a SynthesisParams"):
+        synthesize_divide_tree(small_type, size_m=SIZE, params={"n_candidates": 8}, rng=1)
