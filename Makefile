@@ -60,7 +60,7 @@ SYNTH_TREES := $(DATASETS:%=$(REPORTS)/synthesis/trees/%/synthesis.json)
 SYNTHESIS_README := $(REPORTS)/synthesis/README.md
 REPORT_OUTPUTS += $(SYNTH_TYPES) $(SYNTHESIS_README)
 
-.PHONY: report test data venv clean-reports help analysis classification synthesis
+.PHONY: report test data venv clean-reports help analysis classification synthesis generators
 
 .DEFAULT_GOAL := report
 
@@ -163,6 +163,38 @@ $(RELIEF_README): $(RELIEF_VALIDATIONS) orokit/reports/roundtrip.py orokit/cli/r
 	  --classification $(REPORTS)/classification/tables/per_class_10km.csv -o $@ --overwrite --no-progress
 
 roundtrip: $(ROUNDTRIP_README) $(RELIEF_README)  ## synthetic twins of every region (free, and with the real relief as C_H)
+
+# stage: generator ranking (issues 17-20). Per region and seed one synthesized Divide Tree of the real
+# DEM's size (648 x 92.61 m, the shape of the four DEMs), rendered by every generator in its own process
+# on the DEM's grid, then re-analysed, reclassified and compared with the real landforms (result.json);
+# the table, README.csv and side-by-side hillshades in reports/generators/.
+GEN_REGIONS := sahara appalachians karakoram norway
+GEN_SEEDS := 0 1 2
+GEN_NAMES := argudo belhadj
+GEN_SIZE := 60011.28m
+GEN_RUNDIR := $(REPORTS)/generators/runs
+GEN_SRC := $(wildcard orokit/generators/*.py) orokit/cli/generators_cmd.py orokit/cli/generator_options.py \
+           orokit/cli/render.py $(wildcard orokit/raster/*.py) orokit/validate/roundtrip.py orokit/validate/landform.py
+GEN_RESULTS := $(foreach r,$(GEN_REGIONS),$(foreach s,$(GEN_SEEDS),$(foreach g,$(GEN_NAMES),$(GEN_RUNDIR)/$(r)/seed$(s)/$(g)/result.json)))
+GEN_README := $(REPORTS)/generators/README.md
+REPORT_OUTPUTS += $(GEN_README)
+
+define GEN_TREE_RULE
+$(GEN_RUNDIR)/$(1)/seed$(2)/tree/synthesis.json: $(REPORTS)/synthesis/types/$(1).json $(SYNTH_SRC) | $(INSTALLED)
+	$(OROKIT) -q synthesize-tree --type $$< --size $(GEN_SIZE) --seed $(2) -o $$(@D) --overwrite --no-progress
+endef
+define GEN_RUN_RULE
+$(GEN_RUNDIR)/$(1)/seed$(2)/$(3)/result.json: $(GEN_RUNDIR)/$(1)/seed$(2)/tree/synthesis.json $(DATA_STAMP) $(CLASSIFICATION_README) $(GEN_SRC) | $(INSTALLED)
+	$(OROKIT) -q generators-run --tree $$(<D) --type $(REPORTS)/synthesis/types/$(1).json --like $(1) \
+	  --generator $(3) --seed $(2) --model $(REGION_MODEL) -o $$@ --overwrite
+endef
+$(foreach r,$(GEN_REGIONS),$(foreach s,$(GEN_SEEDS),$(eval $(call GEN_TREE_RULE,$(r),$(s)))))
+$(foreach r,$(GEN_REGIONS),$(foreach s,$(GEN_SEEDS),$(foreach g,$(GEN_NAMES),$(eval $(call GEN_RUN_RULE,$(r),$(s),$(g))))))
+
+$(GEN_README): $(GEN_RESULTS) orokit/reports/generators.py orokit/cli/generators_cmd.py | $(INSTALLED)
+	$(OROKIT) -q generators-report $(GEN_RESULTS) -o $@ --overwrite
+
+generators: $(GEN_README)  ## generator ranking table (argudo, belhadj, ...) in reports/generators/
 
 # last, so that every stage above has appended its outputs (prerequisites expand when the rule is read)
 report: $(REPORT_OUTPUTS)  ## main pipeline: data, summaries, analysis, classification, synthesis, round trip

@@ -39,7 +39,7 @@ def bench(generator: str, type_name: str, size_km: float, res: float, seed: int)
     from orokit.generators import render_terrain
     from orokit.generators.base import tree_rivers
     from orokit.raster.rasterize import make_grid
-    from orokit.raster.render import tree_extent
+    from orokit.raster.skeleton import tree_extent
 
     t0 = time.perf_counter()
     tree = _tree(type_name, size_km, seed)
@@ -72,7 +72,7 @@ def figures(type_name: str, size_km: float, res: float, seed: int, out: Path) ->
     from orokit.generators import belhadj as B
     from orokit.generators.base import tree_rivers
     from orokit.raster.rasterize import make_grid
-    from orokit.raster.render import tree_extent
+    from orokit.raster.skeleton import tree_extent
     from orokit.reports.generators import plot_belhadj_stage
 
     tree = _tree(type_name, size_km, seed)

@@ -28,6 +28,8 @@ COMMANDS: dict[str, str] = {
     "synthesize-tree": "orokit.cli.synthesize_tree:synthesize_tree",
     "synthesis-report": "orokit.cli.synthesis_report:synthesis_report",
     "render": "orokit.cli.render:render",
+    "generators-run": "orokit.cli.generators_cmd:generators_run",
+    "generators-report": "orokit.cli.generators_cmd:generators_report",
     "synthesize": "orokit.cli.synthesize:synthesize",
     "validate": "orokit.cli.validate:validate",
     "roundtrip-report": "orokit.cli.roundtrip_report:roundtrip_report",

@@ -13,7 +13,7 @@ def shade(z: np.ndarray, cell_size_m: float) -> np.ndarray:
     import xarray as xr
     from affine import Affine
 
-    from orokit.reports.dem_summary import hillshade
+    from orokit.raster.shade import hillshade
 
     da = xr.DataArray(np.asarray(z, dtype=np.float32), dims=("y", "x"))
     da = da.rio.write_transform(Affine(cell_size_m, 0.0, 0.0, 0.0, -cell_size_m, 0.0))
@@ -46,3 +46,168 @@ def plot_belhadj_stage(ax: Any, z: np.ndarray, state: np.ndarray, *, cell_size_m
     ax.set_xticks([])
     ax.set_yticks([])
     return ax
+
+
+# ----------------------------------------------------------------------------- ranking table
+#: ranked metrics: key in a run -> (column title, higher is better, percent)
+METRICS: dict[str, tuple[str, bool, bool]] = {
+    "recovered_share": ("tree peaks recovered %", True, True),
+    "extra_share": ("extra peaks %", False, True),
+    "max_bin_error_elevation": ("max bin err. elevation", False, False),
+    "max_bin_error_prominence": ("max bin err. prominence", False, False),
+    "max_bin_error_dominance": ("max bin err. dominance", False, False),
+    "max_bin_error_isolation_distance": ("max bin err. isolation", False, False),
+    "landform.slope_deg": ("slope W1 (deg)", False, False),
+    "landform.curvature_per_km": ("curvature W1 (1/km)", False, False),
+    "landform.relief_1km": ("relief 1 km", False, False),
+    "landform.spectral_slope": ("spectral slope", False, False),
+    "landform.flat_share": ("flat share", False, False),
+    "landform.hypsometry": ("hypsometry", False, False),
+    "disk_accuracy": ("disk accuracy %", True, True),
+    "vote_correct": ("vote right %", True, True),
+    "wall_s": ("time (s)", False, False),
+    "peak_rss_gb": ("peak RSS (GB)", False, False),
+}
+
+
+def _value(run: dict, key: str) -> float:
+    if run.get("failed"):
+        return float("nan")
+    if key.startswith("landform."):
+        v = (run.get("landform") or {}).get(key.split(".", 1)[1])
+    else:
+        v = run.get(key)
+    return float("nan") if v is None else float(v)
+
+
+def ranking_tables(runs: list[dict]) -> tuple[Any, Any, Any]:
+    """Per-run table, per (region, generator) mean/min/max over seeds, and mean ranks.
+
+    Ranks: for each region and metric the generators are ranked by their mean over seeds
+    (1 = best; ties share the lower rank); a generator with no successful run ranks last.
+    The mean rank averages over metrics and regions.
+    """
+    import pandas as pd
+
+    rows = []
+    for r in runs:
+        row = {"region": r["region"], "generator": r["generator"], "seed": r["seed"], "failed": bool(r.get("failed")),
+               "error": r.get("error", "")}
+        for k in METRICS:
+            row[k] = _value(r, k)
+        rows.append(row)
+    per_run = pd.DataFrame(rows).sort_values(["region", "generator", "seed"]).reset_index(drop=True)
+    ok = per_run[~per_run["failed"]]
+    counts = per_run.groupby(["region", "generator"]).agg(runs=("seed", "size"), failed=("failed", "sum"))
+    counts.columns = pd.MultiIndex.from_tuples([(c, "") for c in counts.columns])
+    stats = ok.groupby(["region", "generator"])[list(METRICS)].agg(["mean", "min", "max"])
+    agg = counts.join(stats, how="left")
+    rank_rows = []
+    for region, grp in agg.groupby(level="region"):
+        for k, (_, higher, _) in METRICS.items():
+            m = grp[(k, "mean")] if (k, "mean") in grp else pd.Series(float("nan"), index=grp.index)
+            score = -m if higher else m
+            rk = score.rank(method="min", na_option="bottom")
+            for (reg, gen), v in rk.items():
+                rank_rows.append({"region": reg, "generator": gen, "metric": k, "rank": float(v)})
+    ranks = pd.DataFrame(rank_rows)
+    mean_rank = ranks.groupby("generator")["rank"].mean().sort_values() if len(ranks) else pd.Series(dtype=float)
+    return per_run, agg, mean_rank
+
+
+def _fmt(v: float, pct: bool) -> str:
+    if v != v:  # NaN
+        return "–"
+    if pct:
+        return f"{100 * v:.1f}"
+    return f"{v:.3g}"
+
+
+def ranking_markdown(runs: list[dict]) -> str:
+    """The ranking README: mean rank, per-region tables (mean [min–max] over seeds), failures."""
+    per_run, agg, mean_rank = ranking_tables(runs)
+    seeds = sorted({r["seed"] for r in runs})
+    lines = ["# Generator ranking", "",
+             "Every generator renders the same synthesized Divide Tree per region and seed (seeds "
+             f"{', '.join(map(str, seeds))}) on the real DEM's grid, with the same rivers, each in its own "
+             "process (`orokit generators-run`); the raster is re-analysed at eps 30 m, compared with the tree "
+             "and the terrain type, reclassified by `models/regions-10km.skops`, and its landforms compared "
+             "with the real DEM (`orokit.validate.landform.compare_landforms`). Values: mean [min–max] over "
+             "seeds. Lower is better except for recovered peaks, disk accuracy and vote. Time is the wall "
+             "time of the render process (start-up and writing included); RSS its peak.", "",
+             "## Mean rank (over every metric and region; 1 = best)", "", "| generator | mean rank |", "|---|---|"]
+    for g, v in mean_rank.items():
+        lines.append(f"| {g} | {v:.2f} |")
+    for region, grp in agg.groupby(level="region"):
+        lines += ["", f"## {region}", "", f"![hillshades]({region}.png)", ""]
+        head = ["generator", "runs", "failed"] + [METRICS[k][0] for k in METRICS]
+        lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for (_, gen), row in grp.iterrows():
+            cells = [gen, str(int(row[("runs", "")])), str(int(row[("failed", "")]))]
+            for k, (_, _, pct) in METRICS.items():
+                mean, lo, hi = (row.get((k, s), float("nan")) for s in ("mean", "min", "max"))
+                cells.append(f"{_fmt(mean, pct)} [{_fmt(lo, pct)}–{_fmt(hi, pct)}]" if mean == mean else "–")
+            lines.append("| " + " | ".join(cells) + " |")
+    failed = per_run[per_run["failed"]]
+    lines += ["", "## Failed runs", ""]
+    if len(failed):
+        lines += ["| region | generator | seed | error |", "|---|---|---|---|"]
+        for _, r in failed.iterrows():
+            lines.append(f"| {r['region']} | {r['generator']} | {r['seed']} | {str(r['error']).replace('|', '/')} |")
+    else:
+        lines.append("None.")
+    return "\n".join(lines) + "\n"
+
+
+def plot_hillshade_row(axes: Any, real: Any, images: dict[str, np.ndarray | None], *, title: str = "") -> Any:
+    """Real DEM hillshade then one hillshade image per generator (None: failed run)."""
+    from orokit.raster.shade import hillshade
+
+    axes[0].imshow(np.nan_to_num(hillshade(real), nan=0.0), cmap="gray", vmin=0, vmax=1)
+    axes[0].set_title(f"{title} (real)", fontsize=9)
+    for ax, (name, img) in zip(axes[1:], images.items()):
+        if img is None:
+            ax.text(0.5, 0.5, "failed", ha="center", va="center", transform=ax.transAxes)
+        else:
+            ax.imshow(img, cmap="gray")
+        ax.set_title(name, fontsize=9)
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    return axes
+
+
+def write_ranking_report(runs: list[dict], reals: dict[str, Any], out: Any) -> None:
+    """Write README.md, README.csv (one row per run) and ``<region>.png`` (real + seed-0
+    hillshade of every generator) into ``out``'s folder; README.md last."""
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    from orokit.io.atomic import atomic_path, write_text_atomic
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    per_run, _, _ = ranking_tables(runs)
+    with atomic_path(out.with_suffix(".csv")) as tmp:
+        per_run.to_csv(tmp, index=False)
+    gens = sorted({r["generator"] for r in runs})
+    seed0 = min(r["seed"] for r in runs)
+    for region, real in reals.items():
+        imgs: dict[str, np.ndarray | None] = {}
+        for g in gens:
+            run = next((r for r in runs if r["region"] == region and r["generator"] == g and r["seed"] == seed0), None)
+            hs = Path(run["hillshade"]) if run else None
+            imgs[g] = np.asarray(Image.open(hs)) if run and not run.get("failed") and hs.exists() else None
+        fig, axes = plt.subplots(1, len(gens) + 1, figsize=(3.2 * (len(gens) + 1), 3.4))
+        if real is not None:
+            plot_hillshade_row(np.atleast_1d(axes), real, imgs, title=region)
+        fig.tight_layout()
+        with atomic_path(out.parent / f"{region}.png") as tmp:
+            fig.savefig(tmp, dpi=100, format="png")
+        plt.close(fig)
+    write_text_atomic(out, ranking_markdown(runs))
