@@ -30,8 +30,9 @@ def generator_options(f: Callable[..., Any]) -> Callable[..., Any]:
 
     f = click.option("--list-generators", is_flag=True, expose_value=False, is_eager=True,
                      callback=_list_generators, help="List the generators, their inputs and defaults, and exit.")(f)
-    f = click.option("--exemplar", type=click.Path(dir_okay=False, path_type=Path), default=None,
-                     help="Real DEM a generator learns from (generators whose inputs include 'exemplar').")(f)
+    f = click.option("--exemplar", default=None,
+                     help="Real DEM a generator learns from, a file or a manifest dataset name (generators whose "
+                          "inputs include 'exemplar').")(f)
     f = click.option("--param", "params", multiple=True, metavar="K=V",
                      help="Generator parameter (repeatable), e.g. --param hurst=0.8; see --list-generators.")(f)
     f = click.option("--generator", type=click.Choice(sorted(GENERATORS)), default="argudo", show_default=True,
@@ -48,37 +49,46 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def check_generator_inputs(generator: str, params: tuple[str, ...], exemplar: Path | None) -> Any:
+def exemplar_dem(exemplar: str):
+    """The exemplar DEM (a file, else a manifest dataset) and the sha256 of its file."""
+    from orokit.errors import DataError, InputError
+    from orokit.io.dem import read_dem
+
+    if Path(exemplar).is_file():
+        return read_dem(str(exemplar)), file_sha256(Path(exemplar))
+    from orokit.data import dataset_path, open_dataset_dem
+
+    try:
+        return open_dataset_dem(exemplar), file_sha256(dataset_path(exemplar))
+    except (DataError, KeyError):
+        raise InputError(f"exemplar {exemplar!r} is neither a DEM file nor a dataset of the manifest; "
+                         "pass an existing DEM to --exemplar") from None
+
+
+def check_generator_inputs(generator: str, params: tuple[str, ...], exemplar: str | None) -> Any:
     """Parsed parameters; errors for bad parameters or a missing/unneeded exemplar."""
-    from orokit.errors import InputError
     from orokit.generators import get_generator
 
     spec = get_generator(generator)
     parsed = spec.params(list(params))
-    if "exemplar" in spec.inputs and exemplar is None:
-        raise click.UsageError(f"--generator {generator} needs --exemplar DEM (a real DEM to learn from)")
     if exemplar is not None:
         if "exemplar" not in spec.inputs:
             raise click.UsageError(f"--generator {generator} takes no --exemplar")
-        if not exemplar.is_file():
-            raise InputError(f"exemplar {exemplar} does not exist; pass a DEM file to --exemplar")
     return parsed
 
 
 def render_generator(tree, *, generator: str, params: Any, resolution_m: float, extent, seed: int | None,
-                     tree_path: Path | None = None, exemplar: Path | None = None):
+                     tree_path: Path | None = None, exemplar: str | None = None):
     """Render with a registered generator; records the input files' hashes in the attrs."""
     from orokit.generators import render_terrain
 
-    ex = None
+    ex = ex_sha = None
     if exemplar is not None:
-        from orokit.io.dem import read_dem
-
-        ex = read_dem(str(exemplar))
+        ex, ex_sha = exemplar_dem(exemplar)
     dem = render_terrain(tree, generator=generator, params=params, resolution_m=resolution_m, extent=extent,
                          seed=seed, exemplar=ex)
     if tree_path is not None and Path(tree_path).is_file():
         dem.attrs["tree_file_sha256"] = file_sha256(Path(tree_path))
-    if exemplar is not None:
-        dem.attrs["exemplar_sha256"] = file_sha256(Path(exemplar))
+    if ex_sha is not None:
+        dem.attrs["exemplar_sha256"] = ex_sha
     return dem

@@ -25,8 +25,8 @@ def _real_dem(like: str):
 @click.option("--like", required=True, help="The real DEM (file or manifest dataset): cell size and landforms.")
 @click.option("--generator", required=True, help="Generator name (see `orokit render --list-generators`).")
 @click.option("--param", "params", multiple=True, metavar="K=V", help="Generator parameter (repeatable).")
-@click.option("--exemplar", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Exemplar DEM for generators that learn from one.")
+@click.option("--exemplar", default=None,
+              help="Exemplar DEM (file or dataset) for generators that learn from one [default: the --like DEM].")
 @click.option("--seed", type=click.IntRange(min=0), required=True, help="Seed of the render.")
 @click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Region model (.skops) for the reclassification.")
@@ -56,7 +56,9 @@ def generators_run(tree_dir, type_file, like, generator, params, exemplar, seed,
         raise click.UsageError(f"{out} exists; pass --overwrite to replace it")
     from orokit.generators import get_generator
 
-    get_generator(generator)  # unknown names fail here, before anything runs
+    spec = get_generator(generator)  # unknown names fail here, before anything runs
+    if exemplar is None and "exemplar" in spec.inputs:
+        exemplar = like
     out.parent.mkdir(parents=True, exist_ok=True)
     dem_path = out.parent / "dem.tif"
     hs_path = out.parent / "hillshade.png"
@@ -67,7 +69,7 @@ def generators_run(tree_dir, type_file, like, generator, params, exemplar, seed,
 
     tree = read_tree(tree_dir)
     ext = tree_extent(tree)
-    result: dict = {"generator": generator, "region": like, "seed": seed, "params": list(params), "tree": str(tree_dir), "failed": False,
+    result: dict = {"generator": generator, "region": like, "seed": seed, "exemplar": exemplar, "params": list(params), "tree": str(tree_dir), "failed": False,
                     "load_average_before": list(os.getloadavg())}
     cmd = [sys.executable, "-m", "orokit.cli.main", "-q", "render",
            str(tree_dir), "-o", str(dem_path), "--resolution", f"{res}m", "--extent", *(str(v) for v in ext),

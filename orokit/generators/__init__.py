@@ -11,6 +11,7 @@ name       paper                                         status
 =========  ============================================  ========================
 argudo     Argudo et al. 2019 (orokit's renderer)        complete
 belhadj    Belhadj 2007 (skeleton, MDI, MD)              tree skeleton only
+rusnell    Rusnell 2009 (least-cost fields, blending)    no secondary ridges
 =========  ============================================  ========================
 """
 from __future__ import annotations
@@ -58,6 +59,10 @@ GENERATORS: dict[str, GeneratorSpec] = {
     "belhadj": GeneratorSpec("belhadj", "Belhadj 2007, doi:10.1145/1294685.1294717",
                              "orokit.generators.belhadj", "BelhadjParams", ("tree", "rivers"),
                              "tree skeleton (the paper's particle skeleton is not implemented)"),
+    "rusnell": GeneratorSpec("rusnell", "Rusnell et al. 2009, doi:10.1007/s00371-009-0350-5",
+                             "orokit.generators.rusnell", "RusnellParams", ("tree", "exemplar"),
+                             "Algorithm 1 with profile fit (exemplar) or w_s = 1; no secondary ridges, "
+                             "no water halting, no generator files"),
 }
 
 
@@ -105,7 +110,8 @@ def render_terrain(
     params : the backend's parameters dataclass, a dict or ``K=V`` strings (default: its paper's).
     rivers : a :class:`~orokit.raster.rivers.RiverNetwork` shared between backends
         (default :func:`orokit.generators.base.tree_rivers` on the grid).
-    exemplar : a real DEM (metres) for generators whose inputs include ``exemplar``.
+    exemplar : a real DEM (metres) for generators whose inputs include ``exemplar`` (each
+        backend says when it needs one).
     seed : int seed; None draws fresh entropy. The int is recorded in ``attrs['seed']``
         and the same seed gives the same raster.
 
@@ -126,8 +132,6 @@ def render_terrain(
         params = cls()
     elif not isinstance(params, cls):
         params = spec.params(params)
-    if "exemplar" in spec.inputs and exemplar is None:
-        raise InputError(f"generator {spec.name} needs an exemplar DEM (CLI: --exemplar DEM)")
     tree_arrays(tree)  # empty or malformed trees fail here, with the same message for every backend
     if grid is None:
         if resolution_m is None:

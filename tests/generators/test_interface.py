@@ -18,7 +18,7 @@ from orokit.io.dem import read_dem
 from .trees import collinear_tree, empty_tree, one_peak, small_tree
 
 #: fast parameters per generator for the tests
-FAST = {"argudo": {"erosion": False, "noise_ratio": 0.0}, "belhadj": {}}
+FAST = {"argudo": {"erosion": False, "noise_ratio": 0.0}, "belhadj": {}, "rusnell": {"profile": "none"}}
 
 
 def test_every_registered_generator_loads_with_its_defaults():
@@ -159,3 +159,13 @@ def test_roundtrip_runs_on_a_belhadj_raster():
     # the highest tree peak is the raster's maximum cell only if MD did not rise above it; the
     # round trip reports whatever happened, so only its counts are checked here
     assert s["extra_peaks"] >= 0
+
+
+def test_cli_missing_exemplar_is_one_line_error(tmp_path, tree_file):
+    r = CliRunner().invoke(cli, ["render", str(tree_file), "-o", str(tmp_path / "x.tif"), "--resolution", "100m",
+                                 "--generator", "rusnell", "--exemplar", str(tmp_path / "nope.tif")])
+    assert r.exit_code == 1 and "neither a DEM file nor a dataset" in r.output and "Traceback" not in r.output
+    r = CliRunner().invoke(cli, ["render", str(tree_file), "-o", str(tmp_path / "x.tif"), "--resolution", "100m",
+                                 "--generator", "rusnell"])
+    assert r.exit_code == 1 and "needs an exemplar" in r.output
+    assert not (tmp_path / "x.tif").exists()

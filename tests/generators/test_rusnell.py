@@ -1,0 +1,163 @@
+"""Rusnell 2009 backend: plain fields equal scipy's Dijkstra, generators fixed, blending, bad inputs."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
+
+from orokit.errors import InputError
+from orokit.generators import _rusnell_kernels as K
+from orokit.generators import render_terrain
+from orokit.generators import rusnell as R
+from orokit.raster.rasterize import make_grid
+
+from .trees import small_tree
+
+
+def grid_graph(w: np.ndarray) -> sp.csr_matrix:
+    """The 8-connected grid graph with the kernel's forward edge weights (ny, nx, 4)."""
+    ny, nx, _ = w.shape
+    rows, cols, vals = [], [], []
+    for k in range(4):
+        di, dj = int(K.DI[k]), int(K.DJ[k])
+        for i in range(ny):
+            for j in range(nx):
+                r, q = i + di, j + dj
+                if 0 <= r < ny and 0 <= q < nx:
+                    rows.append(i * nx + j)
+                    cols.append(r * nx + q)
+                    vals.append(w[i, j, k])
+    m = sp.coo_matrix((vals, (rows, cols)), shape=(ny * nx, ny * nx)).tocsr()
+    return m + m.T
+
+
+def _field(w, gens, costs, cs, table=np.ones(2), use_profile=False, ca=np.zeros((0, 0)), halt=0.0):
+    ny, nx, _ = w.shape
+    stamp = np.full((ny, nx), -1, np.int32)
+    fixed = np.full((ny, nx), -1, np.int32)
+    cost, src = np.zeros((ny, nx)), np.zeros((ny, nx))
+    touched = np.empty(ny * nx, np.int64)
+    gi = np.array([g[0] for g in gens], np.int64)
+    gj = np.array([g[1] for g in gens], np.int64)
+    m = K.cost_field(w, gi, gj, np.asarray(costs, float), cs, table, use_profile, ca, halt, stamp, 1, cost, src,
+                     touched, fixed)
+    return np.where(stamp == 1, cost, np.inf), m
+
+
+@pytest.mark.parametrize("r", [0.0, 0.4])
+def test_plain_field_equals_scipy_dijkstra(r):
+    rng = np.random.default_rng(0)
+    mu = 1.5
+    w = R.edge_weights(21, 17, mu, r, rng)
+    got, m = _field(w, [(10, 8)], [0.0], cs=1e9)
+    ref = dijkstra(grid_graph(w), indices=10 * 17 + 8).reshape(21, 17)
+    np.testing.assert_allclose(got, ref, rtol=1e-12)
+    assert m == 21 * 17
+    if r == 0.0:  # a lone generator: 8-neighbour distance (1 or sqrt 2 per step) x mu_w
+        ii, jj = np.mgrid[0:21, 0:17]
+        di, dj = np.abs(ii - 10), np.abs(jj - 8)
+        octile = (np.maximum(di, dj) - np.minimum(di, dj)) + math.sqrt(2) * np.minimum(di, dj)
+        np.testing.assert_allclose(got, mu * octile, rtol=1e-12)
+
+
+def test_generators_are_never_relaxed_and_the_peak_is_the_feature_maximum():
+    w = R.edge_weights(15, 15, 1.0, 0.0, np.random.default_rng(1))
+    # a "peak" at cost 0 and a ridge of generators whose costs rise faster than the edges
+    gens = [(7, 7), (7, 8), (7, 9), (7, 10)]
+    costs = [0.0, 5.0, 10.0, 15.0]
+    got, _ = _field(w, gens, costs, cs=100.0)
+    for (i, j), c in zip(gens, costs):
+        assert got[i, j] == c  # a path from the peak would be cheaper (1, 2, 3), generators keep their cost
+    assert np.argmin(np.where(np.isfinite(got), got, np.inf)) == 7 * 15 + 7
+
+
+def test_search_halts_near_sea_level_and_at_the_fraction_of_the_all_generator_field():
+    w = R.edge_weights(31, 31, 1.0, 0.0, np.random.default_rng(2))
+    got, m = _field(w, [(15, 15)], [0.0], cs=5.0)
+    assert np.isfinite(got).sum() == m < 31 * 31
+    assert got[np.isfinite(got)].max() < 5.0 + 1.5  # expanded only below cs - 0.5
+    ca = np.zeros((31, 31))  # an all-generator field of full height everywhere
+    got2, m2 = _field(w, [(15, 15)], [0.0], cs=20.0, ca=ca, halt=0.5)
+    assert m2 < (np.isfinite(_field(w, [(15, 15)], [0.0], cs=20.0)[0])).sum()
+
+
+def test_profile_scaling_follows_eq1():
+    w = R.edge_weights(3, 40, 1.0, 0.0, np.random.default_rng(3))
+    table = np.array([1.0, 3.0])  # w_s grows linearly from 1 at c_m = 0 to 3 at c_m = c_s
+    got, _ = _field(w, [(1, 0)], [0.0], cs=100.0, table=table, use_profile=True)
+    c = [0.0]
+    for _ in range(5):  # along the row: c += w_e * w_s(c_m(c)), c_g = 0 so c_m = c
+        c.append(c[-1] + 1.0 * (1.0 + 2.0 * c[-1] / 100.0))
+    np.testing.assert_allclose(got[1, :6], c, rtol=1e-12)
+
+
+def test_blend_is_the_mean_at_b0_and_never_exceeds_the_maximum():
+    rng = np.random.default_rng(4)
+    h = rng.uniform(0, 100, (5, 50))
+    np.testing.assert_allclose(R.blend(h, 0.0), h.mean(axis=0))
+    for b in (0.0, 1.0, 3.0, 4.0, 20.0):
+        out = R.blend(h, b)
+        assert (out <= h.max(axis=0) + 1e-9).all() and (out >= h.mean(axis=0) - 1e-9).all()
+    # the kernel's accumulation gives the same as the array formula
+    ny, nx = 1, 50
+    num, den = np.zeros((ny, nx)), np.zeros((ny, nx))
+    touched = np.arange(nx, dtype=np.int64)
+    for f in range(5):
+        K.blend_add(touched, nx, (100.0 - h[f])[None, :], 100.0, 3.0, num, den)
+    np.testing.assert_allclose(num[0] / den[0], R.blend(h, 3.0))
+
+
+def test_profile_fit_is_monotone_and_non_monotone_profiles_are_rejected():
+    rng = np.random.default_rng(5)
+    d = rng.uniform(0, 3000, 5000)
+    drop = 400 * np.sqrt(d / 3000) + rng.normal(0, 30, d.size)
+    dist, prof = R.fit_profile(d, drop)
+    assert dist[0] == 0 and prof[0] == 0 and (np.diff(prof) >= 0).all()
+    assert prof[-1] == pytest.approx(400 * np.sqrt(dist[-1] / 3000), abs=30)
+    tab = R.slope_table(dist, prof, cs=1000.0, mu_w=1.0)
+    assert (tab > 0).all() and tab[0] > tab[-1]  # concave profile: steep near the peak
+    with pytest.raises(InputError, match="monotone"):
+        R.slope_table(np.array([0.0, 1.0, 2.0]), np.array([0.0, 5.0, 3.0]), cs=10.0, mu_w=1.0)
+
+
+@pytest.mark.parametrize("bad", [{"r": 0.75}, {"r": 2.0}, {"mu_w": 0.0}, {"s": 1.0}, {"b": -1.0},
+                                 {"preset": "volcano"}, {"profile": "hand"}])
+def test_out_of_range_parameters_are_refused(bad):
+    with pytest.raises(InputError):
+        R.RusnellParams(**bad)
+
+
+def test_presets_are_table_1():
+    p = R.RusnellParams(preset="crater")
+    assert (p.mu_w, p.r, p.s, p.b) == (1.5, 1.0, 1.1, 4.0)
+    assert R.RusnellParams(preset="cinder-cone", b=5.0).b == 5.0
+
+
+def test_render_without_exemplar_needs_profile_none():
+    tree = small_tree()
+    with pytest.raises(InputError, match="exemplar"):
+        render_terrain(tree, generator="rusnell", resolution_m=200.0, seed=0)
+    a = render_terrain(tree, generator="rusnell", resolution_m=200.0, params={"profile": "none"}, seed=0)
+    b = render_terrain(tree, generator="rusnell", resolution_m=200.0, params={"profile": "none"}, seed=0)
+    assert a.values.tobytes() == b.values.tobytes()
+    z = a.values
+    grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 200.0)
+    row, col, _ = grid.cell_of(tree.peaks[["x", "y"]].to_numpy())
+    # the highest peak is the highest cell; the blend lowers no cell above it
+    assert z.max() == pytest.approx(1500.0, abs=1e-3) and z[row[0], col[0]] == z.max()
+
+
+def test_render_with_an_exemplar_profile():
+    tree = small_tree()
+    grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 100.0)
+    x, y = grid.centres()
+    from orokit.generators.base import as_dataarray
+
+    bumps = sum(h * np.exp(-((x[None, :] - cx) ** 2 + (y[:, None] - cy) ** 2) / 6e5)
+                for cx, cy, h in ((2000, 2000, 600), (6000, 5000, 500), (3000, 6500, 400)))
+    ex = as_dataarray(300 + bumps, grid, None)
+    dem = render_terrain(tree, generator="rusnell", resolution_m=100.0, exemplar=ex, seed=1)
+    assert np.isfinite(dem.values).all() and dem.values.max() <= 1500.0 + 1e-3
