@@ -1,6 +1,7 @@
 """Figures of the generator backends (Belhadj 2007 Figs. 3/5/6) and the ranking table's hillshades."""
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import numpy as np
@@ -127,6 +128,9 @@ def ranking_markdown(runs: list[dict]) -> str:
     """The ranking README: mean rank, per-region tables (mean [min–max] over seeds), failures."""
     per_run, agg, mean_rank = ranking_tables(runs)
     seeds = sorted({r["seed"] for r in runs})
+    loads = [r["load_average_before"][0] for r in runs if r.get("load_average_before")]
+    load = (f" The 1-minute load average when the runs started was {min(loads):.1f}–{max(loads):.1f} "
+            f"(machine with {os.cpu_count()} cores), so times are upper bounds.") if loads else ""
     lines = ["# Generator ranking", "",
              "Every generator renders the same synthesized Divide Tree per region and seed (seeds "
              f"{', '.join(map(str, seeds))}) on the real DEM's grid, with the same rivers, each in its own "
@@ -134,7 +138,7 @@ def ranking_markdown(runs: list[dict]) -> str:
              "and the terrain type, reclassified by `models/regions-10km.skops`, and its landforms compared "
              "with the real DEM (`orokit.validate.landform.compare_landforms`). Values: mean [min–max] over "
              "seeds. Lower is better except for recovered peaks, disk accuracy and vote. Time is the wall "
-             "time of the render process (start-up and writing included); RSS its peak.", "",
+             f"time of the render process (start-up and writing included); RSS its peak.{load}", "",
              "## Mean rank (over every metric and region; 1 = best)", "", "| generator | mean rank |", "|---|---|"]
     for g, v in mean_rank.items():
         lines.append(f"| {g} | {v:.2f} |")
