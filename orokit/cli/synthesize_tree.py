@@ -98,6 +98,12 @@ def synthesize_tree(type_files, size, n_peaks, control_elevation, control_densit
 
 
 def _read_points(path: Path):
+    frame = _read_points_file(path)
+    frame.attrs["source"] = str(path)  # errors about fixed peaks name the file
+    return frame
+
+
+def _read_points_file(path: Path):
     import pandas as pd
 
     if path.suffix.lower() == ".csv":

@@ -44,6 +44,15 @@ CellSizeLike = float | tuple[float, float] | None
 # files from dask worker threads is serialised by this lock.
 _OPEN_LOCK = threading.Lock()
 
+#: elevations (metres) beyond these are not terrain anywhere on Earth (Challenger Deep is
+#: about -10,935 m, Everest 8,849 m): such cells are void markers and read as nodata
+PLAUSIBLE_MIN_M = -12_000.0
+PLAUSIBLE_MAX_M = 9_000.0
+#: raw values that tools write for voids without always declaring them as nodata
+VOID_SENTINELS = (-9999.0, -32768.0, -32767.0, -99999.0)
+#: SRTM .hgt tiles: (rows, cols) for 2-byte samples
+_HGT_SHAPES = ((1201, 1201), (3601, 3601), (1801, 3601))
+
 
 def _is_virtual(path: str) -> bool:
     return path.startswith("/vsi") or "://" in path
@@ -57,6 +66,13 @@ def _open(path: str, *, what: str = "") -> Iterator[rasterio.io.DatasetReader]:
             warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
             src = rasterio.open(path)
     except rasterio.errors.RasterioIOError as exc:
+        if path.lower().endswith(".hgt") and not _is_virtual(path) and Path(path).is_file():
+            size = Path(path).stat().st_size
+            expected = " or ".join(f"{2 * r * c:,} bytes ({r} x {c} samples)" for r, c in _HGT_SHAPES)
+            raise InputError(
+                f"cannot read SRTM tile {path}: it has {size:,} bytes, expected {expected}. The file is "
+                "truncated or not an SRTM tile; download it again."
+            ) from exc
         raise InputError(
             f"cannot read raster {path}{what}: {exc}. Check that the file is complete and in a format GDAL "
             "reads (GeoTIFF/COG, SRTM .hgt, ESRI ASCII .asc, VRT, PNG)."
@@ -83,7 +99,7 @@ class _BandReader:
     dtype: np.dtype = np.dtype(np.float32)
     ndim: int = 2
 
-    def _convert(self, raw: NDArray[Any]) -> NDArray[np.float32]:
+    def _convert(self, raw: NDArray[Any], where: str = "") -> NDArray[np.float32]:
         valid = np.ones(raw.shape, dtype=bool)
         if self.nodata is not None:
             if np.isnan(self.nodata):
@@ -92,6 +108,18 @@ class _BandReader:
                 valid &= raw != _native_sentinel(self.nodata, raw.dtype)
         if raw.dtype.kind == "f":
             valid &= np.isfinite(raw)
+        # undeclared void markers (-9999, -32768...) are never terrain: nodata, reported
+        undeclared = None
+        for v in VOID_SENTINELS:
+            if self.nodata is not None and v == self.nodata:
+                continue
+            native = _native_sentinel(v, raw.dtype)
+            if isinstance(native, np.float64) and raw.dtype.kind in "iu":
+                continue  # cannot occur in this dtype
+            hit = raw == native
+            undeclared = hit if undeclared is None else (undeclared | hit)
+        if undeclared is not None:
+            undeclared &= valid
         # integer inputs (uint16 PNGs, int16 SRTM with -32768 voids) go through
         # float64: no overflow, exact for every 32-bit integer value.
         z = raw.astype(np.float64)
@@ -99,6 +127,22 @@ class _BandReader:
             z *= self.factor
         if self.offset_m != 0.0:
             z += self.offset_m
+        implausible = valid & ((z < PLAUSIBLE_MIN_M) | (z > PLAUSIBLE_MAX_M))
+        if undeclared is not None:
+            implausible |= undeclared
+        n_bad = int(np.count_nonzero(implausible))
+        if n_bad:
+            values = np.unique(raw[implausible])
+            shown = ", ".join(f"{v:g}" for v in values[:3]) + (", ..." if len(values) > 3 else "")
+            warnings.warn(
+                f"{self.path}{where}: {n_bad} cells hold void markers or values beyond any elevation on Earth "
+                f"({shown} {'' if self.factor == 1.0 else 'in the file units '}; plausible: {PLAUSIBLE_MIN_M:g} to "
+                f"{PLAUSIBLE_MAX_M:g} m) and the file declares no such nodata; they are read as nodata. Declare the "
+                "nodata value in the file (gdal_edit.py -a_nodata) or check the elevation units (--z-units).",
+                OrokitWarning,
+                stacklevel=3,
+            )
+            valid &= ~implausible
         z[~valid] = np.nan
         return z.astype(np.float32)
 
@@ -115,7 +159,7 @@ class _BandReader:
                     f"cannot read the pixels of {self.path}{where}: {exc}. The file is probably truncated or "
                     "corrupt; download it again (orokit data fetch) or re-export it."
                 ) from exc
-        return self._convert(raw)
+        return self._convert(raw, where)
 
     def __getitem__(self, key: Any) -> NDArray[np.float32]:
         if not isinstance(key, tuple):
@@ -291,6 +335,8 @@ def read_dem(
             raise InputError(f"DEM file {path} is empty (0 bytes); download or export it again.")
 
     with _open(path) as src:
+        if src.driver == "AAIGrid" and not _is_virtual(path):
+            _check_ascii_grid(path, src.width, src.height)
         width, height, count = src.width, src.height, src.count
         file_crs = CRS.from_user_input(src.crs) if src.crs else None
         file_transform = src.transform
@@ -394,6 +440,15 @@ def read_dem(
         )
     if eff_crs is not None and eff_crs.is_geographic and not has_transform:
         raise CRSError(f"cannot place the ungeoreferenced raster {path} in the geographic CRS {eff_crs.to_string()!r}.")
+    if eff_crs is not None and eff_crs.is_geographic:
+        lats = (transform.f, transform.f + transform.e * height)
+        worst = max(lats, key=abs)
+        if abs(worst) > 90.0 + 1e-9 * max(1.0, abs(transform.e)):
+            raise CRSError(
+                f"{path} reaches latitude {worst:.6g} degrees (rows span {min(lats):.6g} to {max(lats):.6g}) in "
+                f"the geographic CRS {eff_crs.to_string()!r}; latitudes lie within +-90. The transform (origin "
+                "or cell size) is wrong, or the CRS is not geographic: fix the georeference (gdal_edit.py)."
+            )
 
     # -- nodata / scaling ---------------------------------------------------------
     nd = nodata if nodata is not None else nodatavals[band - 1]
@@ -471,3 +526,34 @@ def _all_nodata_message(path: str, nd: float | None) -> str:
         f"raster {path} has no valid cells: every cell is nodata (nodata={nd}) or not finite. "
         "Check the nodata value (nodata=...) or the file."
     )
+
+
+def _check_ascii_grid(path: str, ncols: int, nrows: int) -> None:
+    """Refuse an ESRI ASCII grid whose body disagrees with its header.
+
+    GDAL reads the values as one stream, so a row holding more (or fewer) values than
+    ``ncols`` silently shifts every following row: the grid would be scrambled.
+    """
+    n_lines = 0
+    total = 0
+    with open(path, "rb") as fh:
+        for line in fh:
+            parts = line.split()
+            if not parts:
+                continue
+            head = parts[0].lower()
+            if n_lines == 0 and head[:1].isalpha():  # header: ncols, nrows, xllcorner, ..., nodata_value
+                continue
+            n_lines += 1
+            total += len(parts)
+            if len(parts) != ncols:
+                raise InputError(
+                    f"ESRI ASCII grid {path}: data row {n_lines} holds {len(parts)} values but the header says "
+                    f"ncols {ncols}; every row must hold ncols values (GDAL would re-wrap the rows and scramble "
+                    "the grid). Fix the header or the rows."
+                )
+    if n_lines != nrows:
+        raise InputError(
+            f"ESRI ASCII grid {path}: {n_lines} data rows but the header says nrows {nrows}; fix the header or "
+            "the file (truncated?)."
+        )

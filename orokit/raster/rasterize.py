@@ -69,7 +69,8 @@ def make_grid(extent: tuple[float, float, float, float], resolution_m: float, *,
     if nx * ny > max_cells:
         raise InputError(
             f"a {nx} x {ny} raster ({nx * ny:,} cells) at {res:g} m exceeds the limit of {max_cells:,} cells; "
-            "use a coarser resolution, a smaller extent or raise max_cells"
+            "use a coarser resolution (--resolution) or a smaller domain (--size, --extent); from Python, "
+            "render_elevation(..., max_cells=N) raises the limit"
         )
     return Grid(xmin, ymax, res, ny, nx)
 

@@ -283,8 +283,11 @@ def random_elevation_field(domain: Domain, elevation_hist: Any, *, correlation_m
 
     rng = np.random.default_rng(rng)
     cx, cy = domain.cell
-    noise = gaussian_filter(rng.standard_normal(domain.shape), sigma=(correlation_m / cy, correlation_m / cx),
-                            mode="wrap")
+    # a correlation longer than the grid gives one smooth blob anyway: cap the kernel there
+    # (an uncapped width on a tiny domain made the filter run for minutes)
+    ny, nx = domain.shape
+    sigma = (min(correlation_m / cy, float(ny)), min(correlation_m / cx, float(nx)))
+    noise = gaussian_filter(rng.standard_normal(domain.shape), sigma=sigma, mode="wrap")
     ranks = np.argsort(np.argsort(noise.ravel(), kind="stable"), kind="stable")
     q = (ranks + 0.5) / ranks.size
     p = elevation_hist.probabilities()

@@ -34,6 +34,7 @@ __all__ = [
     "TYPE_FORMAT",
     "TYPE_VERSION",
     "load_terrain_type",
+    "loads_terrain_type",
 ]
 
 TYPE_FORMAT = "orokit.terrain_type"
@@ -473,8 +474,10 @@ class TerrainType:
         if ver != TYPE_VERSION:
             raise SchemaError(f"{source} has terrain-type version {ver!r}; this orokit reads version {TYPE_VERSION}. "
                               "Re-create it with `orokit type` from the same analysis")
+        factors = _unit_factors(data.get("units"), source)
         try:
-            hists = {k: FeatureHistogram(tuple(v["edges"]), tuple(v["counts"]), bool(v.get("open_last", False)))
+            hists = {k: FeatureHistogram(tuple(float(e) * factors.get(k, 1.0) for e in v["edges"]),
+                                         tuple(v["counts"]), bool(v.get("open_last", False)))
                      for k, v in data["histograms"].items() if k in FEATURES}
             return cls(str(data["name"]), hists, float(data["peak_density_per_km2"]), float(data["rho"]),
                        float(data["min_prominence_m"]), str(data.get("isolation_basis", "peaks")),
@@ -495,6 +498,50 @@ class TerrainType:
         return load_terrain_type(path)
 
 
+#: accepted unit names per kind of feature -> factor to the unit of FEATURES
+_LENGTH_UNITS = {"m": 1.0, "km": 1000.0}
+_DIRECTION_UNITS = {"deg": 1.0, "degree": 1.0, "degrees": 1.0}
+_RATIO_UNITS = {"1": 1.0, "": 1.0, "ratio": 1.0, "fraction": 1.0}
+
+
+def _unit_factors(units: Any, source: str) -> dict[str, float]:
+    """Factors that bring each histogram's edges to the units of :data:`FEATURES`.
+
+    A type without ``units`` is in those units (metres, degrees). Elevation and
+    prominence may be ``"ft"`` (x 0.3048) or ``"us-ft"``, lengths also ``"km"``.
+    """
+    from orokit.errors import UnitsError
+    from orokit.io._units import factor_to_metres
+
+    if units is None:
+        return {}
+    if not isinstance(units, Mapping):
+        raise SchemaError(f"{source}: 'units' must map features to units, e.g. {{\"elevation\": \"m\"}}; "
+                          f"got {units!r}")
+    factors: dict[str, float] = {}
+    for feature, unit in units.items():
+        if feature not in FEATURES:
+            raise SchemaError(f"{source}: 'units' names an unknown feature {feature!r}; features: {list(FEATURES)}")
+        want, _ = FEATURES[feature]
+        key = str(unit).strip().lower()
+        if want == "m":
+            if key in _LENGTH_UNITS:
+                factors[feature] = _LENGTH_UNITS[key]
+                continue
+            try:
+                factors[feature] = factor_to_metres(key)
+            except UnitsError:
+                raise SchemaError(f"{source}: unknown unit {unit!r} for {feature}; use 'm', 'km', 'ft' or 'us-ft'") \
+                    from None
+        elif want == "deg":
+            if key not in _DIRECTION_UNITS:
+                raise SchemaError(f"{source}: unit {unit!r} for {feature}; directions are in 'deg' "
+                                  "(counter-clockwise from east)")
+        elif key not in _RATIO_UNITS:
+            raise SchemaError(f"{source}: unit {unit!r} for {feature}; {feature} is a ratio in [0, 1] (unit '1')")
+    return factors
+
+
 def load_terrain_type(path: PathLike) -> TerrainType:
     """Read a type JSON written by :meth:`TerrainType.save`.
 
@@ -505,12 +552,28 @@ def load_terrain_type(path: PathLike) -> TerrainType:
     """
     p = Path(path)
     try:
-        data = json.loads(p.read_text(encoding="utf-8"))
+        raw = p.read_bytes()
     except FileNotFoundError:
         raise InputError(f"terrain type file {p} does not exist") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise SchemaError(f"{p} is not valid JSON ({exc}); is it a terrain type written by `orokit type`?") from exc
-    return TerrainType.from_dict(data, source=str(p))
+    except IsADirectoryError:
+        raise InputError(f"terrain type {p} is a folder; give the JSON file written by `orokit type`") from None
+    return loads_terrain_type(raw, source=str(p))
+
+
+def loads_terrain_type(text: bytes | str, *, source: str = "terrain type") -> TerrainType:
+    """Parse the JSON text of a terrain type (see :func:`load_terrain_type`).
+
+    Raises
+    ------
+    SchemaError
+        Not JSON, not a type, another version, malformed or inconsistent content.
+    """
+    try:
+        data = json.loads(text)
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+        raise SchemaError(f"{source} is not valid JSON ({exc}); is it a terrain type written by `orokit type`?") \
+            from None
+    return TerrainType.from_dict(data, source=source)
 
 
 def _check_feature(feature: str) -> None:

@@ -49,6 +49,32 @@ def _fixed_frame(fixed_peaks: Any) -> pd.DataFrame:
     return frame[["x", "y", "elevation"]].astype(float).reset_index(drop=True)
 
 
+def _check_fixed(frame: pd.DataFrame, source: str) -> None:
+    """Refuse fixed peaks that cannot be in a Divide Tree, before anything is computed.
+
+    Rows are quoted 1-based, as in the file (data rows, the header not counted).
+    """
+    xyz = frame[["x", "y", "elevation"]].to_numpy(float)
+    for j, col in enumerate(("x", "y", "elevation")):
+        bad = np.flatnonzero(~np.isfinite(xyz[:, j]))
+        if bad.size:
+            rows = ", ".join(str(i + 1) for i in bad[:5]) + (", ..." if bad.size > 5 else "")
+            raise InputError(f"{source}: {bad.size} fixed peak(s) have no valid {col} (NaN or infinite) at data "
+                             f"row(s) {rows}; give every fixed peak x, y and elevation (m > 0)")
+    bad = np.flatnonzero(xyz[:, 2] <= 0)
+    if bad.size:
+        raise InputError(f"{source}: fixed peak at data row {bad[0] + 1} has elevation {xyz[bad[0], 2]:g} m; "
+                         "fixed peaks need elevations > 0 m")
+    if len(xyz) > 1:
+        order = np.lexsort((xyz[:, 1], xyz[:, 0]))
+        same = np.flatnonzero((np.diff(xyz[order, 0]) == 0) & (np.diff(xyz[order, 1]) == 0))
+        if same.size:
+            i, j = sorted((int(order[same[0]]), int(order[same[0] + 1])))
+            raise InputError(f"{source}: fixed peaks at data rows {i + 1} and {j + 1} share the position "
+                             f"({xyz[i, 0]:g}, {xyz[i, 1]:g}); two peaks cannot stand on one point (the tree would "
+                             "split into a forest). Remove or move one of them.")
+
+
 @dataclass(frozen=True)
 class SynthesisParams:
     """Parameters of :func:`synthesize_divide_tree` (how to synthesize, not what).
@@ -199,13 +225,15 @@ def synthesize_divide_tree(
     controls = build_controls(domain, control_density=control_density, control_elevation=control_elevation,
                               type_map=type_map, n_types=len(types))
     eps = max(t.min_prominence_m for t in types)
+    fixed_xyz, fixed_type = _fixed_peaks(fixed_peaks, fragment, fragment_offset, domain, controls)
+    free_t = _free_peak_counts(types, controls, domain, n_peaks, fixed_xyz, fixed_type)
+    # the default smooth C_H only once the counts are known to be sane (its smoothing is the
+    # costly step on a tiny domain); nothing above draws from rng
     if controls.elevation is None and p.auto_elevation_m and len(types) == 1:
         from orokit.synthesis.controls import random_elevation_field
 
         controls = replace(controls, elevation=random_elevation_field(
             domain, types[0].histograms["elevation"], correlation_m=float(p.auto_elevation_m), rng=rng))
-    fixed_xyz, fixed_type = _fixed_peaks(fixed_peaks, fragment, fragment_offset, domain, controls)
-    free_t = _free_peak_counts(types, controls, domain, n_peaks, fixed_xyz, fixed_type)
     peaks = _peak_elevations(types, free_t, fixed_xyz, fixed_type, fragment, eps, rng)
     timings["elevations"] = time.perf_counter() - t0
 
@@ -286,18 +314,22 @@ def _fixed_peaks(fixed_peaks: Any, fragment: DivideTree | None, offset: tuple[fl
                  controls: Any) -> tuple[np.ndarray, np.ndarray]:
     """(n, 3) x, y, elevation of the fragment's then the user's fixed peaks, and their type index."""
     user = _fixed_frame(fixed_peaks)
+    _check_fixed(user, getattr(fixed_peaks, "attrs", {}).get("source", "the fixed peaks"))
+    n_user = len(user)
     if fragment is not None:
         fragment.validate()
         fp = fragment.peaks[["x", "y", "elevation"]].astype(float).copy()
         fp["x"] += offset[0]
         fp["y"] += offset[1]
         user = pd.concat([fp, user], ignore_index=True)
+        if n_user:
+            _check_fixed(user, "the fragment peaks (first) and fixed peaks")
     fixed_xyz = user.to_numpy(float).reshape(-1, 3)
     if fixed_xyz.size and not domain.contains(fixed_xyz[:, 0], fixed_xyz[:, 1]).all():
         k = int((~domain.contains(fixed_xyz[:, 0], fixed_xyz[:, 1])).sum())
         raise InputError(f"{k} fixed/fragment peaks lie outside the domain "
                          f"x {domain.x0:.0f}..{domain.x0 + domain.width:.0f}, y {domain.y0:.0f}..{domain.y0 + domain.height:.0f}")
-    if fixed_xyz.size and (fixed_xyz[:, 2] <= 0).any():
+    if fixed_xyz.size and not (fixed_xyz[:, 2] > 0).all():
         raise InputError("fixed peaks need elevations > 0 m")
     fr, fc = domain.cell_index(fixed_xyz[:, 0], fixed_xyz[:, 1])
     return fixed_xyz, controls.type_index[fr, fc]
@@ -336,8 +368,8 @@ def _free_peak_counts(types: list[TerrainType], controls: Any, domain: Domain, n
     free_t = np.maximum(n_t - fixed_per_t, 0)
     if free_t.sum() + len(fixed_xyz) < 2:
         raise InputError(
-            f"the domain holds {int(n_t.sum())} peaks at the type density ({domain.area_km2:.1f} km2): "
-            "too few for a Divide Tree; enlarge size_m or pass n_peaks >= 2"
+            f"the domain holds {int(n_t.sum())} peaks at the type density ({domain.area_km2:.4g} km2): "
+            "too few for a Divide Tree; enlarge size_m (CLI: --size) or pass n_peaks >= 2 (--n-peaks)"
         )
     return free_t
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import dask.array as dsa
@@ -90,8 +91,10 @@ def test_feet_band_units_and_scale(tmp_path):
     assert dem.attrs["z_units_in"] == "ft" and not dem.attrs["z_units_assumed"]
     np.testing.assert_allclose(dem.values, raw.astype(np.float64) * 0.3048, rtol=1e-7)
     with pytest.warns(OrokitWarning, match="declares elevation units"):
-        m = read_dem(p, z_units="m")
-    np.testing.assert_array_equal(m.values, raw)
+        with pytest.warns(OrokitWarning, match="1 cells hold void markers or values beyond"):
+            m = read_dem(p, z_units="m")
+    # 29029 m is no elevation on Earth: nodata (with the warning), the rest as given
+    np.testing.assert_array_equal(m.values, np.where(raw == 29029, np.nan, raw))
     bad = write_tif(tmp_path / "fur.tif", raw, units="furlong")
     with pytest.raises(UnitsError, match="furlong"):
         read_dem(bad)
@@ -231,10 +234,11 @@ def test_png16_feet_local_grid(tmp_path):
         read_dem(p, cell_size=92.61)
     with pytest.raises(CRSError, match="cell_size"):
         read_dem(p, z_units="ft")
-    dem = read_dem(p, z_units="ft", cell_size=92.61)
-    # exact x 0.3048 from the integer values, no uint16 overflow
-    np.testing.assert_allclose(dem.values, raw.astype(np.float64) * 0.3048, rtol=1e-7)
-    assert dem.values[0, 2] == pytest.approx(65535 * 0.3048)
+    with pytest.warns(OrokitWarning, match=r"1 cells hold void markers .*65535"):
+        dem = read_dem(p, z_units="ft", cell_size=92.61)
+    # exact x 0.3048 from the integer values, no uint16 overflow; 65535 ft (19,975 m) is a void marker
+    np.testing.assert_allclose(dem.values, np.where(raw == 65535, np.nan, raw.astype(np.float64) * 0.3048), rtol=1e-7)
+    assert np.isnan(dem.values[0, 2]) and dem.values[1, 0] == pytest.approx(29029 * 0.3048)
     assert dem.values[0, 0] == 0.0  # 0 = sea level is data, not nodata
     assert dem.attrs["local_grid"] is True and dem.rio.crs is None and dem.attrs["z_units_in"] == "ft"
     assert tuple(dem.rio.transform())[:6] == (92.61, 0.0, 0.0, 0.0, -92.61, 0.0)
@@ -349,8 +353,17 @@ def test_bad_chunks(tmp_path):
 def test_property_int16_roundtrip(tmp_path_factory, raw, feet):
     raw[0, 0] = 1  # at least one valid cell
     p = write_tif(tmp_path_factory.mktemp("h") / "p.tif", raw, nodata=-32768, units="ft" if feet else "m")
-    dem = read_dem(p)
     expect = raw.astype(np.float64) * (0.3048 if feet else 1.0)
+    # void markers and values beyond any elevation on Earth are nodata (and reported)
+    void = ((expect < -12_000) | (expect > 9_000) | np.isin(raw, [-9999, -32767])) & (raw != -32768)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        dem = read_dem(p)
+    reported = [w for w in seen if issubclass(w.category, OrokitWarning) and "void markers" in str(w.message)]
+    assert len(reported) == int(void.any())
+    if void.any():
+        assert f"{int(void.sum())} cells" in str(reported[0].message)
+    expect[void] = np.nan
     expect[raw == -32768] = np.nan
     np.testing.assert_allclose(dem.values, expect.astype(np.float32), rtol=0, atol=0)
     assert dem.dtype == np.float32 and not math.isnan(float(dem.values[0, 0]))
