@@ -58,6 +58,19 @@ def write_chunk(path: PathLike, arrays: dict[str, np.ndarray]) -> None:
 
 
 def read_chunk(path: PathLike) -> dict[str, np.ndarray]:
-    """The arrays of one chunk file."""
-    with np.load(path) as data:
-        return {k: data[k] for k in data.files}
+    """The arrays of one chunk file.
+
+    Raises
+    ------
+    TilingError
+        The file is truncated, empty or not an npz of arrays (it is never unpickled).
+    """
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if not hasattr(data, "files"):
+                raise ValueError("not an npz archive")
+            return {k: data[k] for k in data.files}
+    except FileNotFoundError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - BadZipFile, EOFError, ValueError, OSError, zlib errors...
+        raise TilingError(f"checkpoint chunk {path} is corrupt ({type(exc).__name__}: {exc})") from None

@@ -14,6 +14,7 @@ from orokit._typing import PathLike
 from orokit.errors import InputError
 from orokit.io.atomic import atomic_path
 from orokit.topology.divide_tree import DivideTree
+from orokit.topology.tree_checks import check_read_tree
 
 logger = logging.getLogger(__name__)
 
@@ -104,6 +105,8 @@ def read_divide_tree_gpkg(path: PathLike) -> DivideTree:
     InputError
         If the file does not exist or lacks the ``peaks``, ``saddles`` or ``ridges``
         layers or their id columns.
+    DivideTreeError
+        The content is no Divide Tree (see :func:`orokit.topology.tree_checks.check_read_tree`).
     """
     import geopandas as gpd
     import pyogrio
@@ -150,6 +153,4 @@ def read_divide_tree_gpkg(path: PathLike) -> DivideTree:
     for key in ("runoffs", "basin_saddles"):
         if key in layers:
             attrs[key], _ = frame(key, "point_id")
-    tree = DivideTree(peaks, saddles, edges, crs, attrs)
-    tree.validate(check_elevations=False)
-    return tree
+    return check_read_tree(DivideTree(peaks, saddles, edges, crs, attrs), str(path))

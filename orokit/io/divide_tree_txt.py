@@ -31,6 +31,7 @@ from orokit.errors import InputError
 from orokit.io._units import factor_to_metres
 from orokit.io.atomic import atomic_open
 from orokit.topology.divide_tree import DivideTree
+from orokit.topology.tree_checks import check_read_tree
 
 logger = logging.getLogger(__name__)
 
@@ -137,7 +138,7 @@ def _pairs(path: Path, name: str, rows: list[tuple[int, list[str]]], width: int)
             raise InputError(f"{path}:{lineno}: a {name} line needs {width} integer fields; got {' '.join(tokens)[:80]!r}")
         try:
             out[i] = [int(t) for t in tokens]
-        except ValueError:
+        except (ValueError, OverflowError):
             raise InputError(f"{path}:{lineno}: non-integer field in {name} line {' '.join(tokens)[:80]!r}") from None
     return out, [ln for ln, _ in rows]
 
@@ -230,6 +231,9 @@ def read_divide_tree_txt(
     InputError
         Truncated or corrupt file (the message names the line), unknown ids in the
         edges, or a cell size that cannot be inferred.
+    DivideTreeError
+        The content is no Divide Tree (see
+        :func:`orokit.topology.tree_checks.check_read_tree`; the file's ids are quoted).
     """
     path = Path(path)
     if not path.is_file():
@@ -296,8 +300,7 @@ def read_divide_tree_txt(
         "runoffs": runoffs,
         "basin_saddles": _place(frames["BasinSaddles"], factor, cell, height),
     }
-    tree = DivideTree(peaks, saddles, edges, None, attrs)
-    tree.validate(check_elevations=False)
+    tree = check_read_tree(DivideTree(peaks, saddles, edges, None, attrs), str(path), id_column="txt_id")
     logger.info("read %s: %d peaks, %d saddles, %d runoffs", path, tree.n_peaks, tree.n_saddles, len(runoffs))
     return tree
 

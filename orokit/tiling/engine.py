@@ -77,6 +77,22 @@ def _load_summary(path: str) -> tuple[ChunkSummary, dict | None]:
     return ChunkSummary.from_npz(data), iso
 
 
+def _corrupt_chunk(path: str) -> bool:
+    """True (with a warning, and the file removed) when a checkpoint chunk cannot be used."""
+    import warnings
+
+    from orokit.errors import OrokitWarning
+
+    try:
+        _load_summary(path)
+        return False
+    except (TilingError, KeyError, ValueError, TypeError, IndexError) as exc:
+        warnings.warn(f"{exc if isinstance(exc, TilingError) else f'checkpoint chunk {path} is unusable ({exc!r})'}; "
+                      "recomputing that chunk", OrokitWarning, stacklevel=3)
+        Path(path).unlink(missing_ok=True)
+        return True
+
+
 def _tile_task(block: np.ndarray, row0: int, col0: int, shape, min_prominence: float,
                path: str | None, metric) -> tuple[ChunkSummary, dict | None]:
     block = np.asarray(block, dtype=np.float64)
@@ -144,7 +160,7 @@ def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", sch
     for i in range(len(rb) - 1):
         for j in range(len(cb) - 1):
             path = None if ckpt is None else str(chunk_path(ckpt, i, j))
-            if path is not None and Path(path).exists():
+            if path is not None and Path(path).exists() and not _corrupt_chunk(path):
                 task = dask.delayed(_load_summary, nout=2)(path, dask_key_name=f"orokit-load-{i}-{j}-{_h(path)}")
                 reused += 1
             else:
