@@ -175,6 +175,8 @@ _HELD: dict[Path, list[int]] = {}
 def lock_path_for(target: PathLike) -> Path:
     """The lock file of an output (file or folder): hidden, beside it, ``.NAME.lock``."""
     t = Path(os.path.abspath(target))
+    if not t.name:  # the filesystem root: its lock lies inside it
+        return t / ".orokit.lock"
     return t.with_name(f".{t.name}.lock")
 
 
