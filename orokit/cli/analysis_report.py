@@ -16,6 +16,9 @@ def analysis_report(folders: tuple[Path, ...], output: Path, overwrite: bool) ->
     reference Divide Trees of the manifest, and a Divide Tree figure per dataset."""
     from orokit.reports.analysis_report import build_analysis_report
 
+    from orokit.cli.outputs import claim_outputs
+
+    claim_outputs(output)  # locked for the whole run
     if output.exists() and not overwrite:
         raise click.UsageError(f"{output} exists; pass --overwrite to replace it")
     build_analysis_report(list(folders), output)

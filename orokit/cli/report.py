@@ -42,6 +42,9 @@ def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominen
         inputs = sorted(p for p in analysis_dir.iterdir() if (p / "peaks.parquet").exists())
         if not inputs:
             raise click.UsageError(f"{analysis_dir} holds no analysis folder (sub-folders with peaks.parquet)")
+    from orokit.cli.outputs import claim_outputs
+
+    claim_outputs(output, model_path)  # locked for the whole run
     if (output / "README.md").exists() and not overwrite:
         raise click.UsageError(f"{output} already holds a report; pass --overwrite to replace it")
     if model_path is not None and model_path.exists() and not overwrite:

@@ -17,6 +17,9 @@ def report_dataset(ctx: click.Context, name: str, outdir: str, overwrite: bool) 
     from orokit.reports.dem_summary import write_dem_summary
 
     out = Path(outdir)
+    from orokit.cli.outputs import claim_outputs
+
+    claim_outputs(out)  # locked for the whole run
     if (out / "summary.md").exists() and not overwrite:
         raise click.ClickException(f"{out / 'summary.md'} exists; pass --overwrite to replace it.")
     manifest = load_manifest()

@@ -17,6 +17,9 @@ def report_index(ctx: click.Context, summaries: tuple[str, ...], output: str, ov
     from orokit.reports.dem_summary import render_index
 
     out = Path(output)
+    from orokit.cli.outputs import claim_outputs
+
+    claim_outputs(out)  # locked for the whole run
     if out.exists() and not overwrite:
         raise click.ClickException(f"{out} exists; pass --overwrite to replace it.")
     write_text_atomic(out, render_index(list(summaries), out))

@@ -34,6 +34,9 @@ def roundtrip_report(twins, per_class, model, output, table_path, overwrite, pro
         raise click.BadParameter(f"the table {table_path} would replace OUTPUT; give another --table",
                                  param_hint="--table")
     outputs = [output, table_path] + [d / "twin.png" for d in twins]
+    from orokit.cli.outputs import claim_outputs
+
+    claim_outputs(*outputs)  # locked for the whole run
     existing = [str(p) for p in outputs if p.exists()]
     if existing and not overwrite:
         raise click.UsageError(f"{', '.join(existing)} exist(s); pass --overwrite to replace them")

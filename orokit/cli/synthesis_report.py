@@ -21,6 +21,9 @@ def synthesis_report(trees: tuple[Path, ...], output: Path, overwrite: bool) -> 
 
     from orokit.io.atomic import write_text_atomic
 
+    from orokit.cli.outputs import claim_outputs
+
+    claim_outputs(output)  # locked for the whole run
     if output.exists() and not overwrite:
         raise click.UsageError(f"{output} exists; pass --overwrite to replace it")
     rows, runs = [], []
