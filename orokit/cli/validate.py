@@ -11,14 +11,15 @@ def append_row(table: Path, row: dict) -> None:
     """Append one row to a CSV table (rewritten atomically; new columns are added)."""
     import pandas as pd
 
-    from orokit.io.atomic import atomic_path
+    from orokit.io.atomic import atomic_path, output_lock
 
     df = pd.DataFrame([row])
-    if table.exists():
-        df = pd.concat([pd.read_csv(table), df], ignore_index=True)
-    table.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(table) as tmp:
-        df.to_csv(tmp, index=False)
+    with output_lock(table, wait_s=60.0):  # concurrent runs append one after the other
+        if table.exists():
+            df = pd.concat([pd.read_csv(table), df], ignore_index=True)
+        table.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(table) as tmp:
+            df.to_csv(tmp, index=False)
 
 
 @click.command(name="validate")
@@ -56,7 +57,7 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, z_uni
         json_path = folder / "validation.json"
     from orokit.cli.outputs import claim_outputs
 
-    claim_outputs(json_path, append_to)  # locked for the whole run
+    claim_outputs(json_path)  # locked for the whole run (the --append-to log only while appending)
     if json_path is not None and json_path.exists() and not overwrite:
         raise click.UsageError(f"{json_path} exists; pass --overwrite to replace it")
     if append_to is not None and append_to.exists() and append_to.is_dir():

@@ -188,8 +188,9 @@ def _holder(lock: Path) -> str:
     return f" ({text})" if text else ""
 
 
-def _acquire(target: Path) -> Path:
+def _acquire(target: Path, wait_s: float = 0.0) -> Path:
     import fcntl
+    import time
 
     lock = lock_path_for(target)
     held = _HELD.get(lock)
@@ -197,12 +198,16 @@ def _acquire(target: Path) -> Path:
         held[1] += 1
         return lock
     lock.parent.mkdir(parents=True, exist_ok=True)
+    deadline = time.monotonic() + wait_s
     while True:
         fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
+            if time.monotonic() < deadline:
+                time.sleep(0.05)
+                continue
             raise OutputError(
                 f"{target} is being written by another orokit process{_holder(lock)}; wait for it to finish, "
                 f"or write to another output (if no orokit process is running, remove {lock})"
@@ -236,8 +241,10 @@ def _release(lock: Path) -> None:
 
 
 @contextlib.contextmanager
-def output_lock(*targets: PathLike | None) -> Iterator[None]:
+def output_lock(*targets: PathLike | None, wait_s: float = 0.0) -> Iterator[None]:
     """Hold the lock of every output in ``targets`` (``None`` entries are skipped).
+
+    ``wait_s``: how long to wait for another holder (default: fail at once).
 
     The lock is an exclusive ``flock`` on a hidden file beside each output
     (``.NAME.lock``), so it is released by the kernel even when the process is killed;
@@ -261,7 +268,7 @@ def output_lock(*targets: PathLike | None) -> Iterator[None]:
     taken: list[Path] = []
     try:
         for t in sorted({Path(os.path.abspath(t)) for t in targets if t is not None}):
-            taken.append(_acquire(t))
+            taken.append(_acquire(t, wait_s))
         yield
     finally:
         for lock in reversed(taken):
