@@ -16,7 +16,7 @@ from orokit._typing import PathLike
 from orokit.errors import TilingError
 from orokit.io.atomic import atomic_path, write_text_atomic
 
-__all__ = ["open_checkpoint", "chunk_path", "write_chunk", "read_chunk"]
+__all__ = ["open_checkpoint", "chunk_path", "write_chunk", "read_chunk", "discard_chunk"]
 
 
 def open_checkpoint(folder: PathLike, fingerprint: dict[str, Any]) -> Path:
@@ -74,3 +74,14 @@ def read_chunk(path: PathLike) -> dict[str, np.ndarray]:
         raise
     except Exception as exc:  # noqa: BLE001 - BadZipFile, EOFError, ValueError, OSError, zlib errors...
         raise TilingError(f"checkpoint chunk {path} is corrupt ({type(exc).__name__}: {exc})") from None
+
+
+def discard_chunk(path: PathLike, reason: BaseException) -> None:
+    """Remove a chunk file that cannot be used, with a warning; the engine recomputes it."""
+    import warnings
+
+    from orokit.errors import OrokitWarning
+
+    why = str(reason) if isinstance(reason, TilingError) else f"checkpoint chunk {path} is unusable ({reason!r})"
+    warnings.warn(f"{why}; recomputing that chunk", OrokitWarning, stacklevel=3)
+    Path(path).unlink(missing_ok=True)

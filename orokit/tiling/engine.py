@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from orokit.errors import TilingError
-from orokit.io.checkpoint_io import chunk_path, open_checkpoint, read_chunk, write_chunk
+from orokit.io.checkpoint_io import chunk_path, discard_chunk, open_checkpoint, read_chunk, write_chunk
 from orokit.tiling.isolation import block_stats, chunk_isolation
 from orokit.tiling.summary import ChunkSummary, chunk_summary, finalize_summary, merge_summaries
 from orokit.topology.engine import Orometry
@@ -79,17 +79,11 @@ def _load_summary(path: str) -> tuple[ChunkSummary, dict | None]:
 
 def _corrupt_chunk(path: str) -> bool:
     """True (with a warning, and the file removed) when a checkpoint chunk cannot be used."""
-    import warnings
-
-    from orokit.errors import OrokitWarning
-
     try:
         _load_summary(path)
         return False
     except (TilingError, KeyError, ValueError, TypeError, IndexError) as exc:
-        warnings.warn(f"{exc if isinstance(exc, TilingError) else f'checkpoint chunk {path} is unusable ({exc!r})'}; "
-                      "recomputing that chunk", OrokitWarning, stacklevel=3)
-        Path(path).unlink(missing_ok=True)
+        discard_chunk(path, exc)
         return True
 
 
