@@ -19,16 +19,44 @@ def read_tree(path: Path, *, cell_size: float | None = None):
     return read_divide_tree(path, cell_size=cell_size)
 
 
-def extent_like(path: Path, *, cell_size: float | None = None) -> tuple[float, float, float, float]:
-    """Bounds of a raster (the extent of ``--like``)."""
+def like_dem(like: str | Path, *, cell_size: float | None = None, z_units: str | None = "m",
+             hint: str = "--like"):
+    """The DEM named by ``--like``: a raster file or a manifest dataset name (metres).
+
+    A file is read with ``z_units`` (``"m"`` when only its grid matters; ``None`` to use
+    the units it declares) and ``cell_size`` for rasters without georeferencing; a
+    dataset comes with the manifest's units and cell size.
+    """
     from orokit.io.dem import read_dem
 
-    dem = read_dem(str(path), z_units="m", cell_size=cell_size)
+    if Path(like).exists():
+        dem = read_dem(str(like), z_units=z_units, cell_size=cell_size)
+    else:
+        from orokit.data import open_dataset_dem
+        from orokit.errors import DataError
+
+        try:
+            dem = open_dataset_dem(str(like))
+        except (DataError, KeyError) as exc:
+            raise click.BadParameter(f"{str(like)!r} is neither a file nor a dataset of the manifest ({exc})",
+                                     param_hint=hint) from None
+    if dem.rio.crs is not None and dem.rio.crs.is_geographic:
+        raise click.BadParameter(f"{like} is in a geographic CRS; give --size and --resolution in metres",
+                                 param_hint=hint)
+    return dem
+
+
+def like_grid(like: str | Path, *, cell_size: float | None = None) -> tuple[tuple[float, float, float, float], float]:
+    """Extent ``(xmin, ymin, xmax, ymax)`` and cell size (m) of a ``--like`` raster or dataset."""
+    dem = like_dem(like, cell_size=cell_size)
     t = dem.rio.transform()
     ny, nx = dem.shape
     xs = (t.c, t.c + t.a * nx)
     ys = (t.f, t.f + t.e * ny)
-    return (min(xs), min(ys), max(xs), max(ys))
+    if abs(abs(t.a) - abs(t.e)) > 1e-6 * abs(t.a):
+        raise click.BadParameter(f"{like} has non-square cells ({abs(t.a):g} x {abs(t.e):g}); give --resolution "
+                                 "and --extent", param_hint="--like")
+    return (min(xs), min(ys), max(xs), max(ys)), abs(float(t.a))
 
 
 def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None, skeleton=None) -> None:
@@ -51,15 +79,15 @@ def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None
 @click.argument("tree", type=click.Path(exists=True, path_type=Path))
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Output GeoTIFF (COG).")
-@click.option("--resolution", type=LENGTH, default="30m", show_default=True,
-              help="Cell size: 30m, 0.03km (a plain number is metres).")
+@click.option("--resolution", type=LENGTH, default=None,
+              help="Cell size: 30m, 0.03km (a plain number is metres) [default: that of --like, else 30m].")
 @click.option("--erosion/--no-erosion", default=True, show_default=True, help="Multi-scale constrained erosion.")
 @click.option("--seed", type=click.IntRange(min=0), default=None,
               help="Random seed (same seed, same raster) [default: fresh entropy, recorded in the tags].")
 @click.option("--extent", type=(float, float, float, float), default=None,
               help="XMIN YMIN XMAX YMAX in the tree's CRS (default: the tree's domain or bounding box).")
-@click.option("--like", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
-              help="Use the extent of this raster (e.g. the DEM the tree came from).")
+@click.option("--like", default=None,
+              help="Raster file or manifest dataset (e.g. the DEM the tree came from): its extent and cell size.")
 @click.option("--min-prominence", type=float, default=30.0, show_default=True,
               help="eps (m): noise stays below it.")
 @click.option("--lambda", "lam", type=LENGTH, default="200m", show_default=True, help="Meshing distance lambda.")
@@ -88,7 +116,11 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
     for p in (out, preview, tin_path):
         if p is not None and p.exists() and not overwrite:
             raise click.UsageError(f"{p} exists; pass --overwrite to replace it")
-    res = resolution
+    if like is not None:
+        if extent is not None:
+            raise click.UsageError("give --extent or --like, not both")
+        extent, like_res = like_grid(like, cell_size=cell_size)
+    res = resolution if resolution is not None else (like_res if like is not None else 30.0)
     if generator != "argudo" or params:
         from orokit.cli.generator_options import check_generator_inputs, render_generator
 
@@ -98,8 +130,6 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
             params = (f"lam={lam}", f"min_prominence={min_prominence}", f"erosion={erosion}") + tuple(params)
         parsed = check_generator_inputs(generator, params, exemplar)
         t = read_tree(tree, cell_size=cell_size)
-        if like is not None:
-            extent = extent_like(like, cell_size=cell_size)
         t0 = time.perf_counter()
         dem = render_generator(t, generator=generator, params=parsed, resolution_m=res, extent=extent, seed=seed,
                                tree_path=tree, exemplar=exemplar)
@@ -109,8 +139,6 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
         return
     params = RenderParams(lam=lam, min_prominence=min_prominence)
     t = read_tree(tree, cell_size=cell_size)
-    if like is not None:
-        extent = extent_like(like, cell_size=cell_size)
     t0 = time.perf_counter()
     dem, skel = render_elevation(t, resolution_m=res, extent=extent, erosion=erosion, params=params,
                                  return_skeleton=True, rng=seed)

@@ -6,6 +6,7 @@ from pathlib import Path
 import click
 
 from orokit.cli.generator_options import generator_options
+from orokit.cli.render import like_dem
 
 #: files written into OUT besides those of ``orokit synthesize-tree``; hillshade.png is
 #: written last and marks a complete folder
@@ -18,32 +19,11 @@ STALE_FILES = ("validation.json",)
 
 def like_domain(like: str, *, cell_size: float | None = None) -> tuple[float, float, float]:
     """Width, height and cell size (metres) of a DEM file or of a manifest dataset."""
-    dem = _like_dem(like, cell_size=cell_size)
+    dem = like_dem(like, cell_size=cell_size)
     t = dem.rio.transform()
     ny, nx = dem.shape
     res = abs(float(t.a))
     return nx * res, ny * abs(float(t.e)), res
-
-
-def _like_dem(like: str, *, cell_size: float | None = None):
-    """The DEM named by --like (a file or a manifest dataset), in metres."""
-    from orokit.io.dem import read_dem
-
-    if Path(like).exists():
-        dem = read_dem(str(like), z_units="m", cell_size=cell_size)
-    else:
-        from orokit.data import open_dataset_dem
-        from orokit.errors import DataError
-
-        try:
-            dem = open_dataset_dem(like)
-        except (DataError, KeyError) as exc:
-            raise click.BadParameter(f"{like!r} is neither a file nor a dataset of the manifest ({exc})",
-                                     param_hint="--like") from None
-    if dem.rio.crs is not None and dem.rio.crs.is_geographic:
-        raise click.BadParameter(f"{like} is in a geographic CRS; give --size and --resolution in metres",
-                                 param_hint="--like")
-    return dem
 
 
 @click.command(name="synthesize")
@@ -133,7 +113,7 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
     if control_elevation == "like":
         if like is None:
             raise click.UsageError("--control-elevation like needs --like")
-        c_h = np.asarray(_like_dem(like, cell_size=cell_size).values, dtype=float)  # row 0 north, stretched
+        c_h = np.asarray(like_dem(like, cell_size=cell_size).values, dtype=float)  # row 0 north, stretched
     elif control_elevation is not None and not Path(control_elevation).exists():
         raise click.BadParameter(f"{control_elevation} does not exist", param_hint="--control-elevation")
     tree = synthesize_divide_tree(ttype, size_m=(w, h), n_peaks=n_peaks, crs=crs, control_elevation=c_h, rng=seed)

@@ -42,8 +42,12 @@ def append_row(table: Path, row: dict) -> None:
               help="CSV log to append the run's summary row to (created if missing). Default: no log.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing validation JSON.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the disk placement.")
+@click.option("--real", "real", default=None,
+              help="Real DEM (file or manifest dataset) to compare landforms with [default: the --like DEM of "
+                   "OUT/synthesis.json, if any].")
+@click.option("--real-cell-size", type=float, default=None, help="Cell size (m) of a --real file without georeferencing.")
 def validate(out, model_path, tree_path, type_file, label, min_prominence, z_units, json_path, append_to, overwrite,
-             seed) -> None:
+             seed, real, real_cell_size) -> None:
     """Re-analyse OUT (a synthesize folder or a raster), compare it with its Divide Tree, classify it.
 
     Writes OUT/validation.json for a folder (or -o JSON) and, with --append-to, one row to a CSV log;
@@ -68,10 +72,13 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, z_uni
         if folder is None or not (folder / "dividetree.gpkg").exists():
             raise click.UsageError("give --tree (the Divide Tree the raster was rendered from)")
         tree_path = folder / "dividetree.gpkg"
-    if type_file is None and folder is not None and (folder / "synthesis.json").exists():
-        types = json.loads((folder / "synthesis.json").read_text()).get("types") or []
-        if len(types) == 1 and Path(types[0]).exists():
+    if folder is not None and (folder / "synthesis.json").exists():
+        meta = json.loads((folder / "synthesis.json").read_text())
+        types = meta.get("types") or []
+        if type_file is None and len(types) == 1 and Path(types[0]).exists():
             type_file = Path(types[0])
+        if real is None and meta.get("like"):
+            real = meta["like"]
 
     from orokit.cli.render import read_tree
     from orokit.io.atomic import write_text_atomic
@@ -93,8 +100,17 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, z_uni
     rt = roundtrip(dem, tree, min_prominence=min_prominence, terrain_type=ttype, model=model,
                    expected_label=label, rng=seed)
     s = rt.summary()
+    landform = None
+    if real is not None:
+        from orokit.cli.render import like_dem
+        from orokit.validate.landform import compare_landforms
+
+        landform = compare_landforms(like_dem(real, cell_size=real_cell_size, z_units=None, hint="--real"), dem)
     if json_path is not None:
-        write_text_atomic(json_path, summary_json(rt))
+        doc = json.loads(summary_json(rt))
+        if landform is not None:
+            doc["landform"] = {"real": str(real), "table": landform.reset_index().to_dict(orient="records")}
+        write_text_atomic(json_path, json.dumps(doc, indent=2))
     if append_to is not None:
         row = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "raster": str(raster),
                "tree": str(tree_path), "model": str(model_path) if model_path else "", **s}
@@ -112,3 +128,8 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, z_uni
                 msg += f" ({100 * s['disk_accuracy']:.0f} % of {s['n_disks']} disks right)"
     written = [str(p) for p in (json_path, append_to) if p is not None]
     click.echo(msg + (f" -> {', '.join(written)}" if written else ""))
+    if landform is not None:
+        click.echo(f"landforms vs {real} (distance; real north/south halves; target = max(2 x halves, floor)):")
+        for name, row in landform.iterrows():
+            click.echo(f"  {name:17s} {row['distance']:9.4g}  halves {row['halves']:9.4g}  target {row['target']:9.4g}"
+                       f"  {'ok' if row['ok'] else 'OVER'}")

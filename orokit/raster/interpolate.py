@@ -1,6 +1,8 @@
 """Poisson-disk samples and their elevations between ridges and rivers (paper §6.2)."""
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -41,11 +43,14 @@ def sample_elevation(
     ridge_slope: np.ndarray | None = None,
     k_neighbours: int = 16,
     floor_slope: float = 0.05,
+    profile: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elevation of ``points`` from the nearest ridge point q and river point r.
 
     ``h = h(r)`` when ``d(p, R) < w`` (valley floor), else
-    ``h = (1 - a) h(q) + a h(r)`` with ``a = d(p, T) / (d(p, R) + d(p, T) - w)``.
+    ``h = (1 - a) h(q) + a h(r)`` with ``a = d(p, T) / (d(p, R) + d(p, T) - w)`` (the paper),
+    or with ``profile``: ``h = h(r) + (h(q) - h(r)) profile(1 - a)`` (e.g. the learned
+    concave :func:`orokit.raster.profiles.hillslope_profile`).
     With ``ridge_slope`` (one value per ridge point), ``h`` is also capped by the cone
     envelope ``max_q h(q) - s_q |p - q|`` over the ``k_neighbours`` nearest ridge points
     (orokit): flanks then fall faster than the ridge rises, so the ground beside a
@@ -60,7 +65,10 @@ def sample_elevation(
     hq, hr = ridge_z[iq], river_z[ir]
     denom = np.maximum(dR + dT - w, 1e-9)
     alpha = np.clip(dT / denom, 0.0, 1.0)
-    h = np.where(dR < w, hr, (1.0 - alpha) * hq + alpha * hr)
+    if profile is None:
+        h = np.where(dR < w, hr, (1.0 - alpha) * hq + alpha * hr)
+    else:
+        h = np.where(dR < w, hr, hr + (hq - hr) * np.asarray(profile(1.0 - alpha), dtype=np.float64))
     if ridge_slope is not None:
         env = flank_envelope(points, ridge_xy, ridge_z, ridge_slope, k_neighbours=k_neighbours, tree=tree)
         # the cones only cap; far from every ridge they would dig pits far below the rivers, so

@@ -24,6 +24,9 @@ class RenderParams:
         fine, expensive scales).
     erosion_k_dt : stream-power K * dt.
     erosion_max_nodes : largest erosion grid (finer scales run coarser; bounds memory).
+    profiles : ``"linear"`` (the paper's interpolation) or ``"learned"`` (concave hillslopes
+        and ridges measured on real DEMs, :mod:`orokit.raster.profiles`; on the tuning
+        regions it gives slope distances equal or worse, so it is not the default).
     flank_slope, flank_ratio : flanks fall at least ``max(flank_slope, flank_ratio * ridge slope)``
         from every ridge point (keeps saddles the highest passes).
     """
@@ -40,8 +43,15 @@ class RenderParams:
     erosion_steps: int | tuple[int, ...] = (4, 3, 2)
     erosion_k_dt: float = 0.02
     erosion_max_nodes: int = 4_000_000
-    flank_slope: float = 0.15
+    flank_slope: float = 0.05
     flank_ratio: float = 1.5
+    profiles: str = "linear"
+
+    def __post_init__(self) -> None:
+        from orokit.errors import InputError
+
+        if self.profiles not in ("learned", "linear"):
+            raise InputError(f"profiles must be 'learned' or 'linear', got {self.profiles!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}

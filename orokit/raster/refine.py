@@ -1,6 +1,7 @@
 """Refinement of ridge and river segments to pieces shorter than lambda, with planar jitter."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,14 +31,16 @@ def refine_segments(
     lam: float,
     jitter: float = 0.25,
     node_a: np.ndarray | None = None,
+    profile: Callable[[np.ndarray], np.ndarray] | None = None,
     rng: SeedLike = None,
 ) -> Polylines:
     """Split each segment ``seg[i] = (u, v)`` into pieces shorter than ``lam``.
 
     Interior points are displaced in the plane by a random vector of length at most
     ``jitter * piece length`` perpendicular to the segment; their elevation (and value
-    ``a``) is interpolated linearly along the original segment. End points (the
-    original nodes) do not move.
+    ``a``) is interpolated along the original segment: linearly, or with weight
+    ``profile(t)`` of the end node (t = 0 at ``u``, 1 at ``v``) for the elevation. End
+    points (the original nodes) do not move.
     """
     rng = np.random.default_rng(rng)
     node_a = np.zeros(node_xy.shape[0]) if node_a is None else np.asarray(node_a, float)
@@ -56,7 +59,8 @@ def refine_segments(
     normal = np.column_stack([-d[sid, 1], d[sid, 0]]) / np.maximum(length[sid], 1e-12)[:, None]
     piece = (length / k)[sid]
     base = base + normal * (rng.uniform(-jitter, jitter, tot) * piece)[:, None]
-    z = node_z[seg[sid, 0]] + t * (node_z[seg[sid, 1]] - node_z[seg[sid, 0]])
+    wz = t if profile is None else np.asarray(profile(t), dtype=np.float64)
+    z = node_z[seg[sid, 0]] + wz * (node_z[seg[sid, 1]] - node_z[seg[sid, 0]])
     a = node_a[seg[sid, 0]] + t * (node_a[seg[sid, 1]] - node_a[seg[sid, 0]])
     n0 = node_xy.shape[0]
     ids = n0 + np.arange(tot)

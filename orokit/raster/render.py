@@ -126,7 +126,8 @@ def render_elevation(
        ``1 - g(d / R)`` around peaks and saddles (g = (1 - r^2)^3).
     4. Erosion (optional): fastscapelib stream power at 100, 50, 30 m with
        compensating uplift ``U = g(d / R)``.
-    5. Peak and saddle cells are reset to their exact elevations.
+    5. Peak and saddle cells are reset to their exact elevations; the raster's orometry
+       is made the tree's (:func:`orokit.raster.enforce.enforce_orometry`).
     """
     params = params or RenderParams()
     seed = resolve_seed(rng)

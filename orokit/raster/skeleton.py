@@ -13,6 +13,7 @@ from orokit._typing import SeedLike
 from orokit.errors import DivideTreeError
 from orokit.raster.interpolate import flank_envelope, poisson_samples, sample_elevation, valley_width
 from orokit.raster.params import RenderParams
+from orokit.raster.profiles import hillslope_profile, ridge_profile
 from orokit.raster.refine import Polylines, densify, refine_segments
 from orokit.raster.rivers import RidgeSegments, RiverNetwork, ridge_segments, river_network
 from orokit.raster.tin import TIN, constrained_tin
@@ -139,8 +140,10 @@ def build_skeleton(
     base = zmin - max(eps, params.river_margin)
     if zmin >= 0 > base:
         base = 0.5 * zmin
+    learned = params.profiles == "learned"
     ridge_lines = refine_segments(nodes[:, :2], nodes[:, 2], np.column_stack([ridges.node0, ridges.node1]),
-                                  lam=lam, jitter=params.jitter, rng=rng)
+                                  lam=lam, jitter=params.jitter, rng=rng,
+                                  profile=(lambda t: 1.0 - ridge_profile(t)) if learned else None)
     t["refine"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -185,7 +188,8 @@ def build_skeleton(
     dense = lam / 4.0
     vxy, vz, va = densify(river_lines, dense) if river_seg.size else (rivers.xy, rivers.elevation, area)
     pts = np.concatenate([samples, ring])
-    h, dT, dR = sample_elevation(pts, rxy, rz, vxy, vz, valley_width(va, coef=params.valley_coef), ridge_slope=rs)
+    h, dT, dR = sample_elevation(pts, rxy, rz, vxy, vz, valley_width(va, coef=params.valley_coef), ridge_slope=rs,
+                                 profile=hillslope_profile if learned else None)
     far = (np.minimum(dT, dR) >= 0.5 * lam)
     far[samples.shape[0]:] = True  # keep the ring
     pts, h = pts[far], h[far]

@@ -177,3 +177,28 @@ def test_skeleton_tin_keeps_ridge_segments(rendered):
     b = kd.query(skel.ridges.xy[seg[:, 1]])[1]
     present = np.mean([tuple(sorted((i, j))) in edges for i, j in zip(a, b)])
     assert present > 0.95
+
+
+def test_learned_profiles_shape_ridges_and_flanks():
+    """With profiles="learned" a refined ridge follows the measured concave profile (not a
+    straight line) and stays between its saddle and its peak; the linear default is the paper's."""
+    import numpy as np
+
+    from orokit.raster.profiles import hillslope_profile, ridge_profile
+    from orokit.raster.refine import refine_segments
+
+    xy = np.array([[0.0, 0.0], [1000.0, 0.0]])
+    zz = np.array([800.0, 500.0])  # peak, saddle
+    lin = refine_segments(xy, zz, np.array([[0, 1]]), lam=100.0, jitter=0.0, rng=0)
+    con = refine_segments(xy, zz, np.array([[0, 1]]), lam=100.0, jitter=0.0, rng=0,
+                          profile=lambda t: 1.0 - ridge_profile(t))
+    t = lin.xy[2:, 0] / 1000.0
+    assert np.allclose(lin.z[2:], 800.0 - 300.0 * t)
+    assert np.allclose(con.z[2:], 500.0 + 300.0 * ridge_profile(t))
+    mid = t >= 0.2  # rounded summit, then below the straight line: concave
+    assert (con.z[2:][mid] < lin.z[2:][mid]).all() and (np.diff(con.z[2:]) <= 0).all()
+    u = np.linspace(0, 1, 101)
+    assert (np.diff(hillslope_profile(u)) >= 0).all() and hillslope_profile(u)[50] < 0.5
+    assert RenderParams().profiles == "linear"
+    with pytest.raises(Exception, match="profiles"):
+        RenderParams(profiles="cubic")

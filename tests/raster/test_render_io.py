@@ -156,3 +156,25 @@ def test_hillshade_preview_uses_the_shared_hillshade(tmp_path, monkeypatch):
     img = np.asarray(Image.open(tmp_path / "hs.png"))
     assert calls == [img.shape] and max(img.shape) <= 30  # 80 x 40 cells, every 3rd
     assert img[0, 0] == 0 and img.max() > 0  # NaN cells are black
+
+
+def test_render_like_takes_the_cell_size_and_extent_of_the_like_raster(tmp_path, make_dem):
+    """`render --like DEM` without --resolution renders on the DEM's own grid (extent and cells)."""
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+
+    gpkg = tmp_path / "tree.gpkg"
+    write_divide_tree_gpkg(two_peaks(crs="EPSG:32633", x0=500_000.0, y0=4_000_000.0), gpkg)
+    like = make_dem(np.zeros((25, 45), np.float32), res=100.0, crs="EPSG:32633", origin=(499_800.0, 4_002_200.0))
+    like_path = tmp_path / "like.tif"
+    like.attrs["units"] = "m"
+    write_cog(like, like_path)
+    out = tmp_path / "x.tif"
+    r = CliRunner().invoke(cli, ["render", str(gpkg), "-o", str(out), "--like", str(like_path), "--no-erosion",
+                                 "--seed", "1"])
+    assert r.exit_code == 0, r.output
+    back = read_dem(str(out))
+    assert back.shape == like.shape
+    assert tuple(back.rio.transform())[:6] == pytest.approx(tuple(like.rio.transform())[:6])
+    assert back.rio.crs == like.rio.crs
+    r = CliRunner().invoke(cli, ["render", str(gpkg), "-o", str(tmp_path / "y.tif"), "--like", "no-such-dataset"])
+    assert r.exit_code != 0 and "--like" in r.output and "no-such-dataset" in r.output

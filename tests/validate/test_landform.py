@@ -157,3 +157,35 @@ def test_lonlat_grid_uses_ground_cell_sizes(make_dem):
     dem = make_dem(z, res=res_deg, crs="EPSG:4326", origin=(10.0, lat0 + 30 * res_deg))
     st = landform_statistics(dem)
     assert np.median(st.slope_deg) == pytest.approx(math.degrees(math.atan(0.2)), abs=0.3)
+
+
+def test_validate_prints_and_records_the_landform_table(tmp_path, make_dem):
+    """`orokit validate RASTER --tree T --real DEM` prints every landform distance and writes them."""
+    import json
+
+    from click.testing import CliRunner
+
+    from orokit.cli.main import cli
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+    from orokit.io.raster_io import write_cog
+    from orokit.raster.render import render_elevation
+    from orokit.topology.divide_tree import DivideTree
+
+    tree = DivideTree.from_arrays([[1000.0, 1000.0, 600.0], [3000.0, 1000.0, 550.0]], [[2000.0, 1000.0, 450.0]],
+                                  [[0, 1, 0]], attrs={"extent": [0.0, 0.0, 4000.0, 2000.0]})
+    dem = render_elevation(tree, resolution_m=50.0, erosion=False, rng=1)
+    write_cog(dem, tmp_path / "dem.tif")
+    write_divide_tree_gpkg(tree, tmp_path / "tree.gpkg")
+    z = 500 + 60 * _fbm((40, 80), 50.0, 2.5, seed=2)
+    real = make_dem(z / z.std() * 40 + 500, res=50.0, crs=None)
+    real.attrs["units"] = "m"
+    write_cog(real, tmp_path / "real.tif")
+    r = CliRunner().invoke(cli, ["validate", str(tmp_path / "dem.tif"), "--tree", str(tmp_path / "tree.gpkg"),
+                                 "--real", str(tmp_path / "real.tif"), "-o", str(tmp_path / "v.json")])
+    assert r.exit_code == 0, r.output
+    for stat in FLOORS:
+        assert stat in r.output
+    doc = json.loads((tmp_path / "v.json").read_text())
+    rows = {row["statistic"]: row for row in doc["landform"]["table"]}
+    assert set(FLOORS) <= set(rows)
+    assert all(np.isfinite(rows[s]["distance"]) for s in FLOORS if s != "spectral_slope")
