@@ -53,6 +53,7 @@ class LazyGroup(click.Group):
         from orokit.errors import OrokitError
 
         verbose = bool(ctx.obj and ctx.obj.get("verbose", 0) >= 2)
+        previous = _catch_sigterm()
         try:
             return super().invoke(ctx)
         except OrokitError as exc:
@@ -67,8 +68,9 @@ class LazyGroup(click.Group):
                 raise
             if verbose:
                 raise
-            click.echo("interrupted", err=True)
-            sys.exit(130)
+            terminated = _caused_by(exc, _Terminated)
+            click.echo("terminated" if terminated else "interrupted", err=True)
+            sys.exit(143 if terminated else 130)
         except Exception as exc:
             from orokit.io.atomic import is_no_space_error, no_space_error
 
@@ -76,6 +78,32 @@ class LazyGroup(click.Group):
                 raise
             click.echo(f"Error: {no_space_error(_where(ctx, exc), exc)}", err=True)
             sys.exit(1)
+        finally:
+            _restore_sigterm(previous)
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``), raised like Ctrl-C so staged outputs are cleaned up the same way."""
+
+
+def _on_sigterm(signum, frame):  # noqa: ANN001 - signal handler signature
+    raise _Terminated()
+
+
+def _catch_sigterm():
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _on_sigterm)
+
+
+def _restore_sigterm(previous) -> None:  # noqa: ANN001
+    import signal
+
+    if previous is not None:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _caused_by(exc: BaseException, kind: type[BaseException]) -> bool:
