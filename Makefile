@@ -46,11 +46,13 @@ DATASET_SUMMARIES := $(DATASETS:%=$(REPORTS)/datasets/%/summary.md)
 # stage: classification (issue 6). Reads the analysis folders reports/analysis/<name>/.
 ANALYSIS_JSONS := $(DATASETS:%=$(REPORTS)/analysis/%/analysis.json)
 CLASSIFY_SRC := $(wildcard orokit/classify/*.py orokit/sampling/*.py orokit/metrics/disk.py) \
-                orokit/reports/classification.py orokit/cli/report.py
+                orokit/reports/classification.py orokit/cli/report.py orokit/io/model_io.py
 CLASSIFICATION_README := $(REPORTS)/classification/README.md
+CLASSIFICATION_PAPER_README := $(REPORTS)/classification/paper/README.md
 
 ANALYSIS_README := $(REPORTS)/analysis/README.md
-REPORT_OUTPUTS := $(DATASET_SUMMARIES) $(REPORTS)/README.md $(ANALYSIS_README) $(CLASSIFICATION_README)
+REPORT_OUTPUTS := $(DATASET_SUMMARIES) $(REPORTS)/README.md $(ANALYSIS_README) $(CLASSIFICATION_README) \
+                  $(CLASSIFICATION_PAPER_README)
 
 # stage: Divide Tree synthesis (issue 7): a terrain type per region (from its analysis), a
 # 90 x 90 km synthesized tree per type (seed 0), and the fidelity table reports/synthesis/README.md.
@@ -106,13 +108,19 @@ $(ANALYSIS_README): $(ANALYSIS_JSONS) orokit/reports/analysis_report.py orokit/v
 
 analysis: $(ANALYSIS_README)  ## exact analysis of every DEM, table + Divide Tree figures
 
-# grouped target: the report and the default model are written by one command
+# grouped target: the report and the default model (orometry features) are written by one command
 REGION_MODEL := models/regions-10km.skops
 $(CLASSIFICATION_README) $(REGION_MODEL) &: $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
 	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(REPORTS)/classification --radius 10km \
-	  --radius 5km --radius 15km --runs 100 --feature-runs 20 --model $(REGION_MODEL) --overwrite --no-progress
+	  --radius 5km --features orometry --runs 100 --feature-runs 20 --model $(REGION_MODEL) --overwrite \
+	  --no-progress
 
-classification: $(CLASSIFICATION_README)  ## region classification report (Table 2) and models/regions-10km.skops
+# the paper's protocol and feature set (reference mode), kept beside the default figures
+$(CLASSIFICATION_PAPER_README): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
+	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(@D) --radius 10km --radius 5km --radius 15km \
+	  --features paper --runs 100 --feature-runs 20 --overwrite --no-progress
+
+classification: $(CLASSIFICATION_README) $(CLASSIFICATION_PAPER_README)  ## region classification reports (default and paper protocol), models/regions-10km.skops
 
 $(REPORTS)/synthesis/types/%.json: $(REPORTS)/analysis/%/analysis.json $(SYNTH_SRC) | $(INSTALLED)
 	$(OROKIT) -q type $(<D) -o $@ --name $* --overwrite

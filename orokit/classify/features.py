@@ -17,11 +17,10 @@ drops them.
 """
 from __future__ import annotations
 
-import json
+import dataclasses
 import logging
 import warnings
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import geopandas as gpd
@@ -34,10 +33,10 @@ from orokit import __version__
 from orokit._typing import PathLike, SeedLike
 from orokit.classify.peaklist import NORMALIZED_COLUMNS, is_geographic, peak_geometry
 from orokit.errors import InputError, OrokitWarning, SchemaError
-from orokit.io.atomic import atomic_path
-from orokit.metrics.disk import RELATIVE_ELEVATION_DEFAULT, RelativeElevation, disk_metrics
+from orokit.metrics.disk import RELATIVE_ELEVATION_DEFAULT, RelativeElevation
 from orokit.sampling.disks import sample_disks_in_mask, sample_disks_in_polygon
-from orokit.sampling.histograms import HistogramSpec, disk_histograms
+from orokit.sampling.feature_sets import FeatureSet, disk_feature_vector
+from orokit.sampling.histograms import HistogramSpec
 
 logger = logging.getLogger(__name__)
 
@@ -80,12 +79,12 @@ def peaks_in_disks(peaks: pd.DataFrame, centres: NDArray[np.float64], radius_m: 
     return out
 
 
-def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, spec: HistogramSpec | None = None,
+def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, feature_set: FeatureSet | None = None,
                   min_prominence_m: float = 30.0, min_peaks: int = 20, label: str | None = None,
                   source: str | None = None, crs: Any = None,
                   relative_elevation: RelativeElevation = RELATIVE_ELEVATION_DEFAULT,
                   exact_only: bool = False) -> pd.DataFrame:
-    """Histogram features of the peaks of each disk.
+    """Features of the peaks of each disk.
 
     Parameters
     ----------
@@ -95,12 +94,13 @@ def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, spec: HistogramSp
     disks : DataFrame
         Disk centres (columns x, y, radius_m, optional disk_id) in the peaks' CRS, as
         returned by :mod:`orokit.sampling.disks`.
-    spec : HistogramSpec, optional
-        Bins (default: the paper's Table 1).
+    feature_set : FeatureSet, optional
+        What each disk's vector holds (default :meth:`FeatureSet.orometry`;
+        :meth:`FeatureSet.paper` is the paper's Table 1).
     min_prominence_m : float
         eps: only peaks with prominence >= eps count (paper: 30 m).
     min_peaks : int
-        Disks with fewer counted peaks are skipped (paper: 20).
+        Disks with fewer counted peaks within R are skipped (paper: 20).
     label, source : str, optional
         Region label and input name stored in each row.
     crs : CRS-like, optional
@@ -113,10 +113,10 @@ def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, spec: HistogramSp
     Returns
     -------
     DataFrame
-        One row per kept disk: :data:`META_COLUMNS` then ``spec.columns``. ``attrs``
-        hold the parameters, ``n_disks_skipped`` and the spec.
+        One row per kept disk: :data:`META_COLUMNS` then ``feature_set.columns``.
+        ``attrs`` hold the parameters, ``n_disks_skipped`` and the feature set.
     """
-    spec = spec or HistogramSpec.paper()
+    fs = feature_set or FeatureSet.orometry()
     crs = crs if crs is not None else getattr(peaks, "crs", None)
     if not set(NORMALIZED_COLUMNS) <= set(peaks.columns):
         peaks = peak_geometry(peaks, crs=crs)
@@ -129,24 +129,30 @@ def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, spec: HistogramSp
     if exact_only:
         keep &= peaks["prominence_exact"].to_numpy(dtype=bool)
     counted = peaks.loc[keep]
+    arrays = [counted[c].to_numpy(dtype=float) for c in _METRIC_INPUTS]
     radii = disks["radius_m"].to_numpy(dtype=float) if len(disks) else np.zeros(0)
     rows: list[dict[str, Any]] = []
-    hists: list[NDArray[np.float64]] = []
+    vectors: list[NDArray[np.float64]] = []
     n_skipped = 0
     centres = disks[["x", "y"]].to_numpy(dtype=float) if len(disks) else np.zeros((0, 2))
     for r in np.unique(radii):
         sel = np.flatnonzero(radii == r)
-        members = peaks_in_disks(counted, centres[sel], float(r), geographic=geo)
-        for i, idx in zip(sel, members):
-            if len(idx) < min_peaks:
+        members = {f: peaks_in_disks(counted, centres[sel], f * float(r), geographic=geo) for f in fs.radii}
+        for k, i in enumerate(sel):
+            if len(members[1.0][k]) < min_peaks:
                 n_skipped += 1
                 continue
-            m = disk_metrics(counted.iloc[idx], radius_m=float(r), relative_elevation_convention=relative_elevation)
-            hists.append(disk_histograms(m, spec).to_numpy())
+            parts = []
+            for f in fs.radii:
+                idx = members[f][k]
+                parts.append(disk_feature_vector(*(a[idx] for a in arrays), radius_m=f * float(r), feature_set=fs,
+                                                 relative_elevation_convention=relative_elevation))
+            vectors.append(np.concatenate(parts))
             d = disks.iloc[i]
             rows.append({"label": label, "source": source,
                          "disk_id": int(d["disk_id"]) if "disk_id" in disks else int(i),
-                         "x": float(d["x"]), "y": float(d["y"]), "radius_m": float(r), "n_peaks": int(len(idx))})
+                         "x": float(d["x"]), "y": float(d["y"]), "radius_m": float(r),
+                         "n_peaks": int(len(members[1.0][k]))})
     if n_skipped:
         warnings.warn(f"{n_skipped} of {len(disks)} disks{f' of {label!r}' if label else ''} have fewer than "
                       f"{min_peaks} peaks with prominence >= {min_prominence_m:g} m and were skipped "
@@ -155,10 +161,10 @@ def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, spec: HistogramSp
     lon, lat = _lonlat(meta["x"].to_numpy(dtype=float), meta["y"].to_numpy(dtype=float), crs)
     meta.insert(5, "lon", lon)
     meta.insert(6, "lat", lat)
-    feats = pd.DataFrame(np.vstack(hists) if hists else np.zeros((0, len(spec.columns))), columns=spec.columns)
+    feats = pd.DataFrame(np.vstack(vectors) if vectors else np.zeros((0, len(fs.columns))), columns=fs.columns)
     out = pd.concat([meta.reset_index(drop=True), feats], axis=1)
     out["label"] = out["label"].astype(object)
-    out.attrs.update(_attrs(spec, radii, min_prominence_m, min_peaks, relative_elevation, exact_only))
+    out.attrs.update(_attrs(fs, radii, min_prominence_m, min_peaks, relative_elevation, exact_only))
     out.attrs["n_disks_sampled"] = int(len(disks))
     out.attrs["n_disks_skipped"] = int(n_skipped)
     out.attrs["label"] = label
@@ -166,12 +172,32 @@ def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, spec: HistogramSp
     return out
 
 
-def _attrs(spec: HistogramSpec, radii: NDArray, min_prominence_m: float, min_peaks: int,
+#: per-peak columns, in the argument order of :func:`~orokit.sampling.feature_sets.disk_feature_vector`
+_METRIC_INPUTS = ("elevation", "prominence", "saddle_distance_m", "saddle_direction_deg", "isolation_m",
+                  "isolation_direction_deg")
+
+
+def _attrs(fs: FeatureSet, radii: NDArray, min_prominence_m: float, min_peaks: int,
            relative_elevation: str, exact_only: bool) -> dict[str, Any]:
     u = np.unique(radii)
-    return {"orokit_version": __version__, "spec": spec.to_dict(),
+    return {"orokit_version": __version__, "feature_set": fs.to_dict(), "spec": fs.spec.to_dict(),
             "radius_m": float(u[0]) if len(u) == 1 else None, "min_prominence_m": float(min_prominence_m),
             "min_peaks": int(min_peaks), "relative_elevation": relative_elevation, "exact_only": bool(exact_only)}
+
+
+def feature_set_of(features: pd.DataFrame) -> FeatureSet:
+    """The FeatureSet recorded in a feature table (a table with only a HistogramSpec is the paper set)."""
+    a = features.attrs
+    if "feature_set" in a:
+        return FeatureSet.from_dict(a["feature_set"])
+    if "spec" in a:
+        return dataclasses.replace(FeatureSet.paper(), spec=HistogramSpec.from_dict(a["spec"]))
+    raise SchemaError("feature table has no recorded feature set (was it written by orokit features?)")
+
+
+def feature_columns(features: pd.DataFrame) -> list[str]:
+    """Feature columns of a table, from its recorded feature set."""
+    return feature_set_of(features).columns
 
 
 def _lonlat(x: NDArray, y: NDArray, crs: Any) -> tuple[NDArray, NDArray]:
@@ -193,7 +219,7 @@ def _lonlat(x: NDArray, y: NDArray, crs: Any) -> tuple[NDArray, NDArray]:
 
 def features_from_dem(dem: Any, *, radius_m: float, label: str | None = None, analysis: Any = None,
                       min_prominence_m: float = 30.0, min_peaks: int = 20, max_disks: int = 100,
-                      separation: float = 0.5, spec: HistogramSpec | None = None,
+                      separation: float = 0.5, feature_set: FeatureSet | None = None,
                       relative_elevation: RelativeElevation = RELATIVE_ELEVATION_DEFAULT,
                       exact_only: bool = False, rng: SeedLike = None) -> pd.DataFrame:
     """Feature table of one DEM: disks entirely inside its valid cells.
@@ -218,14 +244,14 @@ def features_from_dem(dem: Any, *, radius_m: float, label: str | None = None, an
         warnings.warn(f"no disk of radius {radius_m:g} m fits inside the valid area of {label or 'the DEM'} "
                       f"({dem.shape[1]} x {dem.shape[0]} cells); use a smaller --radius", OrokitWarning, stacklevel=2)
     peaks = peak_geometry(analysis.peaks, crs=analysis.crs if analysis.crs is not None else crs)
-    return feature_table(peaks, disks, spec=spec, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
+    return feature_table(peaks, disks, feature_set=feature_set, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
                          label=label, source=str(dem.attrs.get("source", label)), crs=peaks.crs,
                          relative_elevation=relative_elevation, exact_only=exact_only)
 
 
 def features_from_region(peaks: pd.DataFrame, region: Any, *, radius_m: float, label: str | None = None,
                          region_crs: Any = None, min_prominence_m: float = 30.0, min_peaks: int = 20,
-                         max_disks: int = 100, separation: float = 0.5, spec: HistogramSpec | None = None,
+                         max_disks: int = 100, separation: float = 0.5, feature_set: FeatureSet | None = None,
                          relative_elevation: RelativeElevation = RELATIVE_ELEVATION_DEFAULT,
                          exact_only: bool = False, rng: SeedLike = None) -> pd.DataFrame:
     """Feature table of a region polygon over a peak list (the paper's world experiment).
@@ -257,7 +283,7 @@ def features_from_region(peaks: pd.DataFrame, region: Any, *, radius_m: float, l
     elif len(disks) == 0:
         warnings.warn(f"region {label!r} is smaller than a disk of radius {radius_m:g} m: 0 disks",
                       OrokitWarning, stacklevel=2)
-    return feature_table(peaks, disks, spec=spec, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
+    return feature_table(peaks, disks, feature_set=feature_set, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
                          label=label, source=label, crs=crs, relative_elevation=relative_elevation,
                          exact_only=exact_only)
 
@@ -269,7 +295,7 @@ def concat_features(tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
         raise InputError("no feature table to concatenate")
     ref = tables[0].attrs
     for t in tables[1:]:
-        for k in ("spec", "min_prominence_m", "relative_elevation", "radius_m"):
+        for k in ("feature_set", "spec", "min_prominence_m", "relative_elevation", "radius_m"):
             if t.attrs.get(k) != ref.get(k):
                 raise SchemaError(f"feature tables differ in {k!r}: {ref.get(k)!r} vs {t.attrs.get(k)!r}; "
                                   f"compute all inputs with the same options")
@@ -285,56 +311,24 @@ def concat_features(tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
     return out
 
 
-def spec_of(features: pd.DataFrame) -> HistogramSpec:
-    """The HistogramSpec recorded in a feature table."""
-    if "spec" not in features.attrs:
-        raise SchemaError("feature table has no recorded HistogramSpec (was it written by orokit features?)")
-    return HistogramSpec.from_dict(features.attrs["spec"])
+def check_feature_table(features: pd.DataFrame, *, name: str = "feature table") -> list[str]:
+    """Check a feature table's columns against its recorded feature set; returns the feature columns.
 
-
-def write_features(features: pd.DataFrame, path: PathLike) -> Path:
-    """Write a feature table as Parquet (atomic), parameters in the ``orokit`` schema metadata."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    path = Path(path)
-    table = pa.Table.from_pandas(features, preserve_index=False)
-    md = dict(table.schema.metadata or {})
-    md[b"orokit"] = json.dumps(features.attrs, default=_json_default).encode()
-    table = table.replace_schema_metadata(md)
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp)
-    return path
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, (np.integer,)):
-        return int(o)
-    if isinstance(o, (np.floating,)):
-        return float(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
-
-
-def read_features(path: PathLike) -> pd.DataFrame:
-    """Read a feature table written by :func:`write_features` (attrs restored)."""
-    import pyarrow.parquet as pq
-
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"feature table {path} does not exist; create it with `orokit features`")
-    try:
-        table = pq.read_table(path)
-    except Exception as exc:
-        raise InputError(f"cannot read feature table {path}: {exc}") from exc
-    md = (table.schema.metadata or {}).get(b"orokit")
-    if md is None:
-        raise SchemaError(f"{path} has no orokit feature metadata; create it with `orokit features`")
-    df = table.to_pandas()
-    df.attrs = json.loads(md)
-    spec = spec_of(df)
-    missing = [c for c in META_COLUMNS + spec.columns if c not in df]
+    Raises
+    ------
+    SchemaError
+        No recorded feature set, missing columns, or a NaN / infinite value (named by
+        column and row, so the table can be fixed or recomputed).
+    """
+    cols = feature_columns(features)
+    missing = [c for c in ["label", "source", "x", "y", "radius_m"] + cols if c not in features]
     if missing:
-        raise SchemaError(f"{path} lacks feature columns {missing[:5]}...")
-    return df
+        raise SchemaError(f"{name} lacks columns {missing[:5]}{'...' if len(missing) > 5 else ''}; recompute it "
+                          f"with `orokit features`")
+    X = features[cols].to_numpy(dtype=float)
+    bad = ~np.isfinite(X)
+    if bad.any():
+        r, c = np.argwhere(bad)[0]
+        raise SchemaError(f"{name} has {int(bad.sum())} NaN/infinite feature value(s); first: column {cols[c]!r}, "
+                          f"row {int(r)} (value {X[r, c]!r}); recompute the table with `orokit features`")
+    return cols

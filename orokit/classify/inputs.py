@@ -26,7 +26,7 @@ from orokit.classify.features import feature_table, features_from_dem, features_
 from orokit.classify.peaklist import read_peaks
 from orokit.errors import InputError, OrokitWarning
 from orokit.sampling.disks import sample_disks_in_mask
-from orokit.sampling.histograms import HistogramSpec
+from orokit.sampling.feature_sets import FeatureSet
 
 logger = logging.getLogger(__name__)
 
@@ -101,26 +101,45 @@ def _analysis_domain(peaks: pd.DataFrame, meta: dict[str, Any]) -> tuple[np.ndar
     return valid, transform
 
 
+def open_input_dem(source: PathLike, *, z_units: str | None = None, cell_size: float | None = None) -> Any:
+    """The DEM behind an input when it is one: a raster file, or a DEM of the datasets
+    manifest given by name (``himalaya-everest``; units and cell size from the manifest).
+    ``None`` for analysis folders and peak lists; an error for a name that is neither."""
+    p = Path(source)
+    if p.exists():
+        if p.is_file() and p.suffix.lower() in RASTER_SUFFIXES and not _is_table(p):
+            from orokit.io.dem import read_dem
+
+            return read_dem(str(p), z_units=z_units, cell_size=cell_size)
+        return None
+    from orokit.data import load_manifest, open_dataset_dem
+
+    names = [d.name for d in load_manifest().dems()]
+    if str(source) not in names:
+        raise InputError(f"input {source!r} is neither a file nor a DEM of the datasets manifest "
+                         f"({', '.join(names)})")
+    dem = open_dataset_dem(str(source))
+    dem.attrs.setdefault("source", str(source))
+    return dem
+
+
 def features_for_input(source: PathLike, *, radius_m: float, label: str | None = None,
                        min_prominence_m: float = 30.0, min_peaks: int = 20, max_disks: int = 100,
-                       separation: float = 0.5, spec: HistogramSpec | None = None, relative_elevation: str = "minmax",
+                       separation: float = 0.5, feature_set: FeatureSet | None = None, relative_elevation: str = "minmax",
                        exact_only: bool = False, z_units: str | None = None, cell_size: float | None = None,
                        region: Any = None, isolation: PathLike | None = None, crs: Any = None,
                        rng: SeedLike = None) -> pd.DataFrame:
-    """Feature table of one input (see the module table for where disks go)."""
+    """Feature table of one input (see the module table for where disks go; a DEM of the
+    datasets manifest may be given by name)."""
     p = Path(source)
-    if not p.exists():
-        raise InputError(f"input {p} does not exist")
     label = label or default_label(p)
     kw = dict(radius_m=radius_m, label=label, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
-              max_disks=max_disks, separation=separation, spec=spec, relative_elevation=relative_elevation,
+              max_disks=max_disks, separation=separation, feature_set=feature_set, relative_elevation=relative_elevation,
               exact_only=exact_only, rng=rng)
     if region is not None and not hasattr(region, "geometry"):
         region = read_region(region)
-    if p.is_file() and p.suffix.lower() in RASTER_SUFFIXES and not _is_table(p):
-        from orokit.io.dem import read_dem
-
-        dem = read_dem(str(p), z_units=z_units, cell_size=cell_size)
+    dem = open_input_dem(p, z_units=z_units, cell_size=cell_size)
+    if dem is not None:
         return features_from_dem(dem, **kw)
     peaks = read_peaks(p, crs=crs, z_units=z_units if not p.is_dir() else None, isolation=isolation)
     if region is not None:
@@ -133,7 +152,7 @@ def features_for_input(source: PathLike, *, radius_m: float, label: str | None =
             valid, transform = dom
             disks = sample_disks_in_mask(valid, transform=transform, radius_m=radius_m, crs=peaks.crs,
                                          separation=separation, max_disks=max_disks, rng=rng)
-            return feature_table(peaks, disks, spec=spec, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
+            return feature_table(peaks, disks, feature_set=feature_set, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
                                  label=label, source=p.name, crs=peaks.crs, relative_elevation=relative_elevation,
                                  exact_only=exact_only)
     warnings.warn(f"{p}: no region polygon and no DEM extent known; placing disks inside the convex hull of the "

@@ -1,24 +1,17 @@
-"""Trained region classifiers on disk: skops file + JSON metadata sidecar.
+"""Trained region classifiers: the model object, its metadata and the checks on use.
 
-``MODEL.skops`` holds the scikit-learn Pipeline, saved with :mod:`skops.io` (never
-pickle: a downloaded pickle can run arbitrary code). ``MODEL.skops.json`` holds the
-metadata needed to use it safely: format version, orokit / scikit-learn / skops
-versions, disk radius, eps, min_peaks, relative-elevation convention, the
-HistogramSpec, feature names, classes, evaluation summary, sha256 of the model file
-and of the training feature table.
-
-Loading checks, in order: the sidecar exists and has this format version; the
-sha256 of the model file matches; the skops file contains only trusted types
-(scikit-learn forests and numpy); the classes and number of features of the loaded
-estimator agree with the metadata. A different orokit or scikit-learn version only
-warns (trees may still load); a mismatch of features with a feature table is an error
+The metadata records what is needed to use a model safely: format version, orokit /
+scikit-learn / skops versions, disk radius, eps, min_peaks, relative-elevation
+convention, the feature set (bins, radii, summaries), feature names, classes, the
+"unknown" threshold, evaluation summary and the sha256 of the training feature table.
+Files (skops archive with the metadata inside, readable sidecar, checksums, refusal of
+corrupt or pickled files) are handled by :mod:`orokit.io.model_io`. A different orokit
+or scikit-learn version only warns; features computed otherwise are refused
 (:func:`check_features`).
 """
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import json
 import warnings
 from pathlib import Path
 from typing import Any
@@ -28,21 +21,12 @@ import pandas as pd
 
 from orokit import __version__
 from orokit._typing import PathLike
-from orokit.errors import InputError, OrokitWarning, SchemaError
-from orokit.io.atomic import write_bytes_atomic
-from orokit.sampling.histograms import HistogramSpec
+from orokit.errors import OrokitWarning, SchemaError
+from orokit.io.model_io import MODEL_FORMAT, load_model_file, metadata_path, save_model_file
+from orokit.sampling.feature_sets import FeatureSet
 
-MODEL_FORMAT = "orokit-region-classifier/1"
-_TRUSTED_PREFIXES = ("sklearn.", "numpy.", "builtins.")
-
-
-def sha256_file(path: PathLike) -> str:
-    """Hex sha256 of a file."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+__all__ = ["MODEL_FORMAT", "RegionModel", "model_metadata", "save_model", "load_model", "check_features",
+           "metadata_path"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -53,8 +37,8 @@ class RegionModel:
     metadata: dict[str, Any]
 
     @property
-    def spec(self) -> HistogramSpec:
-        return HistogramSpec.from_dict(self.metadata["spec"])
+    def feature_set(self) -> FeatureSet:
+        return FeatureSet.from_dict(self.metadata["feature_set"])
 
     @property
     def radius_m(self) -> float:
@@ -75,14 +59,16 @@ def model_metadata(pipeline: Any, features: pd.DataFrame, *, evaluation: dict[st
     import sklearn
     import skops
 
+    from orokit.classify.features import feature_set_of
+
     a = features.attrs
-    spec = HistogramSpec.from_dict(a["spec"])
+    fs = feature_set_of(features)
     md = {
         "format": MODEL_FORMAT, "orokit_version": __version__, "sklearn_version": sklearn.__version__,
         "skops_version": skops.__version__, "radius_m": a.get("radius_m"),
         "min_prominence_m": a.get("min_prominence_m"), "min_peaks": a.get("min_peaks"),
         "relative_elevation": a.get("relative_elevation"), "exact_only": a.get("exact_only", False),
-        "spec": spec.to_dict(), "feature_names": spec.columns,
+        "feature_set": fs.to_dict(), "feature_names": fs.columns,
         "classes": [str(c) for c in pipeline.classes_],
         "n_training_disks": {str(k): int(v) for k, v in features["label"].astype(str).value_counts().items()},
         "features_sha256": features_sha256, "evaluation": evaluation or {},
@@ -91,64 +77,31 @@ def model_metadata(pipeline: Any, features: pd.DataFrame, *, evaluation: dict[st
     return md
 
 
-def metadata_path(path: PathLike) -> Path:
-    """Sidecar path of a model file: ``MODEL.skops`` -> ``MODEL.skops.json``."""
-    p = Path(path)
-    return p.with_name(p.name + ".json")
-
-
 def save_model(pipeline: Any, path: PathLike, metadata: dict[str, Any]) -> Path:
-    """Save ``pipeline`` with skops to ``path`` and its metadata (plus sha256) beside it, atomically."""
-    import skops.io as sio
-
-    path = Path(path)
-    if "format" not in metadata or "spec" not in metadata:
+    """Save ``pipeline`` and its metadata (from :func:`model_metadata`) to ``path`` (see :mod:`orokit.io.model_io`)."""
+    if "format" not in metadata or "feature_names" not in metadata:
         raise SchemaError("model metadata must come from model_metadata(...)")
-    blob = sio.dumps(pipeline)
-    md = dict(metadata)
-    md["sha256"] = hashlib.sha256(blob).hexdigest()
-    write_bytes_atomic(path, blob)
-    write_bytes_atomic(metadata_path(path), json.dumps(md, indent=2, sort_keys=True, default=str).encode())
-    return path
+    return save_model_file(pipeline, metadata, path)
 
 
 def load_model(path: PathLike, *, check_hash: bool = True) -> RegionModel:
     """Load a model saved by :func:`save_model`, refusing anything it cannot verify.
 
+    File checks (checksum, corrupt or pickled files, untrusted types, an edited sidecar)
+    are those of :func:`orokit.io.model_io.load_model_file`; then the estimator must agree
+    with the metadata (classes, number of features). Another orokit or scikit-learn
+    version only warns.
+
     Raises
     ------
     InputError
-        Missing file or sidecar, checksum mismatch, untrusted types in the skops file.
+        Missing, corrupt or replaced files, untrusted types.
     SchemaError
-        Another model format version, or metadata that contradicts the estimator.
+        Another model format version, an edited sidecar, or metadata that contradicts the estimator.
     """
-    import skops.io as sio
-
-    path = Path(path)
-    mpath = metadata_path(path)
-    if not path.exists():
-        raise InputError(f"model file {path} does not exist; train one with `orokit train`")
-    if not mpath.exists():
-        raise InputError(f"model {path} has no metadata file {mpath.name}; orokit only loads models saved by "
-                         f"`orokit train` (skops + metadata)")
-    try:
-        md = json.loads(mpath.read_text())
-    except json.JSONDecodeError as exc:
-        raise SchemaError(f"model metadata {mpath} is not valid JSON: {exc}") from exc
-    if md.get("format") != MODEL_FORMAT:
-        raise SchemaError(f"model {path} has format {md.get('format')!r} (orokit {md.get('orokit_version')}); this "
-                          f"orokit {__version__} reads {MODEL_FORMAT!r}: retrain with `orokit train`")
-    blob = path.read_bytes()
-    if check_hash and md.get("sha256") != hashlib.sha256(blob).hexdigest():
-        raise InputError(f"model {path} does not match the sha256 in {mpath.name} (expected {md.get('sha256')}, "
-                         f"got {hashlib.sha256(blob).hexdigest()}): corrupted or replaced file")
-    untrusted = sio.get_untrusted_types(data=blob)
-    bad = [t for t in untrusted if not t.startswith(_TRUSTED_PREFIXES)]
-    if bad:
-        raise InputError(f"model {path} contains types that are not scikit-learn/numpy: {bad}; refusing to load")
-    pipeline = sio.loads(blob, trusted=untrusted)
     import sklearn
 
+    pipeline, md = load_model_file(path, check_hash=check_hash)
     for key, have in (("orokit_version", __version__), ("sklearn_version", sklearn.__version__)):
         if md.get(key) != have:
             warnings.warn(f"model {path} was saved with {key.split('_')[0]} {md.get(key)}, this is {have}; "
@@ -167,8 +120,15 @@ def check_features(model: RegionModel, features: pd.DataFrame) -> None:
     """Raise :class:`SchemaError` unless ``features`` were computed like the model's training features."""
     a = features.attrs
     problems = []
-    if "spec" in a and HistogramSpec.from_dict(a["spec"]) != model.spec:
-        problems.append("histogram bins differ")
+    from orokit.classify.features import feature_set_of
+
+    try:
+        fs = feature_set_of(features)
+    except SchemaError:
+        fs = None
+    if fs is not None and fs != model.feature_set:
+        problems.append(f"feature set {fs.name!r} differs from the model's {model.feature_set.name!r} "
+                        f"(radii, bins or summaries)")
     missing = [c for c in model.feature_names if c not in features]
     if missing:
         problems.append(f"missing feature columns {missing[:5]}")

@@ -6,68 +6,141 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import NDArray
 
 from orokit._typing import SeedLike
 from orokit.classify.model import RegionModel, check_features
-from orokit.errors import InputError
+from orokit.errors import InputError, SchemaError
+
+
+#: answer when the best class is not confident enough (see :func:`predict_regions`)
+UNKNOWN = "unknown"
 
 
 @dataclasses.dataclass
 class Prediction:
-    """Per-disk predictions and the overall vote of one input."""
+    """Per-disk predictions and the terrain-level answer of one input."""
 
     disks: pd.DataFrame  # disk_id, x, y, n_peaks, predicted, proba_<class>...
-    label: str | None  # class with the highest mean probability (None without disks)
-    probabilities: dict[str, float]  # mean over disks
+    label: str | None  # best class, or UNKNOWN when below the model's threshold (None without disks)
+    probabilities: dict[str, float]  # terrain-level posterior: softmax of the disks' summed log-probabilities
     votes: dict[str, int]  # disks predicted per class
+    best: str | None = None  # best class even when the answer is UNKNOWN
+    confidence: float = float("nan")  # mean over disks of the best class's probability
+    threshold: float | None = None  # confidence below which the answer is UNKNOWN
 
     def to_dict(self) -> dict[str, Any]:
-        return {"label": self.label, "probabilities": self.probabilities, "votes": self.votes,
+        return {"label": self.label, "best": self.best, "confidence": self.confidence,
+                "unknown_threshold": self.threshold, "probabilities": self.probabilities, "votes": self.votes,
                 "n_disks": int(len(self.disks)),
                 "disks": self.disks.replace({np.nan: None}).to_dict(orient="records")}
 
 
-def predict_regions(model: RegionModel, features: pd.DataFrame) -> Prediction:
-    """Predict the region of every disk of a feature table and vote.
+def terrain_log_probabilities(proba: NDArray[np.float64], *, floor: float = 1e-3) -> NDArray[np.float64]:
+    """Summed log-probability of each class over the disks (probabilities floored at ``floor``,
+    so one disk cannot veto a class)."""
+    return np.log(np.clip(np.asarray(proba, dtype=float), floor, 1.0)).sum(axis=0)
 
-    The overall label maximises the mean class probability over the disks (soft vote);
-    ``votes`` also gives the hard-vote counts.
+
+def predict_regions(model: RegionModel, features: pd.DataFrame, *, threshold: float | None = None) -> Prediction:
+    """Predict the region of every disk of a feature table and of the whole input.
+
+    The terrain label maximises the disks' summed log-probability (probabilities floored
+    at 1e-3); ``probabilities`` are the normalized exponentials of those sums. The answer
+    is :data:`UNKNOWN` when the mean probability of that class over the disks is below
+    ``threshold`` (default: the model's ``unknown_threshold``, chosen on the spatial
+    hold-out; ``0`` never answers unknown). ``votes`` gives the hard-vote counts.
     """
     check_features(model, features)
     classes = model.classes
+    if threshold is None:
+        threshold = model.metadata.get("unknown_threshold")
     if len(features) == 0:
         return Prediction(pd.DataFrame(columns=["disk_id", "x", "y", "n_peaks", "predicted"]), None,
-                          {c: float("nan") for c in classes}, {c: 0 for c in classes})
-    X = features[model.feature_names].to_numpy(dtype=float)
+                          {c: float("nan") for c in classes}, {c: 0 for c in classes}, threshold=threshold)
+    cols = model.feature_names
+    X = features[cols].to_numpy(dtype=float)
+    bad = ~np.isfinite(X)
+    if bad.any():
+        r, c = np.argwhere(bad)[0]
+        raise SchemaError(f"features hold {int(bad.sum())} NaN/infinite value(s); first: column {cols[c]!r}, row "
+                          f"{int(r)}; recompute them with `orokit features`")
     proba = model.pipeline.predict_proba(X)
     pred = np.asarray(classes)[np.argmax(proba, axis=1)]
-    disks = features[[c for c in ("label", "source", "disk_id", "x", "y", "lon", "lat", "n_peaks")
+    disks = features[[c for c in ("label", "source", "disk_id", "x", "y", "lon", "lat", "radius_m", "n_peaks")
                       if c in features]].copy().reset_index(drop=True)
     disks["predicted"] = pred
     for k, c in enumerate(classes):
         disks[f"proba_{c}"] = proba[:, k]
-    mean = proba.mean(axis=0)
+    logp = terrain_log_probabilities(proba)
+    post = np.exp(logp - logp.max())
+    post /= post.sum()
+    k_best = int(np.argmax(logp))
+    best = classes[k_best]
+    confidence = float(proba[:, k_best].mean())
+    label = UNKNOWN if threshold is not None and confidence < float(threshold) else best
     votes = {c: int(np.sum(pred == c)) for c in classes}
-    return Prediction(disks, classes[int(np.argmax(mean))], {c: float(m) for c, m in zip(classes, mean)}, votes)
+    return Prediction(disks, label, {c: float(v) for c, v in zip(classes, post)}, votes, best, confidence,
+                      None if threshold is None else float(threshold))
 
 
 def classify_input(model: RegionModel, source: Any, *, z_units: str | None = None, cell_size: float | None = None,
                    region: Any = None, min_peaks: int | None = None, isolation: Any = None,
-                   rng: SeedLike = 0) -> Prediction:
-    """Compute features of a DEM, ``orokit analyze`` folder or peak list with the model's
-    parameters (radius, eps, bins) and classify them."""
-    from orokit.classify.inputs import features_for_input
+                   threshold: float | None = None, dem: Any = None, rng: SeedLike = 0) -> Prediction:
+    """Compute features of a DEM, ``orokit analyze`` folder or peak list (or of ``dem``, an
+    opened DEM) with the model's parameters (radius, eps, feature set) and classify them."""
+    from orokit.classify.features import features_from_dem
+    from orokit.classify.inputs import default_label, features_for_input
 
     md = model.metadata
     eps = md.get("min_prominence_m")
     if min_peaks is None:
         min_peaks = md.get("min_peaks")
-    feats = features_for_input(
-        source, radius_m=model.radius_m, min_prominence_m=float(eps if eps is not None else 30.0),
-        min_peaks=int(min_peaks if min_peaks is not None else 20), spec=model.spec,
-        relative_elevation=md.get("relative_elevation") or "minmax", z_units=z_units, cell_size=cell_size,
-        region=region, isolation=isolation, rng=rng)
+    kw = dict(radius_m=model.radius_m, min_prominence_m=float(eps if eps is not None else 30.0),
+              min_peaks=int(min_peaks if min_peaks is not None else 20), feature_set=model.feature_set,
+              relative_elevation=md.get("relative_elevation") or "minmax", rng=rng)
+    if dem is not None:
+        feats = features_from_dem(dem, label=default_label(source), **kw)
+    else:
+        feats = features_for_input(source, z_units=z_units, cell_size=cell_size, region=region, isolation=isolation,
+                                   **kw)
     if len(feats) == 0:
         raise InputError(f"no usable disk in {source}: every disk of radius {model.radius_m:g} m had fewer than "
                          f"{feats.attrs.get('min_peaks')} peaks or did not fit in the data; lower --min-peaks")
-    return predict_regions(model, feats)
+    return predict_regions(model, feats, threshold=threshold)
+
+
+def disk_map(prediction: Prediction, *, crs: Any, n_vertices: int = 64) -> Any:
+    """Every disk of ``prediction`` as a polygon (in ``crs``) with its class probabilities.
+
+    Columns: disk_id, x, y, radius_m, n_peaks, predicted, confidence (the top
+    probability), ``proba_<class>`` (summing to 1 per disk) and the polygon. On a
+    geographic CRS each polygon is the geodesic circle of radius R (WGS84), else a
+    Euclidean circle; ``n_vertices`` points each.
+    """
+    import geopandas as gpd
+    import shapely
+
+    from orokit.classify.peaklist import is_geographic
+
+    d = prediction.disks.copy()
+    pcols = [c for c in d.columns if c.startswith("proba_")]
+    d["confidence"] = d[pcols].to_numpy(float).max(axis=1) if len(d) and pcols else np.zeros(len(d))
+    x, y = d["x"].to_numpy(float), d["y"].to_numpy(float)
+    r = d["radius_m"].to_numpy(float) if "radius_m" in d else np.full(len(d), np.nan)
+    az = np.linspace(0.0, 360.0, n_vertices, endpoint=False)
+    polys = []
+    if is_geographic(crs):
+        from pyproj import Geod
+
+        geod = Geod(ellps="WGS84")
+        for xi, yi, ri in zip(x, y, r):
+            lon, lat, _ = geod.fwd(np.full(n_vertices, xi), np.full(n_vertices, yi), az, np.full(n_vertices, ri))
+            polys.append(shapely.Polygon(np.column_stack([lon, lat])))
+    else:
+        t = np.radians(az)
+        for xi, yi, ri in zip(x, y, r):
+            polys.append(shapely.Polygon(np.column_stack([xi + ri * np.cos(t), yi + ri * np.sin(t)])))
+    keep = [c for c in ("disk_id", "x", "y", "lon", "lat", "radius_m", "n_peaks", "predicted", "confidence")
+            if c in d] + pcols
+    return gpd.GeoDataFrame(d[keep].reset_index(drop=True), geometry=polys, crs=crs)

@@ -24,21 +24,45 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from orokit._typing import SeedLike
-from orokit.errors import InputError, OrokitWarning, SchemaError
-from orokit.sampling.histograms import HistogramSpec
+from orokit.errors import InputError, OrokitWarning
+from orokit.classify.features import check_feature_table, feature_set_of
 
 logger = logging.getLogger(__name__)
 
 SplitKind = Literal["random", "spatial"]
 
 
-def make_classifier(*, n_estimators: int = 100, n_jobs: int = 1, random_state: int | None = None) -> Any:
-    """The paper's classifier: a scikit-learn Pipeline with a RandomForest (100 trees)."""
-    from sklearn.ensemble import RandomForestClassifier
+ClassifierKind = Literal["rf", "et", "hgb"]
+CLASSIFIER_KINDS = ("rf", "et", "hgb")
+
+
+def make_classifier(kind: ClassifierKind = "rf", *, n_estimators: int = 100, n_jobs: int = 1,
+                    random_state: int | None = None) -> Any:
+    """A scikit-learn Pipeline with the region classifier.
+
+    ``"rf"``: the paper's Random Forest (``n_estimators`` trees). ``"et"``: extremely
+    randomized trees (``2 * n_estimators`` trees; random split thresholds average out the
+    noise of few-peak disks). ``"hgb"``: scikit-learn's HistGradientBoostingClassifier
+    (``n_estimators`` boosting iterations, no early stopping).
+    """
     from sklearn.pipeline import Pipeline
 
-    return Pipeline([("rf", RandomForestClassifier(n_estimators=n_estimators, n_jobs=n_jobs,
-                                                   random_state=random_state))])
+    if kind == "rf":
+        from sklearn.ensemble import RandomForestClassifier
+
+        est = RandomForestClassifier(n_estimators=n_estimators, n_jobs=n_jobs, random_state=random_state)
+        return Pipeline([("rf", est)])
+    if kind == "et":
+        from sklearn.ensemble import ExtraTreesClassifier
+
+        est = ExtraTreesClassifier(n_estimators=2 * n_estimators, n_jobs=n_jobs, random_state=random_state)
+        return Pipeline([("et", est)])
+    if kind == "hgb":
+        from sklearn.ensemble import HistGradientBoostingClassifier
+
+        est = HistGradientBoostingClassifier(max_iter=n_estimators, early_stopping=False, random_state=random_state)
+        return Pipeline([("hgb", est)])
+    raise InputError(f"classifier must be one of {', '.join(CLASSIFIER_KINDS)}, got {kind!r}")
 
 
 def check_classes(labels: Sequence[Any], *, min_disks: int = 2, small_classes: Literal["error", "drop"] = "error"
@@ -191,6 +215,19 @@ class Evaluation:
     mean_train: dict[str, float]
     mean_val: dict[str, float]
     params: dict[str, Any]
+    #: per run and held-out region: (true region, terrain-level answer, mean disk probability of that answer)
+    terrain: list[tuple[str, str, float]] = dataclasses.field(default_factory=list)
+
+    @property
+    def terrain_accuracy(self) -> float:
+        """Share of held-out regions (per run) whose disks together get the right terrain label."""
+        return float(np.mean([t == p for t, p, _ in self.terrain])) if self.terrain else float("nan")
+
+    def unknown_threshold(self, keep: float = 0.95) -> float:
+        """Confidence below which the terrain answer is 'unknown': the ``1 - keep`` quantile of the
+        confidences of right terrain answers, so ``keep`` of them stay answered."""
+        right = [c for t, p, c in self.terrain if t == p]
+        return float(np.quantile(right, 1.0 - keep)) if right else 0.0
 
     @property
     def mean_accuracy(self) -> float:
@@ -217,32 +254,42 @@ class Evaluation:
             "per_feature_runs": self.per_feature_runs, "classes": self.classes,
             "confusion": self.confusion.tolist(), "mean_train_disks": self.mean_train,
             "mean_validation_disks": self.mean_val, "params": self.params,
+            "terrain_accuracy": self.terrain_accuracy,
+            "unknown_threshold": self.unknown_threshold() if self.terrain else None,
         }
 
 
 def _fit_score(X: NDArray, y: NDArray, tr: NDArray, va: NDArray, cols: NDArray | None, seed: int,
-               n_estimators: int, classes: list[str]) -> tuple[float, NDArray[np.int64]]:
-    from sklearn.ensemble import RandomForestClassifier
+               n_estimators: int, classes: list[str], kind: ClassifierKind = "rf"
+               ) -> tuple[float, NDArray[np.int64], list[tuple[str, str, float]]]:
     from sklearn.metrics import confusion_matrix
 
     # a spatial split can leave a region with no training disk far enough from its held-out strip:
     # that run cannot test the region (its disks could only be misclassified), so it is not counted
     if len(va) == 0 or len(np.unique(y[tr])) < 2 or not np.isin(np.unique(y[va]), y[tr]).all():
-        return float("nan"), np.zeros((len(classes), len(classes)), dtype=np.int64)
+        return float("nan"), np.zeros((len(classes), len(classes)), dtype=np.int64), []
     Xs = X if cols is None else X[:, cols]
-    rf = RandomForestClassifier(n_estimators=n_estimators, n_jobs=1, random_state=seed)
-    rf.fit(Xs[tr], y[tr])
-    pred = rf.predict(Xs[va])
-    acc = float(np.mean(pred == y[va])) if len(va) else float("nan")
-    return acc, confusion_matrix(y[va], pred, labels=classes)
+    clf = make_classifier(kind, n_estimators=n_estimators, n_jobs=1, random_state=seed)
+    clf.fit(Xs[tr], y[tr])
+    proba = clf.predict_proba(Xs[va])
+    known = [str(c) for c in clf.classes_]
+    pred = np.asarray(known)[np.argmax(proba, axis=1)]
+    acc = float(np.mean(pred == y[va]))
+    # terrain level: the validation disks of each region together, summed log-probabilities
+    terrain = []
+    for c in pd.unique(y[va]):
+        p = proba[y[va] == c]
+        k = int(np.argmax(np.log(np.clip(p, 1e-3, 1.0)).sum(axis=0)))
+        terrain.append((str(c), known[k], float(p[:, k].mean())))
+    return acc, confusion_matrix(y[va], pred, labels=classes), terrain
 
 
 def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "random",
              feature_groups: bool = True, feature_runs: int | None = None, n_estimators: int = 100,
              max_train: int = 80, max_val: int = 20, val_fraction: float = 0.2, buffer_m: float | None = None,
              min_disks: int = 2, small_classes: Literal["error", "drop"] = "error", n_jobs: int = 2,
-             progress: bool = False, rng: SeedLike = None) -> Evaluation:
-    """Repeated-split evaluation of the Random Forest on a feature table.
+             classifier: ClassifierKind = "rf", progress: bool = False, rng: SeedLike = None) -> Evaluation:
+    """Repeated-split evaluation of the classifier on a feature table.
 
     Parameters
     ----------
@@ -263,6 +310,8 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
         See :func:`check_classes`: a region with fewer disks is an error, or dropped.
     n_jobs : int
         Parallel fits (threads).
+    classifier : {"rf", "hgb"}
+        See :func:`make_classifier`.
     rng : Generator, int or None
         Seed of the splits and forests.
 
@@ -276,11 +325,8 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
         raise InputError(f"runs must be >= 1, got {runs}")
     if split not in ("random", "spatial"):
         raise InputError(f"split must be 'random' or 'spatial', got {split!r}")
-    spec = HistogramSpec.from_dict(features.attrs["spec"]) if "spec" in features.attrs else None
-    cols = spec.columns if spec else [c for c in features.columns if c[-1].isdigit() and "_" in c]
-    missing = [c for c in cols if c not in features]
-    if missing:
-        raise SchemaError(f"feature table lacks columns {missing[:5]}")
+    fs = feature_set_of(features)
+    cols = check_feature_table(features)
     keep = check_classes(features["label"].astype(str).to_numpy(), min_disks=min_disks, small_classes=small_classes)
     f = features.loc[keep].reset_index(drop=True)
     X = f[cols].to_numpy(dtype=float)
@@ -306,14 +352,14 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
                                         val_fraction=val_fraction, rng=s))
     tasks = [(None, None, i) for i in range(runs)]
     groups_cols: dict[str, NDArray] = {}
-    if feature_groups and spec is not None:
+    if feature_groups:
         fr = runs if feature_runs is None else min(feature_runs, runs)
-        for name, gcols in spec.groups().items():
+        for name, gcols in fs.groups().items():
             groups_cols[name] = np.array([cols.index(c) for c in gcols])
             tasks += [(name, groups_cols[name], i) for i in range(fr)]
     else:
         fr = 0
-    it = (delayed(_fit_score)(X, y, splits[i][0], splits[i][1], gc, int(seeds[i]), n_estimators, classes)
+    it = (delayed(_fit_score)(X, y, splits[i][0], splits[i][1], gc, int(seeds[i]), n_estimators, classes, classifier)
           for _, gc, i in tasks)
     if progress:
         from tqdm.auto import tqdm
@@ -321,6 +367,7 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
         it = tqdm(it, total=len(tasks), desc=f"training ({split} split)", unit="fit")
     results = Parallel(n_jobs=n_jobs, prefer="threads")(it)
     accs = np.array([r[0] for (name, _, _), r in zip(tasks, results) if name is None])
+    terrain = [t for (name, _, _), r in zip(tasks, results) if name is None for t in r[2]]
     conf = sum((r[1] for (name, _, _), r in zip(tasks, results) if name is None),
                np.zeros((len(classes), len(classes)), dtype=np.int64))
     per_feature = {}
@@ -337,11 +384,12 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
     per_class = {c: float(np.mean(v)) if v else float("nan") for c, v in recalls.items()}
     mean_train = {c: float(np.mean([np.sum(y[s[0]] == c) for s in splits])) for c in classes}
     mean_val = {c: float(np.mean([np.sum(y[s[1]] == c) for s in splits])) for c in classes}
-    params = {"runs": runs, "split": split, "n_estimators": n_estimators, "max_train": max_train,
+    params = {"runs": runs, "split": split, "classifier": classifier, "feature_set": fs.name,
+              "n_estimators": n_estimators, "max_train": max_train,
               "max_val": max_val, "val_fraction": val_fraction, "radius_m": radius,
               "buffer_m": float(buffer_m) if split == "spatial" else None, "n_disks": int(len(f)),
               "dropped_classes": sorted(set(features["label"].astype(str)[~keep]))}
-    ev = Evaluation(split, classes, accs, conf, per_class, per_feature, fr, mean_train, mean_val, params)
+    ev = Evaluation(split, classes, accs, conf, per_class, per_feature, fr, mean_train, mean_val, params, terrain)
     logger.info("%s split, %d runs: mean accuracy %.3f, median %.3f", split, runs, ev.mean_accuracy,
                 ev.median_accuracy)
     return ev
@@ -349,12 +397,12 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
 
 def train_classifier(features: pd.DataFrame, *, n_estimators: int = 100, min_disks: int = 2,
                      small_classes: Literal["error", "drop"] = "error", max_per_class: int | None = None,
-                     n_jobs: int = 2, rng: SeedLike = None) -> Any:
-    """Fit the final Random Forest Pipeline on all disks of a feature table.
+                     classifier: ClassifierKind = "rf", n_jobs: int = 2, rng: SeedLike = None) -> Any:
+    """Fit the final classifier Pipeline on all disks of a feature table.
 
     ``max_per_class`` caps the disks per region (random subset) to balance classes.
     """
-    spec = HistogramSpec.from_dict(features.attrs["spec"])
+    cols = check_feature_table(features)
     keep = check_classes(features["label"].astype(str).to_numpy(), min_disks=min_disks, small_classes=small_classes)
     f = features.loc[keep].reset_index(drop=True)
     rng = np.random.default_rng(rng)
@@ -362,7 +410,7 @@ def train_classifier(features: pd.DataFrame, *, n_estimators: int = 100, min_dis
         idx = np.concatenate([rng.permutation(np.flatnonzero(f["label"].astype(str) == c))[:max_per_class]
                               for c in sorted(f["label"].astype(str).unique())])
         f = f.iloc[np.sort(idx)]
-    model = make_classifier(n_estimators=n_estimators, n_jobs=n_jobs,
+    model = make_classifier(classifier, n_estimators=n_estimators, n_jobs=n_jobs,
                             random_state=int(rng.integers(0, 2**31 - 1)))
-    model.fit(f[spec.columns].to_numpy(dtype=float), f["label"].astype(str).to_numpy())
+    model.fit(f[cols].to_numpy(dtype=float), f["label"].astype(str).to_numpy())
     return model

@@ -11,42 +11,65 @@ from orokit.cli.options import common_input_options
 
 @click.command()
 @click.argument("model_path", metavar="MODEL", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.argument("source", metavar="INPUT", type=click.Path(exists=True, path_type=Path))
+@click.argument("source", metavar="INPUT")
 @common_input_options
 @click.option("--min-peaks", type=int, default=None,
               help="Skip disks with fewer peaks (default: the model's training value).")
+@click.option("--threshold", type=float, default=None,
+              help="Answer 'unknown' when the best region's mean disk probability is below this (default: the "
+                   "model's threshold, chosen on the spatial hold-out; 0 never answers unknown).")
 @click.option("--json", "as_json", is_flag=True, help="Print label, probabilities, votes and per-disk results as JSON.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write per-disk predictions to this CSV.")
+@click.option("--map", "map_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write every disk as a polygon with its class probabilities to this GeoPackage (DEM's CRS), "
+                   "and a PNG map over the hillshade beside it (same name, .png). DEM inputs only.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the disk placement.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing --output.")
-def classify(model_path, source, z_units, cell_size, region, isolation, min_peaks, as_json, output, seed, overwrite):
-    """Classify INPUT (DEM, `orokit analyze` folder or peak list) with MODEL (from `orokit train`).
+@click.option("--overwrite", is_flag=True, help="Replace existing --output / --map files.")
+def classify(model_path, source, z_units, cell_size, region, isolation, min_peaks, threshold, as_json, output,
+             map_path, seed, overwrite):
+    """Classify INPUT (DEM file or manifest DEM name, `orokit analyze` folder, or peak list) with MODEL.
 
-    Features are computed with the model's radius, eps and bins; each disk is
-    predicted and the overall label is the class with the highest mean probability.
+    Features are computed with the model's radius, eps and feature set; each disk is
+    predicted and the terrain label maximises the disks' summed log-probability
+    ('unknown' when the best region is not confident enough).
     """
+    from orokit.classify.inputs import open_input_dem
     from orokit.classify.model import load_model
-    from orokit.classify.predict import classify_input
+    from orokit.classify.predict import classify_input, disk_map
     from orokit.io.atomic import atomic_path
 
     from orokit.cli.outputs import claim_outputs
 
-    claim_outputs(output)  # locked for the whole run
-    if output is not None and output.exists() and not overwrite:
-        raise click.UsageError(f"{output} exists; pass --overwrite to replace it")
+    outputs = [p for p in (output, map_path, map_path.with_suffix(".png") if map_path else None) if p is not None]
+    claim_outputs(*outputs)  # locked for the whole run
+    existing = [str(p) for p in outputs if p.exists()]
+    if existing and not overwrite:
+        raise click.UsageError(f"{', '.join(existing)} exist(s); pass --overwrite to replace")
+    if map_path is not None and map_path.suffix.lower() != ".gpkg":
+        raise click.BadParameter(f"{map_path} must end in .gpkg (GeoPackage)", param_hint="--map")
     model = load_model(model_path)
+    dem = open_input_dem(source, z_units=z_units, cell_size=cell_size) if region is None else None
+    if map_path is not None and dem is None:
+        raise click.UsageError("--map needs a DEM input (a raster file or a manifest DEM name)")
     pred = classify_input(model, source, z_units=z_units, cell_size=cell_size, region=region, isolation=isolation,
-                          min_peaks=min_peaks, rng=seed)
+                          min_peaks=min_peaks, threshold=threshold, dem=dem, rng=seed)
     if output is not None:
         with atomic_path(output) as tmp:
             pred.disks.to_csv(tmp, index=False)
+    if map_path is not None:
+        from orokit.io.model_io import write_disk_map
+        from orokit.reports.classification_map import write_classification_map_png
+
+        disks = disk_map(pred, crs=dem.rio.crs)
+        write_disk_map(disks, map_path)
+        write_classification_map_png(dem, disks, model.classes, map_path.with_suffix(".png"),
+                                     title=f"{Path(str(source)).name}: {pred.label} (R = {model.radius_m / 1000:g} km)")
     if as_json:
-        d = pred.to_dict()
-        if not output:
-            d["disks"] = d["disks"]
-        click.echo(json.dumps(d, indent=2, default=float))
+        click.echo(json.dumps(pred.to_dict(), indent=2, default=float))
     else:
-        top = sorted(pred.probabilities.items(), key=lambda kv: -kv[1])[:5]
-        click.echo(f"{source}: {pred.label} ({len(pred.disks)} disks; "
+        top = sorted(pred.probabilities.items(), key=lambda kv: -kv[1])[:3]
+        extra = f" (best: {pred.best})" if pred.label != pred.best else ""
+        click.echo(f"{source}: {pred.label}{extra} ({len(pred.disks)} disks, mean probability of the best region "
+                   f"{100 * pred.confidence:.0f} %; terrain posterior "
                    + ", ".join(f"{k} {100 * v:.1f} %" for k, v in top) + ")")

@@ -12,7 +12,7 @@ RADIUS = Length(allow_bare=True, bare_min_m=100.0)
 
 
 @click.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(exists=True, path_type=Path))
+@click.argument("inputs", nargs=-1, required=True)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Feature table to write (Parquet, one row per disk).")
 @click.option("--radius", type=RADIUS, default="10km", show_default=True,
@@ -26,6 +26,10 @@ RADIUS = Length(allow_bare=True, bare_min_m=100.0)
               help="Minimum disk-centre distance as a fraction of R.")
 @click.option("--label", "labels", multiple=True,
               help="Region label: once for all inputs, or once per input (default: dataset / file name).")
+@click.option("--features", "feature_set_name", type=click.Choice(["orometry", "paper"]), default="orometry",
+              show_default=True,
+              help="Feature set: orometry (default: histograms plus disk summaries at R/2 and R, chosen on the "
+                   "spatial hold-out) or paper (Argudo et al. 2019, Table 1, the reference mode).")
 @click.option("--relative-elevation", type=click.Choice(["minmax", "max"]), default="minmax", show_default=True,
               help="Relative elevation (h-min)/(max-min) over the disk, or h/max.")
 @click.option("--exact-only", is_flag=True, help="Drop peaks whose prominence is flagged not exact (edge effects).")
@@ -33,11 +37,12 @@ RADIUS = Length(allow_bare=True, bare_min_m=100.0)
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the disk placement.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing OUTPUT.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar over inputs.")
-def features(inputs, output, radius, min_prominence, min_peaks, max_disks, separation, labels, relative_elevation,
-             exact_only, z_units, cell_size, region, isolation, seed, overwrite, progress):
+def features(inputs, output, radius, min_prominence, min_peaks, max_disks, separation, labels, feature_set_name,
+             relative_elevation, exact_only, z_units, cell_size, region, isolation, seed, overwrite, progress):
     """Orometric histograms of disks of radius R placed by blue noise in each INPUT.
 
-    INPUT is a DEM (analysed on the fly; disks entirely inside its valid cells), an
+    INPUT is a DEM file or the name of a DEM of the datasets manifest (analysed on the
+    fly; disks entirely inside its valid cells), an
     `orokit analyze` output folder, or a peak list (orokit table or Kirmse & de
     Ferranti prominence list; with --region, disks inside the polygon eroded by R).
     Distances are measured on the ground (geodesic for lon/lat data). Histogram
@@ -45,8 +50,10 @@ def features(inputs, output, radius, min_prominence, min_peaks, max_disks, separ
     """
     import numpy as np
 
-    from orokit.classify.features import concat_features, write_features
+    from orokit.classify.features import concat_features
+    from orokit.io.model_io import write_feature_table
     from orokit.classify.inputs import features_for_input
+    from orokit.sampling.feature_sets import FeatureSet
 
     from orokit.cli.outputs import claim_outputs
 
@@ -68,10 +75,11 @@ def features(inputs, output, radius, min_prominence, min_peaks, max_disks, separ
         tables.append(features_for_input(
             src, radius_m=radius, label=label, min_prominence_m=min_prominence, min_peaks=min_peaks,
             max_disks=max_disks, separation=separation, relative_elevation=relative_elevation,
+            feature_set=FeatureSet.named(feature_set_name),
             exact_only=exact_only, z_units=z_units, cell_size=cell_size, region=region, isolation=isolation,
             rng=np.random.default_rng(seeds[i])))
     table = concat_features(tables)
-    write_features(table, output)
+    write_feature_table(table, output)
     counts = table["label"].value_counts().to_dict() if len(table) else {}
     click.echo(f"{len(table)} disks of radius {radius / 1000:g} km ({table.attrs.get('n_disks_skipped', 0)} skipped "
                f"with < {min_peaks} peaks) from {len(inputs)} input(s) -> {output}; per label: {counts}")

@@ -24,12 +24,21 @@ from orokit.cli.features import RADIUS  # the shared Length type (orokit.cli.opt
               help="Also save a model trained on all disks at the first radius (e.g. models/regions-10km.skops).")
 @click.option("--z-units", type=click.Choice(["m", "ft"]), default=None, help="Units of DEM inputs without units.")
 @click.option("--cell-size", type=float, default=None, help="Cell size in METRES of DEM inputs without georeference.")
+@click.option("--features", "feature_set", type=click.Choice(["orometry", "paper"]), default="orometry",
+              show_default=True, help="Feature set (paper: Argudo et al. 2019 Table 1, the reference mode).")
+@click.option("--classifier", type=click.Choice(["rf", "et", "hgb"]), default="rf", show_default=True,
+              help="rf: Random Forest (paper); et: extremely randomized trees (2x --trees); hgb: HistGradientBoostingClassifier.")
+@click.option("--separation", type=float, default=0.5, show_default=True,
+              help="Minimum disk-centre distance as a fraction of R.")
+@click.option("--max-disks", type=int, default=100, show_default=True, help="At most this many disks per region.")
+@click.option("--max-train", type=int, default=80, show_default=True,
+              help="At most this many training disks per region in each run (paper: 80).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of disks, splits and forests.")
 @click.option("--n-jobs", type=int, default=2, show_default=True, help="Parallel fits.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing report / model.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bars.")
 def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominence, min_peaks, model_path, z_units,
-           cell_size, seed, n_jobs, overwrite, progress):
+           cell_size, feature_set, classifier, separation, max_disks, max_train, seed, n_jobs, overwrite, progress):
     """Classification report on INPUTs (DEMs, analysis folders or peak lists; one region each).
 
     Accuracies in the tables are percentages; radii in km.
@@ -53,7 +62,8 @@ def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominen
     res = build_classification_report(list(inputs), output, radii_m=radii, runs=runs, feature_runs=feature_runs,
                                       min_prominence_m=min_prominence, min_peaks=min_peaks, model_path=model_path,
                                       n_jobs=n_jobs, progress=progress, seed=seed, z_units=z_units,
-                                      cell_size=cell_size)
+                                      cell_size=cell_size, feature_set=feature_set, classifier=classifier,
+                                      separation=separation, max_disks=max_disks, max_train=max_train)
     for r, e in sorted(res["evaluations"].items()):
         sp = e["spatial"].mean_accuracy
         sp_text = f"{100 * sp:.1f} %" if sp == sp else "not measurable (crops too small for this radius)"

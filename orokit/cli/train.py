@@ -22,7 +22,12 @@ import click
 @click.option("--buffer", "buffer_radii", type=float, default=2.0, show_default=True,
               help="Spatial split: minimum training-to-validation centre distance, in units of R (2 = no shared "
                    "peak).")
-@click.option("--trees", type=int, default=100, show_default=True, help="Trees of the Random Forest.")
+@click.option("--classifier", type=click.Choice(["rf", "et", "hgb"]), default="rf", show_default=True,
+              help="rf: Random Forest (paper); et: extremely randomized trees (2x --trees); hgb: scikit-learn HistGradientBoostingClassifier.")
+@click.option("--trees", type=int, default=100, show_default=True,
+              help="Trees of the Random Forest (boosting iterations with --classifier hgb).")
+@click.option("--max-train", type=int, default=80, show_default=True,
+              help="At most this many training disks per region in each evaluation run (paper: 80).")
 @click.option("--drop-small-classes", is_flag=True,
               help="Drop regions with fewer than 2 disks (with a warning) instead of failing.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
@@ -33,20 +38,21 @@ import click
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of splits and forests.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing model and report files.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bars.")
-def train(features_path, output, runs, feature_runs, split, buffer_radii, trees, drop_small_classes, report_dir,
-          as_json, n_jobs, seed, overwrite, progress):
+def train(features_path, output, runs, feature_runs, split, buffer_radii, classifier, trees, max_train,
+          drop_small_classes, report_dir, as_json, n_jobs, seed, overwrite, progress):
     """Train the region classifier on FEATURES.parquet (from `orokit features`) and evaluate it.
 
     Accuracies are fractions in [0, 1]. The saved model is fitted on all disks.
     """
-    from orokit.classify.features import read_features
-    from orokit.classify.model import model_metadata, save_model, sha256_file
+    from orokit.classify.features import check_feature_table
+    from orokit.classify.model import metadata_path, model_metadata, save_model
     from orokit.classify.train import evaluate, train_classifier
-
-    from orokit.classify.model import metadata_path
+    from orokit.data.fetch import sha256_file
+    from orokit.io.model_io import read_feature_table
 
     kinds = ["random", "spatial"] if split == "both" else [split]
-    feats = read_features(features_path)
+    feats = read_feature_table(features_path)
+    check_feature_table(feats, name=str(features_path))
     radius = float(feats["radius_m"].max()) if len(feats) else 0.0
     outputs = [output, metadata_path(output)]
     if report_dir is not None:
@@ -60,15 +66,25 @@ def train(features_path, output, runs, feature_runs, split, buffer_radii, trees,
     if existing and not overwrite:  # checked before the (long) training runs
         raise click.UsageError(f"{', '.join(existing)} exist(s); pass --overwrite to replace them")
     small = "drop" if drop_small_classes else "error"
+    if drop_small_classes:
+        counts = feats["label"].astype(str).value_counts()
+        dropped = counts[counts < 2]
+        if len(dropped):
+            click.echo("dropping regions with fewer than 2 usable disks: "
+                       + ", ".join(f"{k}: {v}" for k, v in dropped.items()), err=True)
     evals = {}
     for kind in kinds:
         evals[kind] = evaluate(feats, runs=runs, split=kind, feature_groups=feature_runs > 0,
                                feature_runs=feature_runs, n_estimators=trees, buffer_m=buffer_radii * radius,
-                               small_classes=small, n_jobs=n_jobs, progress=progress, rng=seed)
-    model = train_classifier(feats, n_estimators=trees, small_classes=small, n_jobs=n_jobs, rng=seed)
+                               max_train=max_train, classifier=classifier, small_classes=small, n_jobs=n_jobs,
+                               progress=progress, rng=seed)
+    model = train_classifier(feats, n_estimators=trees, small_classes=small, classifier=classifier, n_jobs=n_jobs,
+                             rng=seed)
+    threshold = evals["spatial"].unknown_threshold() if "spatial" in evals and evals["spatial"].terrain else 0.0
     summary = {k: {kk: v for kk, v in e.to_dict().items() if kk != "confusion"} for k, e in evals.items()}
     md = model_metadata(model, feats, evaluation=summary, features_sha256=sha256_file(features_path),
-                        extra={"training_features": features_path.name, "seed": seed})
+                        extra={"training_features": features_path.name, "seed": seed, "classifier": classifier,
+                               "unknown_threshold": threshold})
     save_model(model, output, md)
     if report_dir is not None:
         from orokit.reports.classification import write_training_report

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -167,7 +168,9 @@ def write_radius_outputs(features: pd.DataFrame, evals: Mapping[str, Any], outdi
         files[f"confusion_{k}"] = out / "figures" / f"confusion_{k}_{tag}.png"
         _save(fig, files[f"confusion_{k}"])
         plt.close(fig)
-    spec = HistogramSpec.from_dict(features.attrs["spec"])
+    from orokit.classify.features import feature_set_of
+
+    spec = feature_set_of(features).histogram_spec
     labels = sorted(features["label"].astype(str).unique())
     fig = plt.figure(figsize=(14, 0.8 + 0.75 * len(labels)))
     plot_region_histograms(fig, features, spec, labels)
@@ -200,13 +203,24 @@ def write_training_report(features: pd.DataFrame, evals: Mapping[str, Any], outd
     return out
 
 
+_CLASSIFIERS = {"rf": "Random Forest, {n} trees", "et": "extremely randomized trees (ExtraTrees), 2 x {n} trees",
+                "hgb": "gradient boosting (HistGradientBoosting), {n} iterations"}
+_FEATURE_SETS = {"paper": "the paper's Table 1 histograms at R (176 numbers, `--features paper`, reference mode)",
+                 "orometry": "orokit's default: Table 1 histograms plus disk summaries (peak density, maximum "
+                             "prominence, quantiles of prominence, isolation, key-saddle distance and dominance) at "
+                             "R/2 and R (`--features orometry`)"}
+
+
 def _readme(t2: pd.DataFrame, evals: Mapping[float, Mapping[str, Any]], meta: dict[str, Any]) -> str:
-    lines = ["# Region classification report (orokit)", "",
+    clf = _CLASSIFIERS.get(meta.get("classifier", "rf"), "{n}").format(n=meta["trees"])
+    fs = meta.get("feature_set", "paper")
+    lines = [f"# Region classification report (orokit, features: {fs})", "",
              f"orokit {__version__}; {meta['n_inputs']} DEMs ({', '.join(meta['labels'])}); "
              f"eps = {meta['min_prominence_m']:g} m; disks with < {meta['min_peaks']} peaks skipped; "
-             f"at most {meta['max_disks']} disks per region, centres >= 0.5 R apart; Random Forest, "
-             f"{meta['trees']} trees; {meta['runs']} runs (feature groups: {meta['feature_runs']} runs); seed "
-             f"{meta['seed']}.", "",
+             f"at most {meta['max_disks']} disks per region, centres >= {meta.get('separation', 0.5):g} R apart; "
+             f"at most {meta.get('max_train', 80)} training disks per region and run; {clf}; {meta['runs']} runs "
+             f"(feature groups: {meta['feature_runs']} runs); seed {meta['seed']}.", "",
+             f"Features: {_FEATURE_SETS.get(fs, fs)}.", "",
              "Elevations: SRTM-3 void-filled by Jonathan de Ferranti (viewfinderpanoramas.org), crops from "
              "Argudo et al. (2019), github.com/oargudo/orometry-terrains (MIT). The crops have no published "
              "location: they are analysed as local metric grids.", "",
@@ -244,6 +258,14 @@ def _readme(t2: pd.DataFrame, evals: Mapping[float, Mapping[str, Any]], meta: di
         worst = sorted(base.per_class.items(), key=lambda kv: kv[1])[:3]
         lines.append("  Lowest per-region accuracy (random split): " +
                      ", ".join(f"{k} {100 * v:.0f} %" for k, v in worst) + ".")
+        if "spatial" in e and np.isfinite(e["spatial"].mean_accuracy):
+            sp = e["spatial"]
+            worst = sorted(sp.per_class.items(), key=lambda kv: kv[1])[:3]
+            lines.append("  Lowest per-region accuracy (spatial hold-out): " +
+                         ", ".join(f"{k} {100 * v:.0f} %" for k, v in worst) + f". Terrain level (the held-out "
+                         f"disks of a region together, summed log-probability): {100 * sp.terrain_accuracy:.1f} % "
+                         f"of {len(sp.terrain)} held-out strips right; 'unknown' threshold (mean disk probability "
+                         f"keeping 95 % of right answers): {sp.unknown_threshold():.2f}.")
     lines += ["", "Reference: the paper's published code on these DEMs at R = 10 km (20 runs, random 80:20 "
               "split) reaches 94 % mean accuracy (pyrenees 59 %, andes-chile 20 % with 3 usable disks).", "",
               "The random split puts overlapping neighbours of each validation disk in the training set "
@@ -259,7 +281,9 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
                                 min_peaks: int = 20, max_disks: int = 100, trees: int = 100, seed: int = 0,
                                 labels: Sequence[str] | None = None, model_path: PathLike | None = None,
                                 model_radius_m: float | None = None, n_jobs: int = 2, progress: bool = False,
-                                z_units: str | None = None, cell_size: float | None = None) -> dict[str, Any]:
+                                z_units: str | None = None, cell_size: float | None = None,
+                                feature_set: str = "orometry", classifier: str = "rf", separation: float = 0.5,
+                                max_train: int = 80) -> dict[str, Any]:
     """Features -> repeated training runs -> Table 2, figures and README for several radii.
 
     ``inputs`` are DEMs, ``orokit analyze`` folders or peak lists (one region each).
@@ -268,12 +292,17 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
     """
     import warnings
 
-    from orokit.classify.features import concat_features, write_features
+    from orokit.classify.features import concat_features
     from orokit.classify.inputs import default_label, features_for_input
-    from orokit.classify.model import model_metadata, save_model, sha256_file
+    from orokit.classify.model import model_metadata, save_model
+    from orokit.data.fetch import sha256_file
+    from orokit.io.model_io import write_feature_table
     from orokit.classify.train import evaluate, train_classifier
     from orokit.errors import OrokitWarning
 
+    from orokit.sampling.feature_sets import FeatureSet
+
+    fset = FeatureSet.named(feature_set)
     out = Path(outdir)
     labels = list(labels) if labels else [default_label(p) for p in inputs]
     evals: dict[float, dict[str, Any]] = {}
@@ -288,18 +317,20 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
             for src, lab, s in zip(inputs, labels, seeds):
                 tables.append(features_for_input(src, radius_m=r, label=lab, min_prominence_m=min_prominence_m,
                                                  min_peaks=min_peaks, max_disks=max_disks, z_units=z_units,
-                                                 cell_size=cell_size, rng=np.random.default_rng(s)))
+                                                 cell_size=cell_size, feature_set=fset, separation=separation,
+                                                 rng=np.random.default_rng(s)))
         for w in caught:
             logger.info("%s", w.message)
         feats = concat_features(tables)
         timings[f"features_{r / 1000:g}km_s"] = time.perf_counter() - t0
-        write_features(feats, out / "features" / f"features_{r / 1000:g}km.parquet")
+        write_feature_table(feats, out / "features" / f"features_{r / 1000:g}km.parquet")
         feats_by_r[r] = feats
         evals[r] = {}
         for kind in ("random", "spatial"):
             t0 = time.perf_counter()
             evals[r][kind] = evaluate(feats, runs=runs, split=kind, feature_runs=feature_runs, n_estimators=trees,
-                                      small_classes="drop", n_jobs=n_jobs, progress=progress, rng=seed)
+                                      max_train=max_train, classifier=classifier, small_classes="drop",
+                                      n_jobs=n_jobs, progress=progress, rng=seed)
             timings[f"train_{kind}_{r / 1000:g}km_s"] = time.perf_counter() - t0
         write_radius_outputs(feats, evals[r], out)
     t2 = table2(evals)
@@ -308,16 +339,22 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
     meta = {"orokit_version": __version__, "n_inputs": len(inputs), "labels": labels, "seed": seed, "runs": runs,
             "feature_runs": feature_runs, "radii_m": list(map(float, radii_m)), "min_prominence_m": min_prominence_m,
             "min_peaks": min_peaks, "max_disks": max_disks, "trees": trees, "timings_s": timings,
+            "feature_set": feature_set, "classifier": classifier, "separation": separation, "max_train": max_train,
+            "load_average": list(os.getloadavg()),
             "inputs": [str(p) for p in inputs]}
     if model_path is not None:
         rm = model_radius_m or radii_m[0]
         feats = feats_by_r[rm]
-        model = train_classifier(feats, n_estimators=trees, small_classes="drop", n_jobs=n_jobs, rng=seed)
+        model = train_classifier(feats, n_estimators=trees, small_classes="drop", classifier=classifier,
+                                 n_jobs=n_jobs, rng=seed)
+        sp = evals[rm].get("spatial")
+        threshold = sp.unknown_threshold() if sp is not None and sp.terrain else 0.0
         fpath = out / "features" / f"features_{rm / 1000:g}km.parquet"
         summary = {k: {kk: v for kk, v in e.to_dict().items() if kk != "confusion"} for k, e in evals[rm].items()}
         md = model_metadata(model, feats, evaluation=summary, features_sha256=sha256_file(fpath),
                             extra={"training_features": f"features_{rm / 1000:g}km.parquet", "seed": seed,
-                                   "training_inputs": labels})
+                                   "training_inputs": labels, "classifier": classifier,
+                                   "unknown_threshold": threshold})
         save_model(model, model_path, md)
         meta["model"] = {"path": str(model_path), "sha256": sha256_file(model_path), "radius_m": rm}
     _write_text(out / "manifest.json", json.dumps(meta, indent=2, default=float))

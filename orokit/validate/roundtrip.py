@@ -188,7 +188,7 @@ def roundtrip(
         from orokit.classify.features import features_from_dem
         from orokit.classify.predict import predict_regions
 
-        feats = features_from_dem(dem, radius_m=model.radius_m, analysis=analysis, spec=model.spec,
+        feats = features_from_dem(dem, radius_m=model.radius_m, analysis=analysis, feature_set=model.feature_set,
                                   **model_feature_options(model.metadata, min_prominence=min_prominence), rng=rng)
         pred = predict_regions(model, feats)
     attrs = {"min_prominence": float(min_prominence), "raster_peaks": int(len(analysis.peaks)),

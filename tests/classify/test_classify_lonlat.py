@@ -12,7 +12,8 @@ from click.testing import CliRunner
 from pyproj import Geod, Transformer
 
 from orokit.analysis import write_analysis
-from orokit.classify.features import concat_features, feature_table, write_features
+from orokit.classify.features import concat_features, feature_table
+from orokit.io.model_io import write_feature_table as write_features
 from orokit.classify.peaklist import peak_geometry
 from orokit.classify.train import evaluate, metric_coordinates, spatial_split
 from orokit.cli.main import cli
@@ -128,7 +129,7 @@ def test_classify_keeps_explicit_zero_thresholds_of_the_model(monkeypatch):
     class Model:
         metadata: dict
         radius_m: float = 10_000.0
-        spec: object = None
+        feature_set: object = None
 
     with pytest.raises(InputError):
         classify_input(Model({"min_prominence_m": 0.0, "min_peaks": 0}), "x")

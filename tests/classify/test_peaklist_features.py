@@ -6,7 +6,9 @@ import pytest
 import shapely
 from pyproj import Geod
 
-from orokit.classify.features import feature_table, features_from_region, peaks_in_disks, read_features, write_features
+from orokit.classify.features import feature_table, features_from_region, peaks_in_disks
+from orokit.io.model_io import read_feature_table as read_features
+from orokit.io.model_io import write_feature_table as write_features
 from orokit.classify.peaklist import distance_direction, peak_geometry, read_kirmse_peaks, read_peaks
 from orokit.errors import InputError, OrokitWarning, SchemaError
 from orokit.sampling.disks import sample_disks_in_polygon

@@ -10,7 +10,8 @@ from click.testing import CliRunner
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from orokit.classify.features import concat_features, feature_table, write_features
+from orokit.classify.features import concat_features, feature_set_of, feature_table
+from orokit.io.model_io import write_feature_table as write_features
 from orokit.classify.model import load_model, metadata_path, model_metadata, save_model
 from orokit.classify.peaklist import peak_geometry
 from orokit.classify.predict import predict_regions
@@ -67,7 +68,7 @@ def test_small_classes():
 def test_evaluate_and_model_roundtrip(feats, tmp_path):
     ev = evaluate(feats, runs=4, feature_runs=2, rng=0)
     assert ev.mean_accuracy > 0.6  # 3 classes: chance is 1/3
-    assert set(ev.per_feature) == set(feats.attrs["spec"] and [f["name"] for f in feats.attrs["spec"]["features"]])
+    assert set(ev.per_feature) == set(feature_set_of(feats).groups())
     assert ev.confusion.sum() == sum(len(random_split(feats["label"], rng=0)[1]) for _ in range(4))
     sp = evaluate(feats, runs=3, split="spatial", feature_groups=False, rng=0)
     assert sp.params["buffer_m"] == 20_000.0
@@ -88,16 +89,17 @@ def test_evaluate_and_model_roundtrip(feats, tmp_path):
 
 def test_model_from_other_version(feats, tmp_path):
     model = train_classifier(feats, n_estimators=5, rng=0)
-    path = save_model(model, tmp_path / "m.skops", model_metadata(model, feats))
-    mp = metadata_path(path)
-    md = json.loads(mp.read_text())
-    mp.write_text(json.dumps(dict(md, orokit_version="0.0.1")))
+    md = model_metadata(model, feats)
+    path = save_model(model, tmp_path / "m.skops", dict(md, orokit_version="0.0.1"))
     with pytest.warns(OrokitWarning, match="0.0.1"):
         load_model(path)
-    mp.write_text(json.dumps(dict(md, format="orokit-region-classifier/0")))
+    path = save_model(model, tmp_path / "m.skops", md)
+    mp = metadata_path(path)
+    side = json.loads(mp.read_text())
+    mp.write_text(json.dumps(dict(side, format="orokit-region-classifier/1")))
     with pytest.raises(SchemaError, match="retrain"):
         load_model(path)
-    mp.write_text(json.dumps(md))
+    mp.write_text(json.dumps(side))
     path.write_bytes(path.read_bytes() + b"x")
     with pytest.raises(InputError, match="sha256"):
         load_model(path)

@@ -1,0 +1,249 @@
+"""Feature sets of the region classifier: which numbers describe one disk.
+
+A :class:`FeatureSet` fixes everything that turns the peaks of a disk into its feature
+vector. It is recorded in every feature table and model, so a model computes features
+of new ground exactly as it was trained (and refuses a table made otherwise).
+
+- ``paper``: the reference mode, Argudo et al. (2019) Table 1: ten normalized
+  histograms (176 numbers) of the peaks within R.
+- ``orometry`` (default): chosen by the spatial hold-out (see
+  ``reports/classification/ablation.md``). At R/2 and at R: the Table 1 histograms
+  made cumulative (robust with the few peaks of a disk), without the two direction
+  histograms (they drift between parts of one region and rotate with the DEM); disk
+  summaries that normalized histograms throw away: peak density (peaks >= eps per
+  km2), a prominence spectrum (density of peaks >= 60 ... 800 m), the maximum
+  prominence and quantiles of prominence, isolation (relative and in metres),
+  key-saddle distance and dominance; and quantiles of the elevation of the peaks and
+  of their key saddles.
+
+Column names: ``<feature>_<bin>`` for histograms and ``log_density``,
+``log_max_prominence``, ``q<percent>_<quantity>`` for summaries at R; at another radius
+fraction f the name gets the prefix ``r<f>_`` (``r0.5_log_density``).
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from orokit.errors import SchemaError
+from orokit.metrics.disk import (
+    RELATIVE_ELEVATION_DEFAULT,
+    RelativeElevation,
+    clamped_distance,
+    dominance,
+    relative_elevation,
+    relative_prominence,
+)
+from orokit.sampling.histograms import HistogramSpec
+
+__all__ = ["FeatureSet", "FEATURE_SET_NAMES", "SUMMARY_QUANTILES", "disk_feature_vector"]
+
+FEATURE_SET_NAMES = ("orometry", "paper")
+#: quantiles of the per-disk summaries
+SUMMARY_QUANTILES = (0.25, 0.5, 0.75, 0.9)
+_Q = tuple(f"q{int(round(100 * q))}" for q in SUMMARY_QUANTILES)
+#: summary name -> the group it belongs to (Table 2 rows)
+#: prominence thresholds (m) of the prominence spectrum: log density of peaks at least this prominent
+SPECTRUM_THRESHOLDS_M = (60.0, 100.0, 200.0, 400.0, 800.0)
+#: quantiles of the absolute elevation summaries
+ELEVATION_QUANTILES = (0.1, 0.25, 0.5, 0.75, 0.9)
+_EQ = tuple(f"q{int(round(100 * q))}" for q in ELEVATION_QUANTILES)
+SUMMARY_GROUPS: dict[str, list[str]] = {
+    "density": ["log_density"],
+    "prominence_summary": ["log_max_prominence"] + [f"{q}_log_prominence" for q in _Q],
+    "prominence_spectrum": [f"log_density_p{int(t)}" for t in SPECTRUM_THRESHOLDS_M],
+    "isolation_summary": [f"{q}_isolation_distance" for q in _Q] + [f"{q}_log_isolation_m" for q in _Q],
+    "saddle_distance_summary": [f"{q}_saddle_distance" for q in _Q],
+    "dominance_summary": [f"{q}_dominance" for q in _Q],
+}
+ELEVATION_GROUPS: dict[str, list[str]] = {
+    "elevation_summary": [f"{q}_elevation_km" for q in _EQ] + ["max_elevation_km"],
+    "saddle_elevation_summary": [f"{q}_saddle_elevation_km" for q in _EQ],
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class FeatureSet:
+    """What a disk's feature vector holds.
+
+    Parameters
+    ----------
+    name : str
+        ``"paper"`` or ``"orometry"`` (or a custom name for experiments).
+    spec : HistogramSpec
+        Histogram bins (Table 1).
+    radii : tuple of float
+        Radius fractions of R at which the features are computed (1.0 = the disk).
+    histograms : tuple of str
+        Histogram features used (names of ``spec``); empty for none.
+    summaries : bool
+        Add the disk summaries (density, prominence, isolation, saddle distance, dominance).
+    elevation : bool
+        Add absolute elevation summaries: quantiles and maximum of the peaks' elevation and
+        quantiles of their key saddles' elevation (km).
+    cumulative : bool
+        Cumulative instead of plain normalized histograms (direction histograms stay plain).
+    """
+
+    name: str
+    spec: HistogramSpec
+    radii: tuple[float, ...] = (1.0,)
+    histograms: tuple[str, ...] | None = None
+    summaries: bool = False
+    elevation: bool = False
+    cumulative: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.radii or any(not (0 < f <= 1.0) for f in self.radii) or len(set(self.radii)) != len(self.radii):
+            raise SchemaError(f"feature set radii must be distinct fractions of R in (0, 1], got {self.radii!r}")
+        if 1.0 not in self.radii:
+            raise SchemaError(f"feature set radii must include 1.0 (the disk itself), got {self.radii!r}")
+        if self.histograms is not None:
+            unknown = [h for h in self.histograms if h not in self.spec.names]
+            if unknown:
+                raise SchemaError(f"unknown histogram features {unknown}; available: {self.spec.names}")
+
+    @classmethod
+    def paper(cls) -> FeatureSet:
+        """Argudo et al. (2019) Table 1: ten histograms at R (176 numbers)."""
+        return cls("paper", HistogramSpec.paper())
+
+    @classmethod
+    def orometry(cls) -> FeatureSet:
+        """orokit's default: chosen by the spatial hold-out (see the module docstring)."""
+        spec = HistogramSpec.paper()
+        return cls("orometry", spec, radii=(0.5, 1.0), summaries=True, elevation=True, cumulative=True,
+                   histograms=tuple(n for n in spec.names if "direction" not in n))
+
+    @classmethod
+    def named(cls, name: str) -> FeatureSet:
+        """The feature set called ``name`` (``"orometry"`` or ``"paper"``)."""
+        if name == "paper":
+            return cls.paper()
+        if name == "orometry":
+            return cls.orometry()
+        raise SchemaError(f"unknown feature set {name!r}; choose one of {', '.join(FEATURE_SET_NAMES)}")
+
+    @property
+    def histogram_spec(self) -> HistogramSpec:
+        """The histogram features used (``spec`` restricted to :attr:`histograms`)."""
+        return self.spec if self.histograms is None else self.spec.select(self.histograms)
+
+    @staticmethod
+    def _prefix(f: float) -> str:
+        return "" if f == 1.0 else f"r{f:g}_"
+
+    def _groups_at(self) -> dict[str, list[str]]:
+        g: dict[str, list[str]] = dict(self.histogram_spec.groups())
+        if self.summaries:
+            g.update(SUMMARY_GROUPS)
+        if self.elevation:
+            g.update(ELEVATION_GROUPS)
+        return g
+
+    @property
+    def columns(self) -> list[str]:
+        """Feature columns in vector order (radius by radius, as listed in :attr:`radii`)."""
+        base = [c for cols in self._groups_at().values() for c in cols]
+        return [self._prefix(f) + c for f in self.radii for c in base]
+
+    def groups(self) -> dict[str, list[str]]:
+        """Feature group -> its columns at every radius (one Table 2 row each)."""
+        return {name: [self._prefix(f) + c for f in self.radii for c in cols]
+                for name, cols in self._groups_at().items()}
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "spec": self.spec.to_dict(), "radii": list(self.radii),
+                "histograms": None if self.histograms is None else list(self.histograms),
+                "summaries": self.summaries, "elevation": self.elevation, "cumulative": self.cumulative}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> FeatureSet:
+        try:
+            h = d.get("histograms")
+            return cls(str(d["name"]), HistogramSpec.from_dict(d["spec"]),
+                       radii=tuple(float(f) for f in d.get("radii", (1.0,))),
+                       histograms=None if h is None else tuple(str(x) for x in h),
+                       summaries=bool(d.get("summaries", False)), elevation=bool(d.get("elevation", False)),
+                       cumulative=bool(d.get("cumulative", False)))
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise SchemaError(f"not a feature set dictionary ({exc!r}): {str(d)[:200]}") from exc
+
+
+def _quantiles(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    v = v[np.isfinite(v)]
+    return np.quantile(v, SUMMARY_QUANTILES) if len(v) else np.zeros(len(SUMMARY_QUANTILES))
+
+
+def _elevation_quantiles(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    v = v[np.isfinite(v)]
+    return np.quantile(v, ELEVATION_QUANTILES) / 1000.0 if len(v) else np.zeros(len(ELEVATION_QUANTILES))
+
+
+def disk_feature_vector(elevation: NDArray, prominence: NDArray, saddle_distance_m: NDArray,
+                        saddle_direction_deg: NDArray, isolation_m: NDArray, isolation_direction_deg: NDArray, *,
+                        radius_m: float, feature_set: FeatureSet,
+                        relative_elevation_convention: RelativeElevation = RELATIVE_ELEVATION_DEFAULT,
+                        ) -> NDArray[np.float64]:
+    """Feature vector of the peaks of one disk of radius ``radius_m`` at one radius fraction.
+
+    The arrays hold the counted peaks (prominence >= eps) within ``radius_m``; the
+    per-peak metrics follow :mod:`orokit.metrics.disk`. Returns the values of the
+    feature set's columns for one radius (``len(columns) / len(radii)`` numbers). Every
+    value is finite: an empty disk gives zero histograms and zero summaries.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> fs = FeatureSet.paper()
+    >>> v = disk_feature_vector(np.array([900.0, 500.0]), np.array([900.0, 100.0]), np.array([np.nan, 2e3]),
+    ...                         np.array([np.nan, 90.0]), np.array([np.nan, 5e3]), np.array([np.nan, 0.0]),
+    ...                         radius_m=1e4, feature_set=fs)
+    >>> len(v), float(v[:20].sum())
+    (176, 1.0)
+    """
+    h = np.asarray(elevation, dtype=float)
+    p = np.asarray(prominence, dtype=float)
+    n = len(h)
+    dom = dominance(h, p)
+    rel_h = relative_elevation(h, convention=relative_elevation_convention)
+    rel_p = relative_prominence(p)
+    iso = clamped_distance(isolation_m, radius_m)
+    sad = clamped_distance(saddle_distance_m, radius_m)
+    values = {"dominance": dom, "dominance_groups": dom, "relative_elevation": rel_h,
+              "isolation_direction": np.mod(np.asarray(isolation_direction_deg, float), 360.0),
+              "isolation_distance": iso,
+              "saddle_direction": np.mod(np.asarray(saddle_direction_deg, float), 360.0),
+              "saddle_distance": sad, "prominence": p, "relative_prominence": rel_p,
+              "relevance": np.sqrt(rel_p * rel_h)}
+    parts: list[NDArray[np.float64]] = []
+    for fb in feature_set.histogram_spec.features:
+        if fb.name not in values:
+            raise SchemaError(f"no per-peak metric for histogram feature {fb.name!r}")
+        c = fb.counts(values[fb.name]).astype(float)
+        total = c.sum()
+        c = c / total if total > 0 else c
+        if feature_set.cumulative and "direction" not in fb.name:
+            c = np.cumsum(c)
+        parts.append(c)
+    if feature_set.summaries:
+        area_km2 = np.pi * (radius_m / 1000.0) ** 2
+        lp = np.log10(np.maximum(p, 1.0))
+        parts.append(np.array([np.log10(n / area_km2 + 1e-3), lp.max() if n else 0.0]))
+        parts.append(_quantiles(lp))
+        parts.append(np.log10(np.array([np.sum(p >= t) for t in SPECTRUM_THRESHOLDS_M]) / area_km2 + 1e-3))
+        parts.append(_quantiles(iso))
+        iso_m = np.asarray(isolation_m, dtype=float)
+        # unknown isolation (nothing higher in the data) counts as 100 km
+        parts.append(_quantiles(np.log10(np.where(np.isfinite(iso_m), iso_m, 1e5) + 1.0)))
+        parts.append(_quantiles(sad))
+        parts.append(_quantiles(dom))
+    if feature_set.elevation:
+        parts.append(_elevation_quantiles(h))
+        parts.append(np.array([np.nanmax(h) / 1000.0 if n else 0.0]))
+        parts.append(_elevation_quantiles(h - p))  # key-saddle elevations
+    return np.concatenate(parts) if parts else np.zeros(0)
