@@ -288,7 +288,7 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
              feature_groups: bool = True, feature_runs: int | None = None, n_estimators: int = 100,
              max_train: int = 80, max_val: int = 20, val_fraction: float = 0.2, buffer_m: float | None = None,
              min_disks: int = 2, small_classes: Literal["error", "drop"] = "error", n_jobs: int = 2,
-             classifier: ClassifierKind = "rf", progress: bool = False, rng: SeedLike = None) -> Evaluation:
+             classifier: ClassifierKind = "et", progress: bool = False, rng: SeedLike = None) -> Evaluation:
     """Repeated-split evaluation of the classifier on a feature table.
 
     Parameters
@@ -397,7 +397,7 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
 
 def train_classifier(features: pd.DataFrame, *, n_estimators: int = 100, min_disks: int = 2,
                      small_classes: Literal["error", "drop"] = "error", max_per_class: int | None = None,
-                     classifier: ClassifierKind = "rf", n_jobs: int = 2, rng: SeedLike = None) -> Any:
+                     classifier: ClassifierKind = "et", n_jobs: int = 2, rng: SeedLike = None) -> Any:
     """Fit the final classifier Pipeline on all disks of a feature table.
 
     ``max_per_class`` caps the disks per region (random subset) to balance classes.

@@ -282,7 +282,7 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
                                 labels: Sequence[str] | None = None, model_path: PathLike | None = None,
                                 model_radius_m: float | None = None, n_jobs: int = 2, progress: bool = False,
                                 z_units: str | None = None, cell_size: float | None = None,
-                                feature_set: str = "orometry", classifier: str = "rf", separation: float = 0.5,
+                                feature_set: str = "orometry", classifier: str = "et", separation: float = 0.5,
                                 max_train: int = 80) -> dict[str, Any]:
     """Features -> repeated training runs -> Table 2, figures and README for several radii.
 
