@@ -1,4 +1,4 @@
-"""Feature tables: one row per disk with the concatenated orometric histograms.
+"""Feature tables: one row per disk with its orometric features (histograms, summaries).
 
 Pipeline per region (Argudo et al. 2019, section 4.2):
 
@@ -8,8 +8,9 @@ Pipeline per region (Argudo et al. 2019, section 4.2):
    for geographic CRS);
 3. disks with fewer than ``min_peaks`` peaks (20) are skipped and counted (one
    :class:`~orokit.errors.OrokitWarning` per call);
-4. per-peak metrics relative to the disk (:func:`orokit.metrics.disk.disk_metrics`) and
-   their normalized histograms (:func:`orokit.sampling.histograms.disk_histograms`).
+4. per-peak metrics relative to the disk (:mod:`orokit.metrics.disk`), turned into the
+   feature vector of the chosen :class:`~orokit.sampling.feature_sets.FeatureSet` at each
+   of its radius fractions (:func:`~orokit.sampling.feature_sets.disk_feature_vector`).
 
 Peaks whose prominence is flagged not exact (key saddle may lie outside the data) are
 kept by default, as in the paper's experiments on cropped DEMs; ``exact_only=True``

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -137,7 +136,7 @@ def load_model_file(path: PathLike, *, check_hash: bool = True) -> tuple[Any, di
         raise InputError(f"model {path} contains types that are not scikit-learn/numpy: {bad}; refusing to load")
     try:
         obj = sio.loads(blob, trusted=untrusted)
-    except (zipfile.BadZipFile, Exception) as exc:  # noqa: BLE001
+    except Exception as exc:  # noqa: BLE001 - skops raises many types on a damaged archive
         raise InputError(f"model file {path} is corrupt ({type(exc).__name__}: {exc}); train it again") from exc
     if not (isinstance(obj, dict) and "pipeline" in obj and isinstance(obj.get("metadata"), str)):
         raise SchemaError(f"model file {path} does not hold an orokit model (pipeline + metadata); train it again")

@@ -26,7 +26,10 @@ import pandas as pd
 
 from orokit import __version__
 from orokit._typing import PathLike
+from orokit.sampling.feature_sets import SUMMARY_TITLES
 from orokit.sampling.histograms import FEATURE_TITLES, HistogramSpec
+
+TITLES = {**FEATURE_TITLES, **SUMMARY_TITLES}
 
 logger = logging.getLogger(__name__)
 DPI = 110
@@ -51,10 +54,10 @@ def table2(evals: Mapping[float, Mapping[str, Any]]) -> pd.DataFrame:
             col["All, median acc. (spatial hold-out)"] = 100 * e["spatial"].median_accuracy
         base = e.get("random") or e.get("spatial")
         for name, acc in base.per_feature.items():
-            col[FEATURE_TITLES.get(name, name)] = 100 * acc
+            col[TITLES.get(name, name)] = 100 * acc
         if "spatial" in e and "random" in e:
             for name, acc in e["spatial"].per_feature.items():
-                col[f"{FEATURE_TITLES.get(name, name)} (spatial)"] = 100 * acc
+                col[f"{TITLES.get(name, name)} (spatial)"] = 100 * acc
         col["Regions"] = len(base.classes)
         col["Disks"] = base.params["n_disks"]
         cols[_km(r)] = col

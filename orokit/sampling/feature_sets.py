@@ -65,6 +65,14 @@ ELEVATION_GROUPS: dict[str, list[str]] = {
     "saddle_elevation_summary": [f"{q}_saddle_elevation_km" for q in _EQ],
 }
 
+#: human-readable names of the summary groups (Table 2 rows)
+SUMMARY_TITLES: dict[str, str] = {
+    "density": "Peak density", "prominence_summary": "Prominence quantiles",
+    "prominence_spectrum": "Prominence spectrum", "isolation_summary": "Isolation quantiles",
+    "saddle_distance_summary": "Key saddle distance quantiles", "dominance_summary": "Dominance quantiles",
+    "elevation_summary": "Peak elevation quantiles", "saddle_elevation_summary": "Key saddle elevation quantiles",
+}
+
 
 @dataclasses.dataclass(frozen=True)
 class FeatureSet:
