@@ -112,13 +112,13 @@ analysis: $(ANALYSIS_README)  ## exact analysis of every DEM, table + Divide Tre
 REGION_MODEL := models/regions-10km.skops
 $(CLASSIFICATION_README) $(REGION_MODEL) &: $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
 	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(REPORTS)/classification --radius 10km \
-	  --radius 5km --features orometry --classifier et --runs 100 --feature-runs 20 --model $(REGION_MODEL) \
-	  --overwrite --no-progress
+	  --features orometry --classifier et --runs 30 --feature-runs 5 --model $(REGION_MODEL) --overwrite \
+	  --no-progress
 
 # the paper's protocol and feature set (reference mode), kept beside the default figures
 $(CLASSIFICATION_PAPER_README): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
-	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(@D) --radius 10km --radius 5km --radius 15km \
-	  --features paper --classifier rf --runs 100 --feature-runs 20 --overwrite --no-progress
+	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(@D) --radius 10km --features paper \
+	  --classifier rf --runs 30 --feature-runs 5 --overwrite --no-progress
 
 classification: $(CLASSIFICATION_README) $(CLASSIFICATION_PAPER_README)  ## region classification reports (default and paper protocol), models/regions-10km.skops
 

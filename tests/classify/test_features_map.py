@@ -152,3 +152,36 @@ def test_region_with_one_disk_is_named_and_dropped(dems_and_model):
                          "--drop-small-classes", "--no-progress"])
     assert res.exit_code == 0, res.output
     assert "dropping regions with fewer than 2 usable disks: lonely: 1" in res.output
+
+
+def test_terrain_label_and_unknown_threshold():
+    from orokit.classify.predict import terrain_log_probabilities
+    from orokit.classify.train import Evaluation
+
+    proba = np.array([[0.9, 0.1], [0.9, 0.1], [0.0, 1.0]])
+    # the mean probability prefers class 0 (0.6), the summed log-probability class 1: one disk that rules
+    # class 0 out (floored at 1e-3) outweighs two disks that merely lean to it
+    logp = terrain_log_probabilities(proba)
+    np.testing.assert_allclose(logp, [2 * np.log(0.9) + np.log(1e-3), 2 * np.log(0.1)])
+    assert np.argmax(proba.mean(0)) == 0 and np.argmax(logp) == 1
+    terrain = [("a", "a", c) for c in np.linspace(0.3, 0.9, 21)] + [("b", "a", 0.2)]
+    ev = Evaluation("spatial", ["a", "b"], np.array([0.5]), np.zeros((2, 2), int), {}, {}, 0, {}, {}, {}, terrain)
+    assert ev.terrain_accuracy == pytest.approx(21 / 22)
+    assert ev.unknown_threshold() == pytest.approx(np.quantile(np.linspace(0.3, 0.9, 21), 0.05))
+
+
+def test_disk_map_polygons_are_geodesic_circles_on_lonlat():
+    from pyproj import Geod
+
+    from orokit.classify.predict import Prediction, disk_map
+
+    disks = pd.DataFrame({"disk_id": [0, 1], "x": [10.0, -70.0], "y": [46.0, -33.0], "radius_m": [10_000.0] * 2,
+                          "n_peaks": [30, 40], "predicted": ["a", "b"], "proba_a": [0.7, 0.2],
+                          "proba_b": [0.3, 0.8]})
+    g = disk_map(Prediction(disks, "a", {"a": 0.5, "b": 0.5}, {"a": 1, "b": 1}), crs="EPSG:4326")
+    assert g.crs.equals("EPSG:4326") and list(g["confidence"]) == [0.7, 0.8]
+    geod = Geod(ellps="WGS84")
+    for (_, row), poly in zip(disks.iterrows(), g.geometry):
+        lon, lat = np.asarray(poly.exterior.xy)
+        _, _, d = geod.inv(np.full(len(lon), row["x"]), np.full(len(lat), row["y"]), lon, lat)
+        np.testing.assert_allclose(d, 10_000.0, rtol=1e-6)
