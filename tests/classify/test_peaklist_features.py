@@ -12,6 +12,7 @@ from orokit.io.model_io import write_feature_table as write_features
 from orokit.classify.peaklist import distance_direction, peak_geometry, read_kirmse_peaks, read_peaks
 from orokit.errors import InputError, OrokitWarning, SchemaError
 from orokit.sampling.disks import sample_disks_in_polygon
+from orokit.sampling.feature_sets import FeatureSet
 
 
 def test_directions_ccw_from_east():
@@ -83,13 +84,19 @@ def test_feature_table_counts_eps_and_skips(peaks_factory):
     disks = pd.DataFrame({"disk_id": [0, 1, 2], "x": [30_000.0, 15_000.0, -500_000.0],
                           "y": [-30_000.0, -15_000.0, 0.0], "radius_m": 10_000.0})
     with pytest.warns(OrokitWarning, match="1 of 3 disks"):
-        f = feature_table(peaks, disks, label="a", min_prominence_m=60.0)
+        f = feature_table(peaks, disks, label="a", min_prominence_m=60.0, feature_set=FeatureSet.paper())
     assert f.attrs["n_disks_skipped"] == 1 and len(f) == 2
     for _, row in f.iterrows():
         d = np.hypot(raw["x"] - row["x"], raw["y"] - row["y"])
         assert row["n_peaks"] == int(((d <= 10_000) & (raw["prominence"] >= 60.0)).sum())
     assert f[[c for c in f.columns if c.startswith("dominance_") and not c.startswith("dominance_g")]].sum(
         axis=1).to_numpy() == pytest.approx(1.0)
+    with pytest.warns(OrokitWarning, match="1 of 3 disks"):
+        g = feature_table(peaks, disks, label="a", min_prominence_m=60.0)  # default: orometry
+    assert g["dominance_19"].to_numpy() == pytest.approx(1.0)  # cumulative histograms end at 1
+    np.testing.assert_array_equal(g["n_peaks"], f["n_peaks"])
+    area = np.pi * 10.0 ** 2
+    np.testing.assert_allclose(10 ** g["log_density"] - 1e-3, g["n_peaks"] / area)  # peaks >= eps per km2
 
 
 def test_features_parquet_roundtrip(tmp_path, peaks_factory):
