@@ -211,6 +211,10 @@ def write_disk_map(disks: Any, path: PathLike) -> Path:
     path = Path(path)
     if path.suffix.lower() != ".gpkg":
         raise InputError(f"--map {path}: the disk map is a GeoPackage; give a file name ending in .gpkg")
-    with atomic_path(path) as tmp:
+    import warnings
+
+    with atomic_path(path) as tmp, warnings.catch_warnings():
+        if disks.crs is None:  # a DEM on a local grid: coordinates are metres of that grid, no CRS to record
+            warnings.filterwarnings("ignore", message=".*'crs' was not provided.*")
         disks.to_file(tmp, layer="disks", driver="GPKG")
     return path

@@ -209,9 +209,11 @@ def write_training_report(features: pd.DataFrame, evals: Mapping[str, Any], outd
 _CLASSIFIERS = {"rf": "Random Forest, {n} trees", "et": "extremely randomized trees (ExtraTrees), 2 x {n} trees",
                 "hgb": "gradient boosting (HistGradientBoosting), {n} iterations"}
 _FEATURE_SETS = {"paper": "the paper's Table 1 histograms at R (176 numbers, `--features paper`, reference mode)",
-                 "orometry": "orokit's default: Table 1 histograms plus disk summaries (peak density, maximum "
-                             "prominence, quantiles of prominence, isolation, key-saddle distance and dominance) at "
-                             "R/2 and R (`--features orometry`)"}
+                 "orometry": "orokit's default (`--features orometry`, 382 numbers), at R/2 and at R: the Table 1 "
+                             "histograms made cumulative, without the two direction histograms; disk summaries "
+                             "(peak density, prominence spectrum, maximum and quantiles of prominence, isolation, "
+                             "key-saddle distance, dominance); quantiles of peak and key-saddle elevation. Chosen "
+                             "on the spatial hold-out: see `ablation.md`"}
 
 
 def _readme(t2: pd.DataFrame, evals: Mapping[float, Mapping[str, Any]], meta: dict[str, Any]) -> str:

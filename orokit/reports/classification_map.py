@@ -15,8 +15,8 @@ def plot_classification_map(ax: Any, dem: Any, disks: Any, classes: list[str], *
     """Draw the DEM's hillshade and each disk (polygon) coloured by its predicted class.
 
     ``disks`` is the GeoDataFrame of :func:`orokit.classify.predict.disk_map` (columns
-    ``predicted``, ``proba_<class>``, polygon geometry in the DEM's CRS). The outline
-    alpha grows with the disk's top probability. Axes in km (or degrees), as the
+    ``predicted``, ``proba_<class>``, polygon geometry in the DEM's CRS). Outline width
+    and the centre dot's size grow with the disk's top probability. Axes in km (or degrees), as the
     hillshade of :func:`orokit.reports.dem_summary.plot_hillshade`.
     """
     import matplotlib.pyplot as plt
@@ -40,8 +40,10 @@ def plot_classification_map(ax: Any, dem: Any, disks: Any, classes: list[str], *
             x, y = np.asarray(poly.exterior.xy)
             col = colours.get(row["predicted"], (0, 0, 0, 1))
             conf = float(row["confidence"])
-            ax.fill(x / scale, y / scale, color=col, alpha=0.08 + 0.25 * conf, linewidth=0)
-            ax.plot(x / scale, y / scale, color=col, linewidth=0.6 + 1.2 * conf, alpha=0.9)
+            ax.fill(x / scale, y / scale, color=col, alpha=0.03 + 0.07 * conf, linewidth=0)
+            ax.plot(x / scale, y / scale, color=col, linewidth=0.4 + 0.8 * conf, alpha=0.8)
+        ax.scatter([row["x"] / scale], [row["y"] / scale], s=15 + 60 * float(row["confidence"]),
+                   color=colours.get(row["predicted"], (0, 0, 0, 1)), edgecolors="black", linewidths=0.5, zorder=5)
     present = [c for c in classes + ["unknown"] if len(disks) and (disks["predicted"] == c).any()]
     ax.legend(handles=[Patch(color=colours[c], label=f"{c} ({int((disks['predicted'] == c).sum())})")
                        for c in present], fontsize=7, loc="upper left", bbox_to_anchor=(1.25, 1.0),

@@ -190,7 +190,7 @@ def roundtrip(
 
         feats = features_from_dem(dem, radius_m=model.radius_m, analysis=analysis, feature_set=model.feature_set,
                                   **model_feature_options(model.metadata, min_prominence=min_prominence), rng=rng)
-        pred = predict_regions(model, feats)
+        pred = predict_regions(model, feats, threshold=0.0)  # the best region, never "unknown"
     attrs = {"min_prominence": float(min_prominence), "raster_peaks": int(len(analysis.peaks)),
              "cell_size_m": res, "shape": f"{dem.shape[1]}x{dem.shape[0]}"}
     logger.info("round trip: %.1f %% of %d tree peaks recovered, %d extra",

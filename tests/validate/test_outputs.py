@@ -147,7 +147,7 @@ def test_model_zero_options_are_kept(monkeypatch):
 
     monkeypatch.setattr(features, "features_from_dem", fake_features)
     monkeypatch.setattr(predict, "predict_regions",
-                        lambda model, feats: SimpleNamespace(label="x", disks=pd.DataFrame({"predicted": ["x"]})))
+                        lambda model, feats, **kw: SimpleNamespace(label="x", disks=pd.DataFrame({"predicted": ["x"]})))
     tree = DivideTree.from_arrays([[1000.0, 1000.0, 600.0], [3000.0, 1000.0, 550.0]], [[2000.0, 1000.0, 450.0]],
                                   [[0, 1, 0]], attrs={"extent": [0.0, 0.0, 4000.0, 2000.0]})
     dem = render_elevation(tree, resolution_m=100.0, erosion=False, rng=0)
