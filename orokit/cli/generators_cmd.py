@@ -12,9 +12,9 @@ LENGTH = Length(allow_bare=True)
 
 
 def _real_dem(like: str):
-    from orokit.cli.synthesize import _like_dem
+    from orokit.cli.render import like_dem
 
-    return _like_dem(like)
+    return like_dem(like)
 
 
 @click.command(name="generators-run")

@@ -19,11 +19,19 @@ STALE_FILES = ("validation.json",)
 
 def like_domain(like: str, *, cell_size: float | None = None) -> tuple[float, float, float]:
     """Width, height and cell size (metres) of a DEM file or of a manifest dataset."""
+    x0, y0, w, h, res, _ = like_box(like, cell_size=cell_size)
+    return w, h, res
+
+
+def like_box(like: str, *, cell_size: float | None = None):
+    """South-west corner, width, height, cell size (metres) and CRS (None: local grid) of a
+    ``--like`` DEM, so a twin lands on the DEM's own grid."""
     dem = like_dem(like, cell_size=cell_size)
     t = dem.rio.transform()
     ny, nx = dem.shape
-    res = abs(float(t.a))
-    return nx * res, ny * abs(float(t.e)), res
+    xs, ys = (t.c, t.c + t.a * nx), (t.f, t.f + t.e * ny)
+    crs = None if dem.attrs.get("local_grid") else dem.rio.crs
+    return min(xs), min(ys), nx * abs(float(t.a)), ny * abs(float(t.e)), abs(float(t.a)), crs
 
 
 @click.command(name="synthesize")
@@ -43,14 +51,19 @@ def like_domain(like: str, *, cell_size: float | None = None) -> tuple[float, fl
 @click.option("--seed", type=click.IntRange(min=0), default=None,
               help="Random seed of the tree and the raster [default: fresh entropy, recorded in synthesis.json "
                    "and in the dem.tif tags].")
-@click.option("--crs", default=None, help="Output CRS (projected). Default: local frame.")
+@click.option("--crs", default=None,
+              help="Output CRS (projected EPSG/WKT), or 'local' for a local metric frame with the south-west corner at "
+                   "(0, 0) [default: the --like DEM's grid and CRS, else a local frame].")
+@click.option("--center", default=None,
+              help="LON,LAT of the domain centre: a local azimuthal-equidistant CRS (written as WKT) centred there.")
 @click.option("--tin", "write_tin", is_flag=True, help="Also write the TIN as tin.ply.")
 @click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output folder: dividetree.gpkg/.txt, peaks.csv, synthesis.json, dem.tif, hillshade.png.")
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs in OUTPUT.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
 @generator_options
-def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_elevation, erosion, seed, crs, write_tin,
+def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_elevation, erosion, seed, crs, center,
+               write_tin,
                outdir, overwrite, progress, generator, params, exemplar) -> None:
     """Synthesize a Divide Tree following a terrain type and render it to a raster.
 
@@ -82,9 +95,27 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
     existing = [f for f in outputs if (outdir / f).exists()]
     if existing and not overwrite:
         raise click.UsageError(f"{outdir} already holds {', '.join(existing)}; pass --overwrite to replace them")
+    center_ll = None
+    if center is not None:
+        try:
+            center_ll = tuple(float(v) for v in str(center).split(","))
+            if len(center_ll) != 2:
+                raise ValueError
+        except ValueError:
+            raise click.BadParameter(f"{center!r} is not LON,LAT (e.g. 86.9,27.98)", param_hint="--center") from None
+        if crs is not None:
+            raise click.UsageError("give --center or --crs, not both")
+    if crs is not None and str(crs).lower() == "local":
+        crs = None
+        local = True
+    else:
+        local = False
+    like_origin = None
     if like is not None:
-        w, h, like_res = like_domain(like, cell_size=cell_size)
+        x0, y0, w, h, like_res, like_crs = like_box(like, cell_size=cell_size)
         res = parse_length(resolution, hint="--resolution") if resolution is not None else like_res
+        if crs is None and center_ll is None and not local:
+            like_origin = (x0, y0, like_crs)  # the twin lands on the DEM's grid, in its CRS
     else:
         w, h = parse_length(size, pair=True, hint="--size")
         res = parse_length(resolution or "30m", hint="--resolution")
@@ -116,7 +147,15 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
         c_h = np.asarray(like_dem(like, cell_size=cell_size).values, dtype=float)  # row 0 north, stretched
     elif control_elevation is not None and not Path(control_elevation).exists():
         raise click.BadParameter(f"{control_elevation} does not exist", param_hint="--control-elevation")
-    tree = synthesize_divide_tree(ttype, size_m=(w, h), n_peaks=n_peaks, crs=crs, control_elevation=c_h, rng=seed)
+    if like_origin is not None:
+        from orokit.synthesis.controls import Domain, make_domain
+
+        shape = make_domain((w, h)).shape
+        domain = Domain(like_origin[0], like_origin[1], w, h, like_origin[2], shape)
+        tree = synthesize_divide_tree(ttype, domain=domain, n_peaks=n_peaks, control_elevation=c_h, rng=seed)
+    else:
+        tree = synthesize_divide_tree(ttype, size_m=(w, h), n_peaks=n_peaks, crs=crs, center=center_ll,
+                                      control_elevation=c_h, rng=seed)
     if bar is not None:
         bar.update(1)
     if parsed is None:
