@@ -97,16 +97,11 @@ def _figure(path: Path, name: str, real, ren, twin) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from orokit.raster.shade import hillshade
+    from orokit.reports.landform import plot_landforms
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(1, 3, figsize=(15, 5.2), dpi=110)
-    for ax, da, label in zip(axes, (real, ren, twin), ("real", "render of the real tree", "free twin")):
-        ax.imshow(hillshade(da), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
-        ax.set_title(f"{name}: {label}")
-        ax.set_axis_off()
-    fig.tight_layout()
-    fig.savefig(path)
+    fig = plot_landforms({"real DEM": real, "render of its real tree": ren, "free twin": twin}, title=name)
+    fig.savefig(path, dpi=150)
     plt.close(fig)
 
 

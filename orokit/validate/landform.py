@@ -30,7 +30,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "FLOORS", "LandformStatistics", "compare_landforms", "landform_distances", "landform_statistics",
-    "spectral_slope", "split_halves",
+    "slope_and_relief", "spectral_slope", "split_halves",
 ]
 
 #: number of mid-point quantiles kept per distribution
@@ -220,6 +220,17 @@ def _window_cells(window_m: float, dx: float, dy: float) -> tuple[int, int]:
         k = max(int(round(n)), 3)
         return k if k % 2 else k + 1
     return odd(window_m / dy), odd(window_m / dx)
+
+
+def slope_and_relief(dem: xr.DataArray, *, window_m: float = 1000.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per-cell slope (degrees, central differences) and local relief (m) in ~``window_m``
+    windows of a DEM, as :func:`landform_statistics` computes them (NaN kept)."""
+    z = np.asarray(dem.values, dtype=np.float64)
+    dxr, dy = row_cell_sizes_m(dem)
+    dxr = np.asarray(dxr, dtype=np.float64)
+    gx, gy = _gradient(z, dxr, float(dy))
+    slope = np.degrees(np.arctan(np.hypot(gx, gy)))
+    return slope, _relief(z, _window_cells(window_m, float(np.mean(dxr)), float(dy)))
 
 
 def landform_statistics(dem: xr.DataArray, *, relief_windows_m: tuple[float, float] = (1000.0, 5000.0)
