@@ -29,11 +29,11 @@ __all__ = [
     "paste_fragment",
 ]
 
-_OROMETRY_COLUMNS = ("prominence", "dominance", "key_saddle", "parent")
+_OROMETRY_COLUMNS = ("prominence", "dominance", "key_saddle", "island_parent")
 
 
 def refresh_orometry(tree: DivideTree) -> DivideTree:
-    """Tree with ``prominence``, ``dominance``, ``key_saddle`` and ``parent`` recomputed."""
+    """Tree with ``prominence``, ``dominance``, ``key_saddle`` and ``island_parent`` recomputed."""
     tree.validate()
     table = tree.prominence_table()
     peaks = tree.peaks.copy()
@@ -42,7 +42,7 @@ def refresh_orometry(tree: DivideTree) -> DivideTree:
     with np.errstate(divide="ignore", invalid="ignore"):
         peaks["dominance"] = np.where(z > 0, peaks["prominence"].to_numpy() / z, np.nan)
     peaks["key_saddle"] = table["key_saddle"].to_numpy()
-    peaks["parent"] = table["parent"].to_numpy()
+    peaks["island_parent"] = table["island_parent"].to_numpy()
     return DivideTree(peaks, tree.saddles, tree.edges, tree.crs, dict(tree.attrs))
 
 

@@ -114,7 +114,7 @@ def tree_orometry(tree: DivideTree) -> pd.DataFrame:
     Returns
     -------
     DataFrame aligned with ``tree.peaks.index`` with columns ``prominence``,
-    ``key_saddle`` (-1 for roots), ``parent`` (-1 for roots), ``dominance``,
+    ``key_saddle`` (-1 for roots), ``island_parent`` (-1 for roots), ``dominance``,
     ``saddle_x``, ``saddle_y``, ``saddle_elevation``, ``saddle_distance``,
     ``saddle_direction`` (NaN for roots), ``isolation`` (metres, NaN when no higher
     peak exists), ``isolation_peak``, ``isolation_x``, ``isolation_y``,

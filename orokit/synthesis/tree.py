@@ -496,7 +496,8 @@ def peaks_table(tree: DivideTree):
         from pyproj import Transformer
 
         lon, lat = Transformer.from_crs(tree.crs, "EPSG:4326", always_xy=True).transform(x, y)
-    parent = o["parent"].to_numpy(np.int64)
+    parent = o["island_parent"].to_numpy(np.int64)
+    parents = tree.parents()
     frame = pd.DataFrame(
         {
             "row": none, "col": none, "x": x, "y": y, "lon": np.asarray(lon, float), "lat": np.asarray(lat, float),
@@ -505,7 +506,10 @@ def peaks_table(tree: DivideTree):
             "saddle_row": none, "saddle_col": none,
             "saddle_x": o["saddle_x"].to_numpy(float), "saddle_y": o["saddle_y"].to_numpy(float),
             "saddle_elevation": o["saddle_elevation"].to_numpy(float),
-            "parent": parent, "parent_row": none, "parent_col": none,
+            "island_parent": parent, "island_parent_row": none, "island_parent_col": none,
+            "line_parent": parents["line_parent"].to_numpy(np.int64), "line_parent_row": none, "line_parent_col": none,
+            "prominence_parent": parents["prominence_parent"].to_numpy(np.int64),
+            "prominence_parent_row": none, "prominence_parent_col": none,
             "dominance": o["dominance"].to_numpy(float),
             "isolation": o["isolation"].to_numpy(float),
             "isolation_row": none, "isolation_col": none,

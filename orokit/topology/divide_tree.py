@@ -101,12 +101,13 @@ class DivideTree:
 
     # -------------------------------------------------------------- prominence
     def prominence_table(self) -> pd.DataFrame:
-        """Prominence, key saddle and parent of every peak (elder rule).
+        """Prominence, key saddle and island parent of every peak (elder rule).
 
         Returns a DataFrame aligned with ``peaks.index`` with columns ``prominence``
         (metres), ``key_saddle`` (saddle id, -1 for the highest peak of each connected
         part of the tree, whose prominence is its elevation as in the paper) and
-        ``parent`` (the highest peak on the other side of the key saddle, -1 for roots).
+        ``island_parent`` (the highest peak on the other side of the key saddle, -1 for
+        roots; see :meth:`parents` for the line and prominence parents).
         """
         self.validate(check_elevations=False)
         a, b, s = self._edge_arrays()
@@ -123,7 +124,7 @@ class DivideTree:
         prom = pz.copy()
         prom[has] = pz[has] - sz[key_saddle[has]]
         return pd.DataFrame(
-            {"prominence": prom, "key_saddle": key_saddle, "parent": parent}, index=self.peaks.index
+            {"prominence": prom, "key_saddle": key_saddle, "island_parent": parent}, index=self.peaks.index
         )
 
     def prominence(self) -> np.ndarray:
@@ -205,7 +206,7 @@ class DivideTree:
 
         Removed peaks are absorbed into the neighbour across their highest saddle, so
         the bottleneck (highest) saddle between any two kept peaks is unchanged and
-        every kept peak keeps its prominence, key saddle and parent. Roots (highest
+        every kept peak keeps its prominence, key saddle and island parent. Roots (highest
         peak of each connected part) are kept when their elevation reaches the
         threshold. Saddles not used by the pruned ridges are dropped; ids are
         renumbered in their previous order.

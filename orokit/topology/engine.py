@@ -206,8 +206,13 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     s_cols = np.where(has_saddle, ks % W, -1)
     sx, sy = xy(s_rows, s_cols)
     s_elev = core.key_saddle_z
-    has_parent = core.parent >= 0
-    pidx = np.maximum(core.parent, 0)
+
+    def cell_of(ids):
+        """row and col of peak ids (-1 for none)."""
+        has = ids >= 0
+        idx = np.maximum(ids, 0)
+        return np.where(has, rows[idx] if n else 0, -1), np.where(has, cols[idx] if n else 0, -1)
+
     peaks = pd.DataFrame(
         {
             "row": rows,
@@ -223,9 +228,15 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
             "saddle_x": np.where(has_saddle, sx, np.nan),
             "saddle_y": np.where(has_saddle, sy, np.nan),
             "saddle_elevation": s_elev,
-            "parent": core.parent,
-            "parent_row": np.where(has_parent, rows[pidx] if n else 0, -1),
-            "parent_col": np.where(has_parent, cols[pidx] if n else 0, -1),
+            "island_parent": core.parent,
+            "island_parent_row": cell_of(core.parent)[0],
+            "island_parent_col": cell_of(core.parent)[1],
+            "line_parent": -1,
+            "line_parent_row": -1,
+            "line_parent_col": -1,
+            "prominence_parent": -1,
+            "prominence_parent_row": -1,
+            "prominence_parent_col": -1,
             "dominance": np.where(elev > 0, core.prominence / np.where(elev > 0, elev, 1.0), np.nan),
             "isolation": np.nan,
             "isolation_row": -1,
@@ -284,6 +295,12 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
         crs,
         {"units": "m"},
     )
+    if n:
+        parents = tree.parents()
+        for what in ("line_parent", "prominence_parent"):
+            ids = parents[what].to_numpy(np.int64)
+            peaks[what] = ids
+            peaks[f"{what}_row"], peaks[f"{what}_col"] = cell_of(ids)
     peaks_gdf = gpd.GeoDataFrame(peaks, geometry=gpd.points_from_xy(x, y), crs=crs)
     saddles_gdf = gpd.GeoDataFrame(saddles[SADDLE_COLUMNS], geometry=gpd.points_from_xy(s_x, s_y), crs=crs)
     validate_peak_table(peaks_gdf)

@@ -59,8 +59,10 @@ def test_symmetries_map_peaks_and_saddles_without_ties(z, sym):
 def test_adding_a_constant(z, c):
     a, b = _peaks(z), _peaks(z + np.float32(c))
     assert a["row"].tolist() == b["row"].tolist() and a["col"].tolist() == b["col"].tolist()
-    root = a["parent"].to_numpy() == -1
-    np.testing.assert_array_equal(b["parent"].to_numpy() == -1, root)
+    root = a["island_parent"].to_numpy() == -1
+    np.testing.assert_array_equal(b["island_parent"].to_numpy() == -1, root)
+    for col in ("island_parent", "line_parent"):
+        assert a[col].tolist() == b[col].tolist()
     np.testing.assert_allclose(b["prominence"].to_numpy()[~root], a["prominence"].to_numpy()[~root], atol=1e-3)
     np.testing.assert_allclose(b["prominence"].to_numpy()[root], a["prominence"].to_numpy()[root] + c, atol=1e-3)
 
@@ -83,7 +85,8 @@ def test_strictly_increasing_map_keeps_cells(z, data):
     mapped = z.copy()
     for old, nv in zip(levels, new.astype(np.float32)):
         mapped[z == old] = nv
-    cols = ["row", "col", "saddle_row", "saddle_col", "parent", "parent_row", "parent_col"]
+    cols = ["row", "col", "saddle_row", "saddle_col", "island_parent", "island_parent_row", "island_parent_col",
+            "line_parent", "line_parent_row", "line_parent_col"]
     a, b = _peaks(z), _peaks(mapped)
     assert a[cols].to_numpy().tolist() == b[cols].to_numpy().tolist()
 
@@ -94,7 +97,7 @@ def test_pruning_keeps_survivors(z, eps):
     full, pruned = _peaks(z, 0.0), _peaks(z, eps)
     key = ["row", "col"]
     kept = full[full["prominence"] >= eps]
-    cols = ["row", "col", "prominence", "saddle_row", "saddle_col", "saddle_elevation", "parent_row", "parent_col"]
+    cols = ["row", "col", "prominence", "saddle_row", "saddle_col", "saddle_elevation", "island_parent_row", "island_parent_col"]
     np.testing.assert_array_equal(
         kept.sort_values(key)[cols].to_numpy(float), pruned.sort_values(key)[cols].to_numpy(float)
     )
@@ -108,7 +111,7 @@ def _check_tree(z, eps):
     np.testing.assert_array_equal(tree.peaks["elevation"].to_numpy(float), peaks["elevation"].to_numpy(float))
     table = tree.prominence_table()
     np.testing.assert_allclose(table["prominence"].to_numpy(), peaks["prominence"].to_numpy(), atol=1e-9)
-    np.testing.assert_array_equal(table["parent"].to_numpy() == -1, peaks["parent"].to_numpy() == -1)
+    np.testing.assert_array_equal(table["island_parent"].to_numpy() == -1, peaks["island_parent"].to_numpy() == -1)
     # each non-root peak's key saddle is one of the tree's saddles
     if "row" in tree.saddles.columns:
         tree_saddles = set(zip(tree.saddles["row"].astype(int), tree.saddles["col"].astype(int)))
@@ -124,7 +127,7 @@ def test_tree_spans_each_domain_at_eps0(z):
     peaks, tree = _check_tree(z, 0.0)
     domains = n_domains(np.where(flat_domain_cells(z), np.nan, z))
     assert len(tree.edges) == tree.n_peaks - domains
-    assert int((peaks["parent"] == -1).sum()) == domains
+    assert int((peaks["island_parent"] == -1).sum()) == domains
 
 
 @settings(max_examples=60, deadline=None)

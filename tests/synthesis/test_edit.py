@@ -29,7 +29,7 @@ def check(tree: DivideTree) -> None:
     if "prominence" in tree.peaks.columns:
         fresh = tree.prominence_table()
         assert np.allclose(tree.peaks["prominence"], fresh["prominence"])
-        assert (tree.peaks["parent"].to_numpy() == fresh["parent"].to_numpy()).all()
+        assert (tree.peaks["island_parent"].to_numpy() == fresh["island_parent"].to_numpy()).all()
     table = tree.prominence_table()
     has = table["key_saddle"].to_numpy() >= 0
     assert (table["prominence"].to_numpy()[has] >= 0).all()

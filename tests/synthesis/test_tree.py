@@ -117,19 +117,21 @@ def test_peaks_table_matches_brute_force_oracle(tree):
     assert np.allclose(pt["saddle_elevation"].to_numpy()[keyed], key_h[keyed])
     assert np.isnan(pt["saddle_elevation"].to_numpy()[~keyed]).all()
     assert unique.sum() > 0.9 * tree.n_peaks
-    assert (pt["parent"].to_numpy()[unique] == parent[unique]).all()
+    assert (pt["island_parent"].to_numpy()[unique] == parent[unique]).all()
     z = tree.peaks["elevation"].to_numpy(float)
     assert np.allclose(pt["dominance"].to_numpy(), prom / z)
     # every peak keeps the eps the synthesis enforced, judged by the oracle
     assert (prom[keyed] >= tree.attrs["min_prominence"] - 1e-9).all()
     expected = ["row", "col", "x", "y", "lon", "lat", "elevation", "prominence", "saddle_row", "saddle_col",
-                "saddle_x", "saddle_y", "saddle_elevation", "parent", "parent_row", "parent_col", "dominance",
+                "saddle_x", "saddle_y", "saddle_elevation", "island_parent", "island_parent_row", "island_parent_col",
+                "line_parent", "line_parent_row", "line_parent_col",
+                "prominence_parent", "prominence_parent_row", "prominence_parent_col", "dominance",
                 "isolation", "isolation_row", "isolation_col", "isolation_x", "isolation_y", "prominence_exact",
                 "isolation_exact", "geometry"]
     assert [c for c in expected if c not in pt.columns] == []
     assert pt.index.name == "peak_id"
     root = int(np.argmax(pt["elevation"]))
-    assert pt["parent"].iloc[root] == -1 and np.isnan(pt["saddle_x"].iloc[root])
+    assert pt["island_parent"].iloc[root] == -1 and np.isnan(pt["saddle_x"].iloc[root])
     assert np.isnan(pt["isolation"].iloc[root])
 
 

@@ -54,7 +54,7 @@ def check_against_flooding(z: np.ndarray, outside: str = "unknown") -> None:
         if p.is_root:
             assert row["prominence"] == p.elevation, f"root {p.row, p.col} of\n{z!r}"
             assert np.isnan(row["saddle_elevation"]) and np.isnan(row["saddle_x"])
-            assert row["parent"] == -1
+            assert row["island_parent"] == -1
             assert bool(row["prominence_exact"]) == (outside == "sea")
             continue
         assert row["saddle_elevation"] == p.saddle, f"key saddle of {p.row, p.col} in\n{z!r}"
@@ -65,15 +65,15 @@ def check_against_flooding(z: np.ndarray, outside: str = "unknown") -> None:
         assert z[sr, sc] == p.saddle
         assert p.component[sr, sc]
         # the parent counts higher than P and is reachable above the saddle
-        par = int(row["parent"])
+        par = int(row["island_parent"])
         assert par in rc_of_id, f"parent {par} of {p.row, p.col} is not a peak"
         q = by_rc[rc_of_id[par]]
-        assert (int(row["parent_row"]), int(row["parent_col"])) == (q.row, q.col)
+        assert (int(row["island_parent_row"]), int(row["island_parent_col"])) == (q.row, q.col)
         assert _higher(q, p)
         assert p.component.ravel()[q.rep]
         expected_exact = True if outside == "sea" else p.exact
         assert bool(row["prominence_exact"]) == expected_exact, f"prominence_exact of {p.row, p.col} in\n{z!r}"
-    roots = peaks[peaks["parent"] == -1]
+    roots = peaks[peaks["island_parent"] == -1]
     assert len(roots) == n_domains(np.where(flat_domain_cells(z), np.nan, z))
 
 
@@ -106,7 +106,7 @@ def test_threshold_keeps_exactly_the_prominent(z, eps):
 
 def test_equal_height_peaks_first_in_raster_order_is_higher():
     peaks = _analyze(EQUAL_PEAKS, min_prominence=0).peaks.set_index(["row", "col"])
-    assert peaks.loc[(0, 0), "parent"] == -1
+    assert peaks.loc[(0, 0), "island_parent"] == -1
     assert peaks.loc[(0, 0), "prominence"] == 5
     for rc in [(0, 2), (2, 0), (2, 2)]:
         assert peaks.loc[rc, "prominence"] == 4
@@ -128,7 +128,7 @@ def test_nan_never_carries_a_path():
     z = np.array([[1, 5, np.nan, 6, 1], [1, 2, np.nan, 2, 1]], np.float32)
     peaks = _analyze(z, min_prominence=0).peaks
     assert sorted(peaks["prominence"]) == [5.0, 6.0]
-    assert (peaks["parent"] == -1).all()
+    assert (peaks["island_parent"] == -1).all()
 
 
 def test_root_below_threshold_with_prominent_child():
@@ -136,5 +136,5 @@ def test_root_below_threshold_with_prominent_child():
     # the root is kept as the parent of a kept peak
     z = np.array([[0, -1, 0]], np.float32)
     peaks = _analyze(z, min_prominence=0.5).peaks
-    assert list(zip(peaks["row"], peaks["col"], peaks["prominence"], peaks["parent"])) == [(0, 0, 0.0, -1), (0, 2, 1.0, 0)]
+    assert list(zip(peaks["row"], peaks["col"], peaks["prominence"], peaks["island_parent"])) == [(0, 0, 0.0, -1), (0, 2, 1.0, 0)]
     assert peaks["saddle_elevation"].iloc[1] == -1.0

@@ -16,7 +16,7 @@ import orokit
 
 
 def engine_pairs(peaks) -> tuple[list[tuple[float, float]], list[float]]:
-    root = peaks["parent"].to_numpy() == -1
+    root = peaks["island_parent"].to_numpy() == -1
     e = peaks["elevation"].to_numpy(float)
     s = peaks["saddle_elevation"].to_numpy(float)
     return sorted(zip(e[~root], s[~root])), sorted(e[root].tolist())
@@ -39,7 +39,7 @@ def _roots_of_domains_with_kept_peaks(z: np.ndarray, peaks) -> list[float]:
     from scipy import ndimage
 
     lab, _ = ndimage.label(np.isfinite(z), structure=np.ones((3, 3), bool))
-    nonroot = peaks[peaks["parent"] != -1]
+    nonroot = peaks[peaks["island_parent"] != -1]
     doms = set(lab[nonroot["row"].to_numpy(int), nonroot["col"].to_numpy(int)].tolist())
     return [float(np.nanmax(np.where(lab == d, z, np.nan))) for d in doms]
 

@@ -7,6 +7,7 @@ monkey saddles (one saddle serving several ridges) and forests.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from _parent_oracle import brute_parents, tree_path
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
@@ -103,3 +104,39 @@ def test_equal_elevations_lower_id_is_higher():
     got = tree.parents()
     assert got["line_parent"].tolist() == [-1, 0]  # equal prominence too: the higher one wins
     assert got["prominence_parent"].tolist() == [-1, 0]
+
+
+FT = 0.3048
+REAL_DEMS = [
+    "alaska", "andes-aconcagua", "andes-chile", "appalachians", "gobi", "highlands",
+    "himalaya-annapurna", "himalaya-everest", "karakoram", "norway", "pyrenees", "rockies", "sahara",
+]
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+@pytest.mark.parametrize("name", REAL_DEMS)
+def test_real_dem_parents_match_a_brute_force_walk(real_data, name):
+    """At 100 ft, the parent columns of the peaks table equal the brute-force walk on
+    the analysis' Divide Tree for every peak, and point at peaks of the table."""
+    import orokit
+    from orokit.io.dem import read_dem
+
+    dem = read_dem(real_data(f"dems/{name}.png"), z_units="ft", cell_size=30.87 if name == "pyrenees" else 92.61)
+    result = orokit.analyze(dem, min_prominence=100 * FT, isolation=False)
+    peaks, tree = result.peaks, result.divide_tree
+    assert len(peaks) > 100
+    e = tree.edges[["peak_a", "peak_b", "saddle"]].to_numpy(np.int64)
+    lp, pp, prom, _ = brute_parents(tree.peaks["elevation"], tree.saddles["elevation"], e)
+    np.testing.assert_allclose(np.where(np.isinf(prom), peaks["elevation"], prom), peaks["prominence"], atol=1e-6)
+    np.testing.assert_array_equal(peaks["line_parent"].to_numpy(), lp)
+    np.testing.assert_array_equal(peaks["prominence_parent"].to_numpy(), pp)
+    rows, cols = peaks["row"].to_numpy(), peaks["col"].to_numpy()
+    for what, ids in (("line_parent", lp), ("prominence_parent", pp)):
+        has = ids >= 0
+        np.testing.assert_array_equal(peaks[f"{what}_row"].to_numpy()[has], rows[ids[has]])
+        np.testing.assert_array_equal(peaks[f"{what}_col"].to_numpy()[has], cols[ids[has]])
+        assert (peaks[f"{what}_row"].to_numpy()[~has] == -1).all()
+    # landmass high points have none; every other peak has both
+    root = peaks["island_parent"].to_numpy() == -1
+    assert ((lp == -1) == root).all() and ((pp == -1) == root).all()

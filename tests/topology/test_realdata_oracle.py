@@ -23,7 +23,7 @@ def _cell(name: str) -> float:
 
 
 def _pairs(peaks):
-    root = peaks["parent"].to_numpy() == -1
+    root = peaks["island_parent"].to_numpy() == -1
     e = peaks["elevation"].to_numpy(float)
     s = peaks["saddle_elevation"].to_numpy(float)
     return np.array(sorted(zip(e[~root], s[~root]))).reshape(-1, 2), np.sort(e[root])

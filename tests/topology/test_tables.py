@@ -29,7 +29,7 @@ def test_analysis_tables_follow_the_schema(result):
     assert list(p.columns[: len(PEAK_COLUMNS)]) == PEAK_COLUMNS
     for c in PEAK_SCHEMA:
         assert str(p[c.name].dtype) == c.dtype, c.name
-    roots = p["parent"] == NONE_ID
+    roots = p["island_parent"] == NONE_ID
     assert roots.any() and (p.loc[roots, "saddle_row"] == NONE_ID).all()
     assert p.loc[roots, "saddle_elevation"].isna().all()
 
@@ -43,7 +43,7 @@ def test_validation_names_the_problem(result):
     with pytest.raises(SchemaError, match=r"row \(float64, expected int64\)"):
         validate_peak_table(bad)
     bad = p.copy()
-    bad.loc[bad.index[0], "parent"] = -5
+    bad.loc[bad.index[0], "island_parent"] = -5
     with pytest.raises(SchemaError, match="below the 'none' value -1"):
         validate_peak_table(bad)
     with pytest.raises(SchemaError, match="indexed by 'peak_id'"):
@@ -57,11 +57,12 @@ def test_synthesized_peaks_table_uses_the_same_none(result):
 
     table = peaks_table(result.divide_tree)
     validate_peak_table(table)
-    for c in ("row", "col", "saddle_row", "saddle_col", "parent_row", "parent_col", "isolation_row", "isolation_col"):
+    for c in ("row", "col", "saddle_row", "saddle_col", "island_parent_row", "island_parent_col", "line_parent_row",
+              "line_parent_col", "prominence_parent_row", "prominence_parent_col", "isolation_row", "isolation_col"):
         assert (table[c] == NONE_ID).all(), c
     # the tree alone gives the raster analysis' prominences and parents
     assert np.array_equal(table["prominence"].to_numpy(), result.peaks["prominence"].to_numpy())
-    assert np.array_equal(table["parent"].to_numpy(), result.peaks["parent"].to_numpy())
+    assert np.array_equal(table["island_parent"].to_numpy(), result.peaks["island_parent"].to_numpy())
 
 
 def test_written_tables_are_validated_on_read(result, tmp_path):
