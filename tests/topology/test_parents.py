@@ -140,3 +140,23 @@ def test_real_dem_parents_match_a_brute_force_walk(real_data, name):
     # landmass high points have none; every other peak has both
     root = peaks["island_parent"].to_numpy() == -1
     assert ((lp == -1) == root).all() and ((pp == -1) == root).all()
+
+
+def test_chunked_engine_parents_are_the_walk_on_its_own_tree(make_dem):
+    """--chunks gives the same peaks, prominences and island parents; its line and
+    prominence parents are the exact walk on the chunked engine's own Divide Tree."""
+    import orokit
+
+    rng = np.random.default_rng(7)
+    z = rng.normal(size=(120, 150)).cumsum(0).cumsum(1) + 25 * rng.normal(size=(120, 150))
+    dem = make_dem(z.astype(np.float32))
+    a = orokit.analyze(dem, min_prominence=20.0, isolation=False)
+    b = orokit.analyze(dem, min_prominence=20.0, isolation=False, chunks=40)
+    for col in ("row", "col", "prominence", "island_parent", "saddle_row", "saddle_col"):
+        assert a.peaks[col].tolist() == b.peaks[col].tolist()
+    for result in (a, b):
+        tree = result.divide_tree
+        e = tree.edges[["peak_a", "peak_b", "saddle"]].to_numpy(np.int64)
+        lp, pp, _, _ = brute_parents(tree.peaks["elevation"], tree.saddles["elevation"], e)
+        np.testing.assert_array_equal(result.peaks["line_parent"].to_numpy(), lp)
+        np.testing.assert_array_equal(result.peaks["prominence_parent"].to_numpy(), pp)
