@@ -47,7 +47,7 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
     dataset metadata (key ``orokit_attrs``). The file is written atomically.
 
     ``peaks``: the peaks table of the same tree (same ids, :data:`~orokit.topology.tables.PEAK_SCHEMA`,
-    e.g. ``AnalysisResult.peaks``); its orometry columns (prominence, key saddle, parent,
+    e.g. ``AnalysisResult.peaks``); its orometry columns (prominence, key saddle, parents,
     dominance, isolation, exactness flags) are added to the ``peaks`` layer, so a GIS user
     needs no join. :func:`read_divide_tree_gpkg` leaves them out of the tree (they are
     derived: ``tree.prominence_table()`` recomputes them).

@@ -56,7 +56,7 @@ def test_gpkg_peaks_table_must_match_the_tree(result, tmp_path):
     with pytest.raises(InputError, match="rows but the tree"):
         write_divide_tree_gpkg(result.divide_tree, tmp_path / "t.gpkg", peaks=result.peaks.iloc[:-1])
     with pytest.raises(SchemaError):
-        write_divide_tree_gpkg(result.divide_tree, tmp_path / "t.gpkg", peaks=result.peaks.drop(columns="parent"))
+        write_divide_tree_gpkg(result.divide_tree, tmp_path / "t.gpkg", peaks=result.peaks.drop(columns="island_parent"))
     assert not (tmp_path / "t.gpkg").exists()
 
 
