@@ -52,21 +52,42 @@ def analysis_json(result: AnalysisResult) -> str:
 
 
 def _write(result: AnalysisResult, out: Path) -> Path:
+    from concurrent.futures import ThreadPoolExecutor
+
     from orokit.io.divide_tree_io import write_divide_tree_gpkg
 
     validate_peak_table(result.peaks)
     validate_saddle_table(result.saddles)
     peaks = result.peaks
-    with atomic_path(out / "peaks.csv") as tmp:
-        pd.DataFrame(peaks.drop(columns="geometry")).to_csv(tmp, float_format="%.10g")
-    with atomic_path(out / "peaks.parquet") as tmp:
-        peaks.to_parquet(tmp)
-    with atomic_path(out / "saddles.parquet") as tmp:
-        result.saddles.to_parquet(tmp)
-    tree = result.divide_tree
-    write_divide_tree_gpkg(tree, out / "dividetree.gpkg", peaks=peaks)
+    # each table once, in its own thread (the writers release the GIL)
+    tasks = [
+        lambda: _write_csv(peaks, out / "peaks.csv"),
+        lambda: _write_parquet(peaks, out / "peaks.parquet"),
+        lambda: _write_parquet(result.saddles, out / "saddles.parquet"),
+        lambda: write_divide_tree_gpkg(result.divide_tree, out / "dividetree.gpkg", peaks=peaks),
+    ]
+    with ThreadPoolExecutor(len(tasks)) as pool:
+        futures = [pool.submit(task) for task in tasks]
+        for f in futures:
+            f.result()  # the first failure is raised; analysis.json is then not written
     write_text_atomic(out / "analysis.json", analysis_json(result))
     return out
+
+
+def _write_parquet(frame, path: Path) -> None:
+    with atomic_path(path) as tmp:
+        frame.to_parquet(tmp)
+
+
+def _write_csv(frame, path: Path) -> None:
+    """A (Geo)DataFrame without its geometry as CSV, index first, floats in full precision."""
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    plain = pd.DataFrame(frame.drop(columns="geometry", errors="ignore")).reset_index()
+    table = pa.Table.from_pandas(plain, preserve_index=False)
+    with atomic_path(path) as tmp:
+        pacsv.write_csv(table, tmp)
 
 
 def read_analysis(outdir: PathLike) -> AnalysisResult:

@@ -100,39 +100,59 @@ class _BandReader:
     ndim: int = 2
 
     def _convert(self, raw: NDArray[Any], where: str = "") -> NDArray[np.float32]:
-        valid = np.ones(raw.shape, dtype=bool)
-        if self.nodata is not None:
-            if np.isnan(self.nodata):
-                valid &= ~np.isnan(raw)
+        # float32 metres are converted in place (a copy would double the peak memory);
+        # other inputs by row blocks, so the float64 intermediate stays small
+        inplace = raw.dtype == np.float32 and self.factor == 1.0 and self.offset_m == 0.0
+        out = raw if inplace else np.empty(raw.shape, np.float32)
+        n_bad = 0
+        bad_values = []
+        step = max(1, (1 << 22) // max(1, raw.shape[-1]))
+        for r0 in range(0, raw.shape[0], step):
+            blk = raw[r0:r0 + step]
+            valid = np.ones(blk.shape, dtype=bool)
+            if self.nodata is not None:
+                if np.isnan(self.nodata):
+                    valid &= ~np.isnan(blk)
+                else:
+                    valid &= blk != _native_sentinel(self.nodata, blk.dtype)
+            if blk.dtype.kind == "f":
+                valid &= np.isfinite(blk)
+            # undeclared void markers (-9999, -32768...) are never terrain: nodata, reported
+            undeclared = None
+            for v in VOID_SENTINELS:
+                if self.nodata is not None and v == self.nodata:
+                    continue
+                native = _native_sentinel(v, blk.dtype)
+                if isinstance(native, np.float64) and blk.dtype.kind in "iu":
+                    continue  # cannot occur in this dtype
+                hit = blk == native
+                undeclared = hit if undeclared is None else (undeclared | hit)
+            if undeclared is not None:
+                undeclared &= valid
+            if inplace:
+                z = blk
             else:
-                valid &= raw != _native_sentinel(self.nodata, raw.dtype)
-        if raw.dtype.kind == "f":
-            valid &= np.isfinite(raw)
-        # undeclared void markers (-9999, -32768...) are never terrain: nodata, reported
-        undeclared = None
-        for v in VOID_SENTINELS:
-            if self.nodata is not None and v == self.nodata:
-                continue
-            native = _native_sentinel(v, raw.dtype)
-            if isinstance(native, np.float64) and raw.dtype.kind in "iu":
-                continue  # cannot occur in this dtype
-            hit = raw == native
-            undeclared = hit if undeclared is None else (undeclared | hit)
-        if undeclared is not None:
-            undeclared &= valid
-        # integer inputs (uint16 PNGs, int16 SRTM with -32768 voids) go through
-        # float64: no overflow, exact for every 32-bit integer value.
-        z = raw.astype(np.float64)
-        if self.factor != 1.0:
-            z *= self.factor
-        if self.offset_m != 0.0:
-            z += self.offset_m
-        implausible = valid & ((z < PLAUSIBLE_MIN_M) | (z > PLAUSIBLE_MAX_M))
-        if undeclared is not None:
-            implausible |= undeclared
-        n_bad = int(np.count_nonzero(implausible))
+                # integer inputs (uint16 PNGs, int16 SRTM with -32768 voids) go through
+                # float64: no overflow, exact for every 32-bit integer value.
+                z = blk.astype(np.float64)
+                if self.factor != 1.0:
+                    z *= self.factor
+                if self.offset_m != 0.0:
+                    z += self.offset_m
+            with np.errstate(invalid="ignore"):
+                implausible = valid & ((z < PLAUSIBLE_MIN_M) | (z > PLAUSIBLE_MAX_M))
+            if undeclared is not None:
+                implausible |= undeclared
+            k = int(np.count_nonzero(implausible))
+            if k:
+                n_bad += k
+                bad_values.append(np.unique(blk[implausible]))
+                valid &= ~implausible
+            z[~valid] = np.nan
+            if not inplace:
+                out[r0:r0 + step] = z
         if n_bad:
-            values = np.unique(raw[implausible])
+            values = np.unique(np.concatenate(bad_values))
             shown = ", ".join(f"{v:g}" for v in values[:3]) + (", ..." if len(values) > 3 else "")
             warnings.warn(
                 f"{self.path}{where}: {n_bad} cells hold void markers or values beyond any elevation on Earth "
@@ -142,9 +162,7 @@ class _BandReader:
                 OrokitWarning,
                 stacklevel=3,
             )
-            valid &= ~implausible
-        z[~valid] = np.nan
-        return z.astype(np.float32)
+        return out
 
     def read(self, window: Window | None = None, out_shape: tuple[int, int] | None = None) -> NDArray[np.float32]:
         where = "" if window is None else f" (rows {window.row_off}:{window.row_off + window.height}, cols {window.col_off}:{window.col_off + window.width})"
@@ -500,10 +518,11 @@ def read_dem(
         "long_name": "elevation",
     }
     dem = xr.DataArray(data, dims=("y", "x"), coords={"y": y, "x": x}, name="elevation", attrs=attrs)
+    # in place: rioxarray's default copies the whole array (deeply) at each call
     if eff_crs is not None:
-        dem = dem.rio.write_crs(eff_crs)
-    dem = dem.rio.write_transform(transform)
-    dem = dem.rio.write_nodata(np.nan, encoded=False)
+        dem.rio.write_crs(eff_crs, inplace=True)
+    dem.rio.write_transform(transform, inplace=True)
+    dem.rio.write_nodata(np.nan, encoded=False, inplace=True)
     logger.info(
         "read %s: %d x %d cells, %s, units %s -> m%s",
         path, height, width, eff_crs.to_string() if eff_crs is not None else "local metric grid", zu,

@@ -37,6 +37,11 @@ def _json_attrs(attrs: dict) -> dict:
     return out
 
 
+#: how every layer is written: through GDAL's Arrow interface, without spatial index (GIS tools
+#: build one on demand; it would double the writing time)
+_GPKG = {"driver": "GPKG", "engine": "pyogrio", "use_arrow": True, "layer_options": {"SPATIAL_INDEX": "NO"}}
+
+
 def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFrame | None = None) -> Path:
     """Write ``tree`` as a GeoPackage with layers ``peaks``, ``saddles`` and ``ridges``.
 
@@ -78,16 +83,16 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
     with atomic_path(path) as tmp, warnings.catch_warnings():
         # a tree on a local grid has no CRS: that is recorded in attrs, not a problem
         warnings.filterwarnings("ignore", message="'crs' was not provided", category=UserWarning)
-        points(peak_layer, "peak_id").to_file(tmp, layer="peaks", driver="GPKG", engine="pyogrio")
-        points(tree.saddles, "saddle_id").to_file(tmp, layer="saddles", driver="GPKG", engine="pyogrio")
+        points(peak_layer, "peak_id").to_file(tmp, layer="peaks", **_GPKG)
+        points(tree.saddles, "saddle_id").to_file(tmp, layer="saddles", **_GPKG)
         ridges = tree.ridges()
         if ridges.crs is None and tree.crs is not None:
             ridges = ridges.set_crs(tree.crs)
-        ridges.to_file(tmp, layer="ridges", driver="GPKG", engine="pyogrio", geometry_type="LineString")
+        ridges.to_file(tmp, layer="ridges", geometry_type="LineString", **_GPKG)
         for key in ("runoffs", "basin_saddles"):
             extra = tree.attrs.get(key)
             if isinstance(extra, pd.DataFrame):
-                points(extra, "point_id").to_file(tmp, layer=key, driver="GPKG", engine="pyogrio", geometry_type="Point")
+                points(extra, "point_id").to_file(tmp, layer=key, geometry_type="Point", **_GPKG)
         import pyogrio
 
         # attrs go to a small non-spatial table (portable across GDAL versions)

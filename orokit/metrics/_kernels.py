@@ -203,7 +203,7 @@ def block_pyramid(block):
 @njit(cache=True, nogil=True)
 def nan_pyramid(block):
     """Pyramid of "holds a NaN" (1.0) of a block."""
-    return build_pyramid(np.where(np.isnan(block), 1.0, 0.0))
+    return build_pyramid(np.isnan(block).astype(np.float32))
 
 
 @njit(cache=True, parallel=True)

@@ -92,10 +92,15 @@ def isolation(z: np.ndarray, rows: np.ndarray, cols: np.ndarray, *, transform, c
     H, W = z.shape
     pz = z[rows, cols].astype(np.float64)
     inf = np.full(rows.size, np.inf)
-    best, cand = _kernels.nearest_in_block(z, rows, cols, pz, inf, *metric.args(), metric.slack, metric.ncand)
     edge = _kernels.outside_distance(rows, cols, H, W, *metric.args())
-    nan_d = _kernels.nearest_nan_in_block(z, rows, cols, np.minimum(edge, best), *metric.args())
-    edge = np.minimum(edge, nan_d)
+    if np.isnan(z).any():
+        best, cand = _kernels.nearest_in_block(z, rows, cols, pz, inf, *metric.args(), metric.slack, metric.ncand)
+        nan_d = _kernels.nearest_nan_in_block(z, rows, cols, np.minimum(edge, best), *metric.args())
+        edge = np.minimum(edge, nan_d)
+    else:
+        # no nodata: the pyramid of z itself, in z's dtype (no NaN-free copy, no NaN pyramid)
+        best, cand = _kernels.nearest_query(z, *_kernels.build_pyramid(z), rows, cols, pz, inf, *metric.args(),
+                                            metric.slack, metric.ncand)
     return finish_isolation(metric, rows, cols, best, cand, W, edge)
 
 

@@ -14,7 +14,7 @@ engine at several million cells per second.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 _NEIGHBOURS_8 = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 # each unordered neighbour pair once: E, SW, S, SE
@@ -113,6 +113,162 @@ def label_basins(ptr):
         for t in range(top):
             label[stack[t]] = lab
     return label, peak_cell
+
+
+@njit(cache=True, parallel=True)
+def ascent_labels(z, lab):
+    """Basins of steepest ascent of a whole raster, in place and in parallel row blocks.
+
+    Same pointers as :func:`steepest_ascent` on the raster padded with NaN (outside the
+    raster counts as nodata), without the padded copy. ``lab`` (int32 or int64, size
+    ``z.size``) first holds each cell's pointer, then, chain by chain, the encoded id
+    ``-2 - k`` of the maximum it reaches; threads may meet on a chain, and a cell holds
+    either a pointer up its chain or that chain's final id, so every reader sees a
+    valid state. On return ``lab`` holds basin ids 0..n-1 (maxima in raster order) and
+    -1 for NaN cells. Returns the flat cell of each maximum.
+    """
+    H, W = z.shape
+    nb = min(H, 256)
+    counts = np.zeros(nb + 1, np.int64)
+    for b in prange(nb):
+        r0 = b * H // nb
+        r1 = (b + 1) * H // nb
+        cnt = 0
+        for r in range(r0, r1):
+            for c in range(W):
+                i = r * W + c
+                zi = z[r, c]
+                if zi != zi:
+                    lab[i] = -1
+                    continue
+                best = i
+                bz = zi
+                for d in _NEIGHBOURS_8:
+                    rr = r + d[0]
+                    cc = c + d[1]
+                    if rr < 0 or rr >= H or cc < 0 or cc >= W:
+                        continue
+                    zn = z[rr, cc]
+                    if zn != zn:
+                        continue
+                    j = rr * W + cc
+                    if zn > bz or (zn == bz and j < best):
+                        best = j
+                        bz = zn
+                if best == i:
+                    lab[i] = -2
+                    cnt += 1
+                else:
+                    lab[i] = best
+        counts[b + 1] = cnt
+    for b in range(nb):
+        counts[b + 1] += counts[b]
+    peak_cell = np.empty(counts[nb], np.int64)
+    for b in prange(nb):
+        k = counts[b]
+        for i in range((b * H // nb) * W, ((b + 1) * H // nb) * W):
+            if lab[i] == -2:
+                lab[i] = -2 - k
+                peak_cell[k] = i
+                k += 1
+    for b in prange(nb):
+        stack = np.empty(1024, np.int64)
+        for i in range((b * H // nb) * W, ((b + 1) * H // nb) * W):
+            v = lab[i]
+            if v < 0:
+                continue
+            top = 0
+            j = i
+            while v >= 0:
+                if top == stack.size:
+                    bigger = np.empty(stack.size * 2, np.int64)
+                    bigger[:top] = stack[:top]
+                    stack = bigger
+                stack[top] = j
+                top += 1
+                j = v
+                v = lab[j]
+            for t in range(top):
+                lab[stack[t]] = v
+    for b in prange(nb):
+        for i in range((b * H // nb) * W, ((b + 1) * H // nb) * W):
+            v = lab[i]
+            if v <= -2:
+                lab[i] = -2 - v
+    return peak_cell
+
+
+@njit(cache=True, nogil=True)
+def basin_graph(z, lab, npk, r0, r1):
+    """Border maxima, minima and highest passes of the basins, over rows ``r0:r1``.
+
+    One pass of :func:`basin_border_max` (a border cell touches the raster edge or a
+    NaN cell), :func:`basin_min` and :func:`basin_passes` (cell pairs whose first cell
+    is in ``r0:r1``), so row stripes can run in parallel threads and be merged (see
+    ``engine.basin_graph``). Returns ``(bmax, nmin, ea, eb, ec)``.
+    """
+    H, W = z.shape
+    zf = z.ravel()
+    bmax = np.full(npk, -np.inf)
+    nmin = np.full(npk, np.inf)
+    size = 1024
+    while size < 8 * npk * (r1 - r0) // max(H, 1) + 1024:
+        size *= 2
+    keys = np.full(size, -1, np.int64)
+    vals = np.empty(size, np.int64)
+    count = 0
+    for r in range(r0, r1):
+        for c in range(W):
+            i = r * W + c
+            la = lab[i]
+            if la < 0:
+                continue
+            zi = zf[i]
+            if zi < nmin[la]:
+                nmin[la] = zi
+            if zi > bmax[la]:
+                isb = r == 0 or r == H - 1 or c == 0 or c == W - 1
+                if not isb:
+                    for d in _NEIGHBOURS_8:
+                        if lab[(r + d[0]) * W + c + d[1]] < 0:
+                            isb = True
+                            break
+                if isb:
+                    bmax[la] = zi
+            for d in _FORWARD_4:
+                rr = r + d[0]
+                cc = c + d[1]
+                if rr >= H or cc < 0 or cc >= W:
+                    continue
+                j = rr * W + cc
+                lb = lab[j]
+                if lb < 0 or lb == la:
+                    continue
+                p = j if above(zi, i, zf[j], j) else i
+                if la < lb:
+                    key = la * np.int64(npk) + lb
+                else:
+                    key = lb * np.int64(npk) + la
+                count += _insert(keys, vals, key, p, zf)
+                if 2 * count > keys.size:
+                    old_k = keys
+                    old_v = vals
+                    keys = np.full(old_k.size * 2, -1, np.int64)
+                    vals = np.empty(old_k.size * 2, np.int64)
+                    for s in range(old_k.size):
+                        if old_k[s] != -1:
+                            _insert(keys, vals, old_k[s], old_v[s], zf)
+    ea = np.empty(count, np.int64)
+    eb = np.empty(count, np.int64)
+    ec = np.empty(count, np.int64)
+    k = 0
+    for s in range(keys.size):
+        if keys[s] != -1:
+            ea[k] = keys[s] // npk
+            eb[k] = keys[s] % npk
+            ec[k] = vals[s]
+            k += 1
+    return bmax, nmin, ea, eb, ec
 
 
 @njit(cache=True, nogil=True)

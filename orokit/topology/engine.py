@@ -64,27 +64,64 @@ def steepest_ascent_basins(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     of every cell in raster order, and the flat cell of each basin's maximum. Ties break
     as in :func:`orometry` (elevation, then raster order; earlier = higher).
     """
-    ptr, _ = _kernels.steepest_ascent(np.pad(z, 1, constant_values=np.nan))
-    return _kernels.label_basins(ptr)
+    label = np.empty(z.size, np.int64)
+    max_cell = _kernels.ascent_labels(np.ascontiguousarray(z), label)
+    return label, max_cell
+
+
+def _threads() -> int:
+    import numba
+
+    return int(numba.get_num_threads())
+
+
+def basin_graph(z: np.ndarray, label: np.ndarray, n_max: int) -> tuple[np.ndarray, ...]:
+    """Border maxima, minima and highest passes of the basins, in parallel row stripes.
+
+    Returns ``(bmax, nmin, ea, eb, ec)`` (see :func:`_kernels.basin_graph`); each basin
+    pair appears once, with the highest of its passes in the total order.
+    """
+    H = z.shape[0]
+    k = max(1, min(_threads(), H // 64))
+    bounds = [(t * H // k, (t + 1) * H // k) for t in range(k)]
+    if k == 1:
+        return _kernels.basin_graph(z, label, n_max, 0, H)
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(k) as pool:
+        parts = list(pool.map(lambda b: _kernels.basin_graph(z, label, n_max, b[0], b[1]), bounds))
+    bmax = np.maximum.reduce([p[0] for p in parts])
+    nmin = np.minimum.reduce([p[1] for p in parts])
+    ea, eb, ec = (np.concatenate([p[i] for p in parts]) for i in (2, 3, 4))
+    # a pair seen in several stripes: keep its highest pass (elevation, then raster order)
+    key = ea * np.int64(n_max) + eb
+    zf = z.ravel()
+    order = np.lexsort((ec, -zf[ec], key))
+    key = key[order]
+    first = np.ones(key.size, bool)
+    first[1:] = key[1:] != key[:-1]
+    sel = order[first]
+    return bmax, nmin, ea[sel], eb[sel], ec[sel]
 
 
 def orometry(z: np.ndarray, *, min_prominence: float, outside: str = "unknown") -> Orometry:
-    """Exact peaks, prominences and pruned Divide Tree of a 2-D array (NaN = nodata)."""
+    """Exact peaks, prominences and pruned Divide Tree of a 2-D array (NaN = nodata).
+
+    Uses every numba thread (``NUMBA_NUM_THREADS``); results do not depend on it.
+    """
     if z.ndim != 2 or z.size == 0:
         raise InputError(f"the DEM must be a non-empty 2-D array; got shape {z.shape}")
     if np.isinf(z).any():
         raise InputError("the DEM contains infinite values; mark nodata as NaN")
+    z = np.ascontiguousarray(z)
     zf = z.ravel()
-    ptr, border = _kernels.steepest_ascent(np.pad(z, 1, constant_values=np.nan))
-    label, max_cell = _kernels.label_basins(ptr)
-    del ptr
+    # basin ids in place of the pointers: 4 bytes per cell when they fit
+    label = np.empty(z.size, np.int32 if z.size < 2**31 - 2 else np.int64)
+    max_cell = _kernels.ascent_labels(z, label)
     n_max = int(max_cell.size)
     if n_max == 0:
         raise InputError("the DEM has no valid cells (all nodata)")
-    border_z = _kernels.basin_border_max(z, label, border, n_max)
-    del border
-    nmin = _kernels.basin_min(z, label, n_max)
-    ea, eb, ec = _kernels.basin_passes(z, label, n_max)
+    border_z, nmin, ea, eb, ec = basin_graph(z, label, n_max)
     del label
     return finalize_graph(
         node_key=max_cell,
@@ -129,7 +166,9 @@ def finalize_graph(
     from scipy.sparse.csgraph import connected_components
 
     n = node_key.size
-    order = np.lexsort((ekey, -ez))
+    # canonical order: saddle from high to low, then the basin pair (monkey saddles list
+    # several pairs at one cell; their order must not depend on how they were found)
+    order = np.lexsort((eb, ea, ekey, -ez))
     ea, eb, ez, ekey = ea[order], eb[order], ez[order], ekey[order]
     bmax = np.full(n, -np.inf) if outside == "sea" else node_bmax
     in_tree, key_edge, parent, touched = _kernels.kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, bmax)

@@ -1,0 +1,69 @@
+"""The in-memory engine's parallel kernels equal the sequential (tiled-engine) kernels,
+and results do not depend on the number of threads."""
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+
+from orokit.topology import _kernels, engine
+
+
+def _sequential(z):
+    ptr, border = _kernels.steepest_ascent(np.pad(z, 1, constant_values=np.nan))
+    label, max_cell = _kernels.label_basins(ptr)
+    n = max_cell.size
+    ea, eb, ec = _kernels.basin_passes(z, label, n)
+    return (label, max_cell, _kernels.basin_border_max(z, label, border, n), _kernels.basin_min(z, label, n),
+            sorted(zip(ea.tolist(), eb.tolist(), ec.tolist())))
+
+
+def _grids():
+    rng = np.random.default_rng(13)
+    for t in range(60):
+        h = int(rng.integers(1, 300 if t % 4 == 0 else 40))
+        w = int(rng.integers(1, 40))
+        z = rng.integers(0, int(rng.integers(1, 6)), (h, w)).astype(np.float32 if t % 2 else np.float64)
+        if t % 3 == 0:
+            z[rng.random(z.shape) < 0.2] = np.nan
+        if not np.isnan(z).all():
+            yield z
+
+
+@pytest.mark.parametrize("label_dtype", [np.int32, np.int64])
+def test_parallel_kernels_equal_sequential(label_dtype):
+    n_tall = 0
+    for z in _grids():
+        label, max_cell, bmax, nmin, edges = _sequential(z)
+        lab = np.empty(z.size, label_dtype)
+        got_max = _kernels.ascent_labels(z, lab)
+        np.testing.assert_array_equal(lab, label)
+        np.testing.assert_array_equal(got_max, max_cell)
+        gb, gn, ea, eb, ec = engine.basin_graph(z, lab, max_cell.size)
+        np.testing.assert_array_equal(gb, bmax)
+        np.testing.assert_array_equal(gn, nmin)
+        assert sorted(zip(ea.tolist(), eb.tolist(), ec.tolist())) == edges
+        n_tall += z.shape[0] >= 128
+    assert n_tall >= 5  # several grids are split into row stripes
+
+
+def _fields(core):
+    return {k: v for k, v in vars(core).items()}
+
+
+def test_orometry_does_not_depend_on_threads():
+    rng = np.random.default_rng(5)
+    z = rng.integers(0, 40, (400, 150)).astype(np.float64)
+    z[rng.random(z.shape) < 0.05] = np.nan
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = _fields(engine.orometry(z, min_prominence=3.0))
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        many = _fields(engine.orometry(z, min_prominence=3.0))
+    finally:
+        numba.set_num_threads(before)
+    assert one.keys() == many.keys()
+    for k in one:
+        np.testing.assert_array_equal(np.asarray(one[k]), np.asarray(many[k]), err_msg=k)
+    assert one["peak_cell"].size > 50
