@@ -1,16 +1,17 @@
-"""Scaling benchmark of the chunked (dask) engine (issue 5).
+"""Scaling benchmark of the chunked (dask) engine (issues 5 and 13).
 
-Mosaics of the 648 x 648 real DEMs (mirrored so seams are continuous) of n x n tiles,
-written as one GeoTIFF per tile plus a VRT, analysed with ``orokit.analyze(...,
-chunks=C)`` reading the VRT lazily. Every measurement runs in a fresh subprocess
-so its peak resident memory (all threads) is its own. Prints M cells/s, peak RSS,
-and the time and memory ratio of chunked vs in-memory on the largest raster both
-handle; the chunked and in-memory peak tables are compared for equality.
+Mosaics of n x n copies of a 648 x 648 real DEM (mirrored so seams are continuous):
+the four mirror images are written once as GeoTIFF tiles and a VRT places them n * n
+times, so nothing large is written (49 x 49: 1.0 G cells, 98 x 98: 4.0 G cells).
+Each is analysed with ``orokit.analyze(read_dem(VRT, chunks=C), chunks=C)``, isolation
+on, in a fresh subprocess so its peak resident memory (all threads) is its own.
+Prints M cells/s, peak RSS, the summed time of chunk tasks and of merge tasks, time per
+cell against the in-memory run of the largest mosaic both handle, and (``--chunk-sweep``)
+the merge cost against the number of chunks; chunked and in-memory peak tables are
+compared for equality.
 
-Reference on this machine (issue 5): Kirmse's C++ program, 60 M cells in 22.8 s
-single-threaded with 850 MB as one tile.
-
-Run:  .venv/bin/python benchmarks/scaling.py [--sizes 6 12 24] [--chunks 2048] [--workdir /tmp/orokit-scaling]
+Run:  .venv/bin/python benchmarks/scaling.py [--sizes 6 12 49 98] [--chunks 2048]
+          [--chunk-sweep 12 512 1024 2048] [--workdir /tmp/orokit-scaling]
 """
 from __future__ import annotations
 
@@ -27,39 +28,89 @@ FT = 0.3048
 
 
 def write_mosaic(n: int, workdir: Path, dem_name: str) -> Path:
-    """n x n GeoTIFF tiles + VRT; returns the VRT path (reused when present)."""
+    """VRT of an n x n mosaic of a real DEM (mirrored, continuous seams); returns its path.
+
+    Only the four mirror images of the DEM are written, as GeoTIFF tiles; the VRT
+    places them n * n times, so a 4 G-cell mosaic needs ~7 MB of disk (plus the VRT).
+    """
     import numpy as np
     import rasterio
-    from rasterio.transform import from_origin
+    from affine import Affine
 
     from orokit.data import open_dataset_dem
-    from orokit.io.mosaic import build_vrt
 
-    folder = workdir / f"mosaic_{n}x{n}_{dem_name}"
-    vrt = folder / "mosaic.vrt"
-    if vrt.exists():
-        return vrt
-    folder.mkdir(parents=True, exist_ok=True)
-    z = open_dataset_dem(dem_name).values.astype("float32")
-    h, w = z.shape
+    folder = workdir / f"tiles_{dem_name}"
+    vrt = workdir / f"mosaic_{n}x{n}_{dem_name}.vrt"
+    z = None
     res = 92.61
-    for i in range(n):
-        for j in range(n):
-            t = z[:: (1 if i % 2 == 0 else -1), :: (1 if j % 2 == 0 else -1)]
+    paths = {}
+    for fi in (0, 1):
+        for fj in (0, 1):
+            path = folder / f"tile_{fi}{fj}.tif"
+            paths[fi, fj] = path
+            if path.exists():
+                continue
+            if z is None:
+                folder.mkdir(parents=True, exist_ok=True)
+                z = open_dataset_dem(dem_name).values.astype("float32")
+            t = z[:: (-1 if fi else 1), :: (-1 if fj else 1)]
             with rasterio.open(
-                folder / f"tile_{i:03d}_{j:03d}.tif", "w", driver="GTiff", width=w, height=h, count=1,
-                dtype="float32", crs="EPSG:32645", transform=from_origin(300000 + j * w * res, 4000000 - i * h * res, res, res),
+                path, "w", driver="GTiff", width=t.shape[1], height=t.shape[0], count=1, dtype="float32",
+                crs="EPSG:32645", transform=Affine(res, 0.0, 300000.0, 0.0, -res, 4000000.0),
                 tiled=True, blockxsize=256, blockysize=256,
             ) as ds:
                 ds.write(np.ascontiguousarray(t), 1)
-    return build_vrt(sorted(folder.glob("tile_*.tif")), vrt)
+                ds.set_band_unit(1, "m")
+    if vrt.exists():
+        return vrt
+    with rasterio.open(paths[0, 0]) as ds:
+        h, w = ds.height, ds.width
+    sources = []
+    for i in range(n):
+        for j in range(n):
+            sources.append(
+                f'    <SimpleSource><SourceFilename relativeToVRT="0">{paths[i % 2, j % 2]}</SourceFilename>'
+                f'<SourceBand>1</SourceBand><SrcRect xOff="0" yOff="0" xSize="{w}" ySize="{h}"/>'
+                f'<DstRect xOff="{j * w}" yOff="{i * h}" xSize="{w}" ySize="{h}"/></SimpleSource>'
+            )
+    srs = "EPSG:32645"
+    text = (
+        f'<VRTDataset rasterXSize="{n * w}" rasterYSize="{n * h}">\n  <SRS>{srs}</SRS>\n'
+        f'  <GeoTransform>300000.0, {res}, 0.0, 4000000.0, 0.0, {-res}</GeoTransform>\n'
+        f'  <VRTRasterBand dataType="Float32" band="1">\n    <UnitType>m</UnitType>\n'
+        + "\n".join(sources) + "\n  </VRTRasterBand>\n</VRTDataset>\n"
+    )
+    tmp = vrt.with_suffix(".vrt.tmp")
+    tmp.write_text(text)
+    tmp.replace(vrt)
+    return vrt
 
 
 def run_one(vrt: str, chunks: int | None, eps: float, out: str | None) -> dict:
-    """One measurement (in a subprocess): analyse, report time and peak RSS."""
+    """One measurement (in a subprocess): analyse, report time, peak RSS and task costs."""
+    import threading
+
     import orokit
     from orokit.io.dem import read_dem
+    from orokit.tiling import engine as tiling_engine
 
+    cost = {"merge_s": 0.0, "merges": 0, "chunk_s": 0.0, "chunks": 0}
+    lock = threading.Lock()
+
+    def timed(fn, what):
+        def wrapper(*a, **k):
+            t = time.perf_counter()
+            try:
+                return fn(*a, **k)
+            finally:
+                with lock:
+                    cost[what + "_s"] += time.perf_counter() - t
+                    cost[what + "s"] += 1
+        return wrapper
+
+    # the engine builds its graph from these module attributes: time every task
+    tiling_engine.merge_summaries = timed(tiling_engine.merge_summaries, "merge")
+    tiling_engine._tile_task = timed(tiling_engine._tile_task, "chunk")
     t0 = time.perf_counter()
     dem = read_dem(vrt, chunks=chunks)
     r = orokit.analyze(dem, min_prominence=eps, chunks=chunks)
@@ -71,11 +122,14 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None) -> dict:
         "seconds": dt,
         "peaks": int(len(r.peaks)),
         "timings": r.attrs["timings_s"],
+        "task_costs": cost,
         "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "load_average_1min": os.getloadavg()[0],
     }
 
 
 def measure(vrt: Path, chunks: int | None, eps: float, out: Path | None = None) -> dict:
+    """:func:`run_one` in a fresh subprocess."""
     cmd = [sys.executable, __file__, "--one", str(vrt), "--eps", str(eps)]
     if chunks:
         cmd += ["--chunks", str(chunks)]
@@ -87,12 +141,15 @@ def measure(vrt: Path, chunks: int | None, eps: float, out: Path | None = None) 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--sizes", type=int, nargs="+", default=[6, 12, 24])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[6, 12, 49],
+                    help="mosaics of n x n DEMs (49: 1.0 G cells, 98: 4.0 G cells)")
     ap.add_argument("--chunks", type=int, default=1024)
     ap.add_argument("--eps-ft", type=float, default=100.0)
     ap.add_argument("--dem", default="karakoram")
     ap.add_argument("--workdir", type=Path, default=Path("/tmp/orokit-scaling"))
     ap.add_argument("--in-memory-max", type=int, default=12, help="largest mosaic also run in memory")
+    ap.add_argument("--chunk-sweep", type=int, nargs="+", default=None, metavar="N CHUNK",
+                    help="mosaic size N then chunk sizes: merge cost against the number of chunks")
     ap.add_argument("--one")
     ap.add_argument("--eps", type=float)
     ap.add_argument("--out")
@@ -106,7 +163,9 @@ def main() -> None:
     eps = args.eps_ft * FT
     print(f"chunked engine, chunks {args.chunks}^2, eps {args.eps_ft:g} ft, {os.cpu_count()} cores; "
           f"GeoTIFF tiles + VRT read lazily")
-    print(f"{'mosaic':>8} {'M cells':>8} {'mode':>10} {'peaks':>8} {'seconds':>8} {'Mc/s':>6} {'peak RSS MB':>11}")
+    print(f"{'mosaic':>8} {'M cells':>8} {'mode':>10} {'peaks':>8} {'seconds':>8} {'Mc/s':>6} {'peak RSS MB':>11} "
+          f"{'chunks':>6} {'chunk s':>8} {'merges':>6} {'merge s':>8} {'load':>5}")
+    print("(chunk s / merge s: summed task seconds over all threads)")
     rows = {}
     for n in args.sizes:
         vrt = write_mosaic(n, args.workdir, args.dem)
@@ -115,8 +174,11 @@ def main() -> None:
             out = args.workdir / f"peaks_{n}_{mode}.parquet"
             m = measure(vrt, ch, eps, out)
             rows[n, mode] = m
+            tc = m["task_costs"]
+            merge = (f"{tc['chunks']:>6d} {tc['chunk_s']:>8.1f} {tc['merges']:>6d} {tc['merge_s']:>8.1f}"
+                     if tc["chunks"] else f"{'':>6} {'':>8} {'':>6} {'':>8}")
             print(f"{n:>3}x{n:<4} {m['cells'] / 1e6:>8.1f} {mode:>10} {m['peaks']:>8d} {m['seconds']:>8.1f} "
-                  f"{m['cells'] / m['seconds'] / 1e6:>6.1f} {m['rss_mb']:>11.0f}")
+                  f"{m['cells'] / m['seconds'] / 1e6:>6.1f} {m['rss_mb']:>11.0f} {merge} {m['load_average_1min']:>5.1f}")
     summary = {"chunks": args.chunks, "eps_ft": args.eps_ft, "dem": args.dem,
                "runs": [{"mosaic": n, "mode": mode, **m} for (n, mode), m in rows.items()]}
     both = [n for n in args.sizes if (n, "in-memory") in rows]
@@ -131,6 +193,28 @@ def main() -> None:
         summary.update({"time_ratio_chunked_vs_in_memory": c["seconds"] / i["seconds"],
                         "memory_ratio_chunked_vs_in_memory": c["rss_mb"] / i["rss_mb"],
                         "tables_identical": bool(a.equals(b))})
+    if both:
+        base = rows[max(both), "in-memory"]
+        per_cell = base["seconds"] / base["cells"]
+        for n in args.sizes:
+            c = rows[n, "chunked"]
+            ratio = (c["seconds"] / c["cells"]) / per_cell
+            print(f"{n}x{n} chunked: time per cell {ratio:.2f}x the in-memory {max(both)}x{max(both)} run "
+                  f"(target <= 1.3), peak RSS {c['rss_mb'] / 1024:.2f} GB (target < 2)")
+            c["time_per_cell_vs_in_memory"] = ratio
+    if args.chunk_sweep:
+        n = args.chunk_sweep[0]
+        vrt = write_mosaic(n, args.workdir, args.dem)
+        print(f"merge cost against the number of chunks ({n}x{n} mosaic):")
+        print(f"{'chunk':>6} {'chunks':>6} {'merges':>6} {'merge s':>8} {'chunk s':>8} {'total s':>8} {'RSS MB':>7}")
+        sweep = []
+        for ch in args.chunk_sweep[1:]:
+            m = measure(vrt, ch, eps)
+            tc = m["task_costs"]
+            print(f"{ch:>6} {tc['chunks']:>6} {tc['merges']:>6} {tc['merge_s']:>8.2f} {tc['chunk_s']:>8.2f} "
+                  f"{m['seconds']:>8.1f} {m['rss_mb']:>7.0f}")
+            sweep.append({"chunk": ch, **m})
+        summary["chunk_sweep"] = {"mosaic": n, "runs": sweep}
     sizes = sorted(n for n in args.sizes)
     if len(sizes) > 1:
         s0, s1 = rows[sizes[0], "chunked"], rows[sizes[-1], "chunked"]

@@ -320,15 +320,16 @@ def main() -> None:
                   f"  (load {min(loads):.1f}-{max(loads):.1f})")
             if not cmp["identical"]:
                 print(f"   peak sets differ: {cmp}")
+            if not args.no_record:  # after every mosaic: a long run interrupted keeps what it measured
+                sys.path.insert(0, str(Path(__file__).parent))
+                from _record import record
+
+                path = record("vs_kirmse", {"dem": args.dem, "eps_ft": EPS_FT, "reps": args.reps,
+                                            "orokit_numba_threads": env.get("NUMBA_NUM_THREADS", "all cores"),
+                                            "mosaics": rows})
         print("ratio = Kirmse (prominence -t 1 + merge_divide_trees -f) / orokit, whole processes, "
               "median wall time; > 1: orokit faster")
-        if not args.no_record:
-            sys.path.insert(0, str(Path(__file__).parent))
-            from _record import record
-
-            path = record("vs_kirmse", {"dem": args.dem, "eps_ft": EPS_FT, "reps": args.reps,
-                                        "orokit_numba_threads": env.get("NUMBA_NUM_THREADS", "all cores"),
-                                        "mosaics": rows})
+        if not args.no_record and rows:
             print(f"recorded in {path}")
     finally:
         if tmp is not None:

@@ -379,6 +379,21 @@ def _find(parent, x):
 
 
 @njit(cache=True, nogil=True)
+def forest_components(n, ea, eb):
+    """Component (a root node id) of every node of the graph with edges ``ea``-``eb``."""
+    uf = np.arange(n)
+    for e in range(ea.size):
+        ra = _find(uf, ea[e])
+        rb = _find(uf, eb[e])
+        if ra != rb:
+            uf[rb] = ra
+    out = np.empty(n, np.int64)
+    for i in range(n):
+        out[i] = _find(uf, i)
+    return out
+
+
+@njit(cache=True, nogil=True)
 def kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, border_z):
     """Maximum spanning forest and elder-rule prominence in one Kruskal sweep.
 

@@ -162,9 +162,6 @@ def finalize_graph(
     the saddle cell (``ekey``, flat index) and its elevation. Used by the in-memory
     engine (nodes = basins) and by the tiled engine (nodes = merged tile summaries).
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     n = node_key.size
     # canonical order: saddle from high to low, then the basin pair (monkey saddles list
     # several pairs at one cell; their order must not depend on how they were found)
@@ -177,9 +174,8 @@ def finalize_graph(
     prom[~is_root] = node_z[~is_root] - ez[key_edge[~is_root]]
     # a domain whose cells all have the root's elevation is flat: no peak
     ta, tb = ea[in_tree], eb[in_tree]
-    graph = coo_matrix((np.ones(ta.size), (ta, tb)), shape=(n, n))
-    _, dom = connected_components(graph, directed=False)
-    dmin = np.full(dom.max() + 1 if n else 0, np.inf)
+    dom = _kernels.forest_components(n, ta, tb)
+    dmin = np.full(n, np.inf)
     np.minimum.at(dmin, dom, node_nmin)
     flat_root = is_root & (dmin[dom] >= node_z)
     keep = np.where(is_root, (min_prominence <= 0) | (node_z >= min_prominence), prom >= min_prominence)
