@@ -29,7 +29,7 @@ from orokit.errors import CRSError
 if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
 
-__all__ = ["CellMetric", "cell_distance", "point_distance", "WGS84"]
+__all__ = ["CellMetric", "cell_distance", "point_distance", "parse_crs", "WGS84"]
 
 #: The ellipsoid used for every geodesic computation in orokit.
 WGS84 = Geod(ellps="WGS84")
@@ -41,7 +41,19 @@ def _to_lonlat(crs_wkt: str) -> Transformer:
     return Transformer.from_crs(CRS.from_wkt(crs_wkt), _EPSG4326, always_xy=True)
 
 
-def _as_crs(crs: Any) -> CRS | None:
+def parse_crs(crs: Any) -> CRS | None:
+    """A :class:`pyproj.CRS` from any CRS-like input (EPSG code, "EPSG:xxxx", WKT, CRS), None for None.
+
+    Raises
+    ------
+    CRSError
+        pyproj cannot interpret ``crs``; the message names the value and the fix.
+
+    Examples
+    --------
+    >>> parse_crs("EPSG:4326").is_geographic, parse_crs(None)
+    (True, None)
+    """
     if crs is None:
         return None
     try:
@@ -62,7 +74,8 @@ def _linear_unit_m(crs: CRS | None) -> float:
 
 
 def _ccw_from_east(azimuth_cw_from_north: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.mod(90.0 - azimuth_cw_from_north, 360.0)
+    a = np.mod(90.0 - azimuth_cw_from_north, 360.0)
+    return np.where(a >= 360.0, 0.0, a)  # np.mod(-1e-17, 360) == 360.0
 
 
 @dataclass(frozen=True)
@@ -93,7 +106,7 @@ class CellMetric:
     crs: CRS | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "crs", _as_crs(self.crs))
+        object.__setattr__(self, "crs", parse_crs(self.crs))
         object.__setattr__(self, "transform", Affine(*tuple(self.transform)[:6]))
 
     # -- construction -------------------------------------------------------------
@@ -151,22 +164,32 @@ class CellMetric:
     def point_distance_direction(
         self, x0: ArrayLike, y0: ArrayLike, x1: ArrayLike, y1: ArrayLike
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Distance (m) and direction (degrees CCW from east) between CRS points."""
+        """Distance (m) and direction (degrees CCW from east, [0, 360)) between CRS points.
+
+        NaN where either end has a NaN coordinate; the direction is NaN between
+        identical points.
+        """
         x0a, y0a, x1a, y1a = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (x0, y0, x1, y1)))
+        ok = np.isfinite(x0a) & np.isfinite(y0a) & np.isfinite(x1a) & np.isfinite(y1a)
+        dist = np.full(x0a.shape, np.nan)
+        direction = np.full(x0a.shape, np.nan)
+        if not ok.any():
+            return dist, direction
+        x0a, y0a, x1a, y1a = x0a[ok], y0a[ok], x1a[ok], y1a[ok]
         if self.is_geographic:
             lon0, lat0 = self._geodetic(x0a, y0a)
             lon1, lat1 = self._geodetic(x1a, y1a)
-            az, _, dist = WGS84.inv(lon0, lat0, lon1, lat1)
-            az = np.asarray(az, dtype=np.float64)
-            dist = np.asarray(dist, dtype=np.float64)
-            direction = _ccw_from_east(az)
+            az, _, d = WGS84.inv(lon0, lat0, lon1, lat1)
+            d = np.asarray(d, dtype=np.float64)
+            a = _ccw_from_east(np.asarray(az, dtype=np.float64))
         else:
             dx = (x1a - x0a) * self.unit_m
             dy = (y1a - y0a) * self.unit_m
-            dist = np.hypot(dx, dy)
-            direction = np.mod(np.degrees(np.arctan2(dy, dx)), 360.0)
-        # identical points: distance 0, direction undefined
-        direction = np.where(dist > 0, direction, np.nan)
+            d = np.hypot(dx, dy)
+            a = np.mod(np.degrees(np.arctan2(dy, dx)), 360.0)
+            a = np.where(a >= 360.0, 0.0, a)
+        dist[ok] = d
+        direction[ok] = np.where(d > 0, a, np.nan)  # identical points: direction undefined
         return dist, direction
 
     def distance_direction(

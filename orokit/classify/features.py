@@ -65,9 +65,8 @@ def peaks_in_disks(peaks: pd.DataFrame, centres: NDArray[np.float64], radius_m: 
     if not geographic:
         tree = cKDTree(np.column_stack([x, y]))
         return [np.sort(np.asarray(i, dtype=np.int64)) for i in tree.query_ball_point(centres, radius_m)]
-    from pyproj import Geod
+    from orokit.geodesy import WGS84 as geod
 
-    geod = Geod(ellps="WGS84")
     tree = cKDTree(_unit_vectors(x, y))
     chord = 2 * np.sin(min(radius_m * 1.01 / (_EARTH_R * 0.995), np.pi) / 2)
     out = []

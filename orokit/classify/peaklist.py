@@ -37,7 +37,8 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from orokit._typing import PathLike
-from orokit.errors import CRSError, InputError, OrokitWarning, SchemaError, UnitsError
+from orokit.errors import InputError, OrokitWarning, SchemaError, UnitsError
+from orokit.geodesy import parse_crs, point_distance
 
 logger = logging.getLogger(__name__)
 
@@ -49,55 +50,10 @@ NORMALIZED_COLUMNS = [
 _UNITS = {"m": 1.0, "ft": FT}
 
 
-def _crs(crs: Any) -> Any:
-    if crs is None:
-        return None
-    from pyproj import CRS
-
-    try:
-        return CRS.from_user_input(crs)
-    except Exception as exc:  # pyproj raises CRSError of its own
-        raise CRSError(f"cannot use CRS {crs!r}: {exc}") from exc
-
-
 def is_geographic(crs: Any) -> bool:
     """True for a geographic (lon/lat degrees) CRS."""
-    c = _crs(crs)
+    c = parse_crs(crs)
     return bool(c is not None and c.is_geographic)
-
-
-def distance_direction(x0: NDArray, y0: NDArray, x1: NDArray, y1: NDArray, *, geographic: bool
-                       ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Distance (m) and direction (degrees CCW from east, [0, 360)) from points 0 to points 1.
-
-    NaN where either end is NaN. Geographic: WGS84 geodesic (x = lon, y = lat);
-    otherwise Euclidean in CRS units (metres).
-
-    Examples
-    --------
-    >>> d, a = distance_direction(np.array([0.0]), np.array([0.0]), np.array([0.0]), np.array([5.0]), geographic=False)
-    >>> float(d[0]), float(a[0])
-    (5.0, 90.0)
-    """
-    x0, y0, x1, y1 = (np.asarray(v, dtype=float) for v in (x0, y0, x1, y1))
-    ok = np.isfinite(x0) & np.isfinite(y0) & np.isfinite(x1) & np.isfinite(y1)
-    dist = np.full(x0.shape, np.nan)
-    ang = np.full(x0.shape, np.nan)
-    if ok.any():
-        if geographic:
-            from pyproj import Geod
-
-            az, _, d = Geod(ellps="WGS84").inv(x0[ok], y0[ok], x1[ok], y1[ok])
-            a = 90.0 - np.asarray(az)
-        else:
-            dx, dy = x1[ok] - x0[ok], y1[ok] - y0[ok]
-            d = np.hypot(dx, dy)
-            a = np.degrees(np.arctan2(dy, dx))
-        a = np.mod(a, 360.0)
-        a = np.where(np.asarray(d) > 0, a, np.nan)  # no direction to a coincident point
-        dist[ok] = d
-        ang[ok] = np.where(a >= 360.0, 0.0, a)
-    return dist, ang
 
 
 def peak_geometry(peaks: pd.DataFrame, *, crs: Any = None) -> gpd.GeoDataFrame:
@@ -116,22 +72,21 @@ def peak_geometry(peaks: pd.DataFrame, *, crs: Any = None) -> gpd.GeoDataFrame:
     GeoDataFrame
         :data:`NORMALIZED_COLUMNS` plus Point geometry; the input index is kept.
     """
-    crs = _crs(crs if crs is not None else getattr(peaks, "crs", None))
+    crs = parse_crs(crs if crs is not None else getattr(peaks, "crs", None))
     need = ["x", "y", "elevation", "prominence"]
     missing = [c for c in need if c not in peaks]
     if missing:
         raise SchemaError(f"peak table lacks columns {missing}; expected the orokit peaks table "
                           f"(x, y, elevation, prominence, saddle_x, saddle_y, isolation, ...)")
-    geo = is_geographic(crs)
     x = peaks["x"].to_numpy(dtype=float)
     y = peaks["y"].to_numpy(dtype=float)
     nan = np.full(len(peaks), np.nan)
     sx = peaks["saddle_x"].to_numpy(dtype=float) if "saddle_x" in peaks else nan
     sy = peaks["saddle_y"].to_numpy(dtype=float) if "saddle_y" in peaks else nan
-    sd, sa = distance_direction(x, y, sx, sy, geographic=geo)
+    sd, sa = point_distance(x, y, sx, sy, crs=crs)
     ix = peaks["isolation_x"].to_numpy(dtype=float) if "isolation_x" in peaks else nan
     iy = peaks["isolation_y"].to_numpy(dtype=float) if "isolation_y" in peaks else nan
-    idist, ia = distance_direction(x, y, ix, iy, geographic=geo)
+    idist, ia = point_distance(x, y, ix, iy, crs=crs)
     iso = peaks["isolation"].to_numpy(dtype=float) if "isolation" in peaks else idist
     exact = (peaks["prominence_exact"].to_numpy(dtype=bool) if "prominence_exact" in peaks
              else np.ones(len(peaks), dtype=bool))

@@ -131,9 +131,8 @@ def disk_map(prediction: Prediction, *, crs: Any, n_vertices: int = 64) -> Any:
     az = np.linspace(0.0, 360.0, n_vertices, endpoint=False)
     polys = []
     if is_geographic(crs):
-        from pyproj import Geod
+        from orokit.geodesy import WGS84 as geod
 
-        geod = Geod(ellps="WGS84")
         for xi, yi, ri in zip(x, y, r):
             lon, lat, _ = geod.fwd(np.full(n_vertices, xi), np.full(n_vertices, yi), az, np.full(n_vertices, ri))
             polys.append(shapely.Polygon(np.column_stack([lon, lat])))

@@ -30,6 +30,7 @@ from rasterio.windows import Window
 
 from orokit._typing import PathLike
 from orokit.errors import CRSError, InputError, OrokitWarning, UnitsError
+from orokit.geodesy import parse_crs
 from orokit.io._units import TO_METRES, is_known_units, normalize_units
 
 logger = logging.getLogger(__name__)
@@ -237,15 +238,6 @@ def _normalize_chunks(chunks: ChunksLike, shape: tuple[int, int]) -> tuple[tuple
         raise InputError(f"invalid chunks={chunks!r} for a raster of shape {shape}: {exc}") from exc
 
 
-def _as_crs(crs: Any) -> CRS | None:
-    if crs is None:
-        return None
-    try:
-        return CRS.from_user_input(crs)
-    except Exception as exc:
-        raise CRSError(f"cannot interpret crs={crs!r}: {exc}. Pass an EPSG code or WKT, e.g. crs='EPSG:32633'.") from exc
-
-
 def read_dem(
     source: PathLike,
     *,
@@ -416,7 +408,7 @@ def read_dem(
         )
 
     # -- georeference -------------------------------------------------------------
-    user_crs = _as_crs(crs)
+    user_crs = parse_crs(crs)
     if file_crs is not None and user_crs is not None and not file_crs.equals(user_crs):
         raise CRSError(
             f"{path} already has CRS {file_crs.to_string()!r}; crs={user_crs.to_string()!r} conflicts with it. "

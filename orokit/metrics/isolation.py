@@ -5,14 +5,14 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from pyproj import CRS, Geod
+from pyproj import CRS
 
 from orokit.errors import CRSError
+from orokit.geodesy import WGS84 as _GEOD
 from orokit.metrics import _kernels
 
 __all__ = ["isolation", "GridMetric"]
 
-_GEOD = Geod(ellps="WGS84")
 SLACK = 0.012  # > max relative difference between sphere and WGS84 geodesic distances
 NCAND = 64
 

@@ -9,22 +9,25 @@ from pyproj import Geod
 from orokit.classify.features import feature_table, features_from_region, peaks_in_disks
 from orokit.io.model_io import read_feature_table as read_features
 from orokit.io.model_io import write_feature_table as write_features
-from orokit.classify.peaklist import distance_direction, peak_geometry, read_kirmse_peaks, read_peaks
+from orokit.classify.peaklist import peak_geometry, read_kirmse_peaks, read_peaks
 from orokit.errors import InputError, OrokitWarning, SchemaError
 from orokit.sampling.disks import sample_disks_in_polygon
 from orokit.sampling.feature_sets import FeatureSet
 
 
 def test_directions_ccw_from_east():
-    d, a = distance_direction(np.zeros(4), np.zeros(4), np.array([1.0, 0, -1, 0]), np.array([0, 1.0, 0, -1]),
-                              geographic=False)
+    from orokit.geodesy import point_distance
+
+    d, a = point_distance(np.zeros(4), np.zeros(4), np.array([1.0, 0, -1, 0]), np.array([0, 1.0, 0, -1]),
+                          crs="EPSG:32633")
     assert d.tolist() == [1, 1, 1, 1] and a.tolist() == [0, 90, 180, 270]
-    d, a = distance_direction(np.array([10.0]), np.array([45.0]), np.array([10.0]), np.array([45.01]),
-                              geographic=True)
+    d, a = point_distance(np.array([10.0]), np.array([45.0]), np.array([10.0]), np.array([45.01]), crs="EPSG:4326")
     assert a[0] == pytest.approx(90.0) and d[0] == pytest.approx(1111.5, abs=2)
-    d, a = distance_direction(np.array([179.999]), np.array([0.0]), np.array([-179.999]), np.array([0.0]),
-                              geographic=True)  # across the antimeridian: short way, eastwards
+    d, a = point_distance(np.array([179.999]), np.array([0.0]), np.array([-179.999]), np.array([0.0]),
+                          crs="EPSG:4326")  # across the antimeridian: short way, eastwards
     assert d[0] < 300 and a[0] == pytest.approx(0.0, abs=1e-6)
+    d, a = point_distance(np.array([0.0, 1.0, np.nan]), np.zeros(3), np.array([0.0, np.nan, 1.0]), np.ones(3))
+    assert d[0] == 1.0 and a[0] == 90.0 and np.isnan(d[1:]).all() and np.isnan(a[1:]).all()
 
 
 def _kirmse_files(tmp_path):
