@@ -178,7 +178,7 @@ roundtrip: $(ROUNDTRIP_README) $(RELIEF_README)  ## synthetic twins of every reg
 # the table, README.csv and side-by-side hillshades in reports/generators/.
 GEN_REGIONS := sahara appalachians karakoram norway
 GEN_SEEDS := 0 1 2
-GEN_NAMES := argudo belhadj rusnell
+GEN_NAMES := argudo belhadj rusnell michel
 GEN_SIZE := 60011.28m
 GEN_RUNDIR := $(REPORTS)/generators/runs
 GEN_SRC := $(wildcard orokit/generators/*.py) orokit/cli/generators_cmd.py orokit/cli/generator_options.py \

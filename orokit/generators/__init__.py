@@ -12,6 +12,7 @@ name       paper                                         status
 argudo     Argudo et al. 2019 (orokit's renderer)        complete
 belhadj    Belhadj 2007 (skeleton, MDI, MD)              tree skeleton only
 rusnell    Rusnell 2009 (least-cost fields, blending)    no secondary ridges
+michel     Michel 2015 (plates, warped fBm, watershed)   peak positions only
 =========  ============================================  ========================
 """
 from __future__ import annotations
@@ -63,6 +64,10 @@ GENERATORS: dict[str, GeneratorSpec] = {
                              "orokit.generators.rusnell", "RusnellParams", ("tree", "exemplar"),
                              "Algorithm 1 with profile fit (exemplar) or w_s = 1; no secondary ridges, "
                              "no water halting, no generator files"),
+    "michel": GeneratorSpec("michel", "Michel et al. 2015, doi:10.2312/egsh.20151011",
+                            "orokit.generators.michel", "MichelParams", ("tree", "rivers"),
+                            "peak positions + rivers (no vector-map mode); orokit's defaults for T1, T2, blur, k, "
+                            "slopes"),
 }
 
 
