@@ -171,3 +171,20 @@ def test_cli_missing_exemplar_is_one_line_error(tmp_path, tree_file):
                                  "--generator", "rusnell"])
     assert r.exit_code == 1 and "needs an exemplar" in r.output
     assert not (tmp_path / "x.tif").exists()
+
+
+@pytest.mark.slow
+def test_cli_synthesize_with_a_generator_records_it(tmp_path):
+    from pathlib import Path
+
+    types = Path(__file__).resolve().parents[2] / "reports" / "synthesis" / "types" / "appalachians.json"
+    out = tmp_path / "syn"
+    r = CliRunner().invoke(cli, ["synthesize", "--type", str(types), "--size", "8km", "--resolution", "100m",
+                                 "--generator", "belhadj", "--param", "hurst=0.8", "--seed", "3", "-o", str(out),
+                                 "--no-progress"])
+    assert r.exit_code == 0, r.output
+    syn = json.loads((out / "synthesis.json").read_text())
+    assert syn["generator"] == "belhadj" and syn["generator_parameters"]["hurst"] == 0.8 and syn["seed"] == 3
+    with rasterio.open(out / "dem.tif") as src:
+        assert src.tags()["generator"] == "belhadj" and src.tags()["seed"] == "3"
+    assert (out / "hillshade.png").exists()
