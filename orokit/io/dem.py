@@ -75,7 +75,7 @@ def _open(path: str, *, what: str = "") -> Iterator[rasterio.io.DatasetReader]:
                 "truncated or not an SRTM tile; download it again."
             ) from exc
         raise InputError(
-            f"cannot read raster {path}{what}: {exc}. Check that the file is complete and in a format GDAL "
+            f"cannot read raster {path}{what}: {str(exc).rstrip('.')}. Check that the file is complete and in a format GDAL "
             "reads (GeoTIFF/COG, SRTM .hgt, ESRI ASCII .asc, VRT, PNG)."
         ) from exc
     with src:
@@ -175,7 +175,7 @@ class _BandReader:
                     raw = src.read(self.band, window=window)
             except rasterio.errors.RasterioError as exc:
                 raise InputError(
-                    f"cannot read the pixels of {self.path}{where}: {exc}. The file is probably truncated or "
+                    f"cannot read the pixels of {self.path}{where}: {str(exc).rstrip('.')}. The file is probably truncated or "
                     "corrupt; download it again (orokit data fetch) or re-export it."
                 ) from exc
         return self._convert(raw, where)
