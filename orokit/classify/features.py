@@ -289,7 +289,7 @@ def features_from_region(peaks: pd.DataFrame, region: Any, *, radius_m: float, l
 
 
 def concat_features(tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
-    """Concatenate feature tables made with the same spec and parameters."""
+    """Concatenate feature tables made with the same feature set and parameters."""
     tables = [t for t in tables if t is not None]
     if not tables:
         raise InputError("no feature table to concatenate")

@@ -11,6 +11,11 @@ reported beside it holds out a strip of each region: a random direction per run 
 per input, the last ``val_fraction`` of the disks along it are validation disks, and
 only disks whose centres are farther than ``buffer_m`` (default 2 R: no shared peak)
 from every validation centre are used for training.
+
+orokit's default classifier is extremely randomized trees (``classifier="et"``), chosen
+on the spatial hold-out; ``"rf"`` is the paper's forest. Every run also records the
+terrain-level answer of each held-out strip (summed log-probability of its disks), from
+which the "unknown" threshold of a model is taken (:meth:`Evaluation.unknown_threshold`).
 """
 from __future__ import annotations
 

@@ -25,7 +25,7 @@ import click
 @click.option("--classifier", type=click.Choice(["rf", "et", "hgb"]), default="et", show_default=True,
               help="et: extremely randomized trees, 2x --trees (default, chosen on the spatial hold-out); rf: the paper's Random Forest; hgb: scikit-learn HistGradientBoostingClassifier.")
 @click.option("--trees", type=int, default=100, show_default=True,
-              help="Trees of the Random Forest (boosting iterations with --classifier hgb).")
+              help="Trees of the forest (et uses twice as many; boosting iterations with --classifier hgb).")
 @click.option("--max-train", type=int, default=80, show_default=True,
               help="At most this many training disks per region in each evaluation run (paper: 80).")
 @click.option("--drop-small-classes", is_flag=True,
