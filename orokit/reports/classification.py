@@ -208,8 +208,8 @@ def write_training_report(features: pd.DataFrame, evals: Mapping[str, Any], outd
 
 _CLASSIFIERS = {"rf": "Random Forest, {n} trees", "et": "extremely randomized trees (ExtraTrees), 2 x {n} trees",
                 "hgb": "gradient boosting (HistGradientBoosting), {n} iterations"}
-_FEATURE_SETS = {"paper": "the paper's Table 1 histograms at R (176 numbers, `--features paper`, reference mode)",
-                 "orometry": "orokit's default (`--features orometry`, 382 numbers), at R/2 and at R: the Table 1 "
+_FEATURE_SETS = {"paper": "the paper's Table 1 histograms at R ({n} numbers, `--features paper`, reference mode)",
+                 "orometry": "orokit's default (`--features orometry`, {n} numbers), at R/2 and at R: the Table 1 "
                              "histograms made cumulative, without the two direction histograms; disk summaries "
                              "(peak density, prominence spectrum, maximum and quantiles of prominence, isolation, "
                              "key-saddle distance, dominance); quantiles of peak and key-saddle elevation. Chosen "
@@ -225,7 +225,7 @@ def _readme(t2: pd.DataFrame, evals: Mapping[float, Mapping[str, Any]], meta: di
              f"at most {meta['max_disks']} disks per region, centres >= {meta.get('separation', 0.5):g} R apart; "
              f"at most {meta.get('max_train', 80)} training disks per region and run; {clf}; {meta['runs']} runs "
              f"(feature groups: {meta['feature_runs']} runs); seed {meta['seed']}.", "",
-             f"Features: {_FEATURE_SETS.get(fs, fs)}.", "",
+             f"Features: {_FEATURE_SETS.get(fs, fs).format(n=meta.get('n_features', '?'))}.", "",
              "Elevations: SRTM-3 void-filled by Jonathan de Ferranti (viewfinderpanoramas.org), crops from "
              "Argudo et al. (2019), github.com/oargudo/orometry-terrains (MIT). The crops have no published "
              "location: they are analysed as local metric grids.", "",
@@ -344,7 +344,7 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
     meta = {"orokit_version": __version__, "n_inputs": len(inputs), "labels": labels, "seed": seed, "runs": runs,
             "feature_runs": feature_runs, "radii_m": list(map(float, radii_m)), "min_prominence_m": min_prominence_m,
             "min_peaks": min_peaks, "max_disks": max_disks, "trees": trees, "timings_s": timings,
-            "feature_set": feature_set, "classifier": classifier, "separation": separation, "max_train": max_train,
+            "feature_set": feature_set, "n_features": len(fset.columns), "classifier": classifier, "separation": separation, "max_train": max_train,
             "load_average": list(os.getloadavg()),
             "inputs": [str(p) for p in inputs]}
     if model_path is not None:
