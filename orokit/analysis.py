@@ -50,6 +50,8 @@ def analyze(
     chunks: int | tuple[int, int] | None = None,
     scheduler: Any = None,
     checkpoint: str | Path | None = None,
+    depressions: bool = False,
+    sea_level_m: float | None = None,
 ) -> AnalysisResult:
     """Peaks, key saddles, prominence, dominance, isolation and the Divide Tree.
 
@@ -71,6 +73,12 @@ def analyze(
     scheduler : dask scheduler for the chunked engine: None (default threads or the
         active distributed client), a name, a ``distributed.Client`` or an address.
     checkpoint : folder for chunk summaries; a rerun with it reuses finished chunks.
+    depressions : also find the depressions (pits) with depth >= ``min_prominence``:
+        the same engine on ``-h`` (same tie rules and edge flags), in
+        ``result.depressions`` (:data:`orokit.topology.depressions.DEPRESSION_COLUMNS`).
+        With ``outside="sea"`` a depression that reaches the edge spills into the sea.
+    sea_level_m : with ``depressions``, cells at or below this elevation are sea: land
+        depressions spill into it and no pit is reported inside it.
 
     Returns
     -------
@@ -198,7 +206,50 @@ def analyze(
         "%d peaks with prominence >= %g m (of %d maxima) in %.2f s",
         len(result.peaks), min_prominence, core.n_maxima, t_end - t0,
     )
+    if depressions:
+        result.depressions = _depressions(dem, transform, crs, min_prominence=min_prominence, outside=outside,
+                                          sea_level_m=sea_level_m, chunks=chunks if tiled else None,
+                                          scheduler=scheduler)
+        result.attrs["sea_level_m"] = sea_level_m
+        result.attrs["n_depressions"] = int(len(result.depressions))
+    elif sea_level_m is not None:
+        raise InputError("sea_level_m only applies to depressions; pass depressions=True (CLI: --depressions)")
     return result
+
+
+def _depressions(dem, transform, crs, *, min_prominence, outside, sea_level_m, chunks, scheduler):
+    """Depressions table: the engine on -h (see :mod:`orokit.topology.depressions`)."""
+    import geopandas as gpd
+    import xarray as xr
+    from affine import Affine
+
+    from orokit.geodesy import CellMetric
+    from orokit.topology.depressions import depressions_table, engine_grid, spill_areas
+
+    t0 = time.perf_counter()
+    data = dem.data
+    g, sea, pad = engine_grid(data, outside=outside, sea_level_m=sea_level_m)
+    t = transform
+    gt = Affine(t.a, t.b, t.c - (t.a + t.b) * pad, t.d, t.e, t.f - (t.d + t.e) * pad)
+    gda = xr.DataArray(g, dims=("y", "x"), attrs={"units": "m", "local_grid": crs is None,
+                                                   "cell_size": abs(t.a)})
+    gda = gda.rio.write_transform(gt)
+    if crs is not None:
+        gda = gda.rio.write_crs(crs)
+    neg = analyze(gda, min_prominence=min_prominence, outside="unknown", isolation=False,
+                  chunks=chunks, scheduler=scheduler)
+    area = None
+    need = int(np.prod(g.shape)) * 40
+    if need <= 0.5 * available_memory():
+        gv = np.asarray(g, dtype=np.float64)
+        dx, dy = CellMetric(gt, crs).cell_size_m(np.arange(gv.shape[0]))
+        area = spill_areas(gv, neg.peaks["row"].to_numpy(), neg.peaks["col"].to_numpy(), dx * dy)
+    else:
+        logger.warning("depressions: area_m2 not computed (the raster does not fit in memory)")
+    table = depressions_table(neg.peaks, area_m2=area, sea=sea, pad=pad)
+    logger.info("%d depressions with depth >= %g m in %.2f s", len(table), min_prominence,
+                time.perf_counter() - t0)
+    return gpd.GeoDataFrame(table, geometry=gpd.points_from_xy(table["x"], table["y"]), crs=crs)
 
 
 #: bytes per cell the in-memory engine needs at most (measured: ~50 B/cell at 15 M cells)

@@ -31,10 +31,16 @@ import click
               help="Folder for chunk summaries; rerunning with it reuses the finished chunks.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing analysis in OUTPUT.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
+@click.option("--depressions", is_flag=True,
+              help="Also find the depressions (pits) with depth >= the threshold: depressions.parquet and a "
+                   "'depressions' layer in dividetree.gpkg.")
+@click.option("--sea-level", "sea_level_m", type=float, default=None,
+              help="With --depressions: cells at or below this elevation (metres) are one sea.")
 @click.pass_context
 def analyze(ctx: click.Context, dem: str, outdir: Path, min_prominence: float, z_units: str | None, cell_size: float | None,
             band: int | None, outside: str, no_isolation: bool, chunks: int | None, scheduler: str | None,
-            checkpoint: Path | None, overwrite: bool, progress: bool) -> None:
+            checkpoint: Path | None, overwrite: bool, progress: bool, depressions: bool,
+            sea_level_m: float | None) -> None:
     """Analyse DEM into OUTPUT.
 
     DEM is any raster GDAL reads (GeoTIFF, SRTM .hgt, VRT, ASCII grid, PNG with
@@ -74,7 +80,8 @@ def analyze(ctx: click.Context, dem: str, outdir: Path, min_prominence: float, z
                                      param_hint="DEM")
         da = open_dataset_dem(dem, chunks=chunks)
     result = run(da, min_prominence=min_prominence, outside=outside, isolation=not no_isolation,
-                 progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint)
+                 progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint,
+                 depressions=depressions, sea_level_m=sea_level_m)
     from orokit.io.analysis_io import write_analysis
 
     write_analysis(result, outdir, overwrite=True)
@@ -84,4 +91,5 @@ def analyze(ctx: click.Context, dem: str, outdir: Path, min_prominence: float, z
     click.echo(
         f"{n} peaks with prominence >= {min_prominence:g} m, {len(result.saddles)} saddles, "
         f"{da.shape[0]}x{da.shape[1]} cells in {time.perf_counter() - t0:.2f} s -> {outdir}"
+        + ("" if result.depressions is None else f" ({len(result.depressions)} depressions)")
     )

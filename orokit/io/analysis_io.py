@@ -60,12 +60,15 @@ def _write(result: AnalysisResult, out: Path) -> Path:
     validate_saddle_table(result.saddles)
     peaks = result.peaks
     # each table once, in its own thread (the writers release the GIL)
+    layers = {} if result.depressions is None else {"depressions": result.depressions}
     tasks = [
         lambda: _write_csv(peaks, out / "peaks.csv"),
         lambda: _write_parquet(peaks, out / "peaks.parquet"),
         lambda: _write_parquet(result.saddles, out / "saddles.parquet"),
-        lambda: write_divide_tree_gpkg(result.divide_tree, out / "dividetree.gpkg", peaks=peaks),
+        lambda: write_divide_tree_gpkg(result.divide_tree, out / "dividetree.gpkg", peaks=peaks, layers=layers),
     ]
+    if result.depressions is not None:
+        tasks.append(lambda: _write_parquet(result.depressions, out / "depressions.parquet"))
     with ThreadPoolExecutor(len(tasks)) as pool:
         futures = [pool.submit(task) for task in tasks]
         for f in futures:
@@ -108,7 +111,9 @@ def read_analysis(outdir: PathLike) -> AnalysisResult:
     tree = read_divide_tree_gpkg(out / "dividetree.gpkg")
     crs = peaks.crs
     meta.pop("crs", None)
-    return AnalysisResult(peaks, saddles, tree, crs, meta)
+    dep_path = out / "depressions.parquet"
+    depressions = gpd.read_parquet(dep_path) if dep_path.exists() else None
+    return AnalysisResult(peaks, saddles, tree, crs, meta, depressions)
 
 
 def read_peaks(source: PathLike):

@@ -42,7 +42,8 @@ def _json_attrs(attrs: dict) -> dict:
 _GPKG = {"driver": "GPKG", "engine": "pyogrio", "use_arrow": True, "layer_options": {"SPATIAL_INDEX": "NO"}}
 
 
-def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFrame | None = None) -> Path:
+def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFrame | None = None,
+                           layers: dict | None = None) -> Path:
     """Write ``tree`` as a GeoPackage with layers ``peaks``, ``saddles`` and ``ridges``.
 
     ``ridges`` holds LineStrings peak_a -> saddle -> peak_b with the columns
@@ -56,6 +57,8 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
     dominance, isolation, exactness flags) are added to the ``peaks`` layer, so a GIS user
     needs no join. :func:`read_divide_tree_gpkg` leaves them out of the tree (they are
     derived: ``tree.prominence_table()`` recomputes them).
+
+    ``layers``: further point GeoDataFrames by layer name (e.g. ``depressions``).
     """
     import geopandas as gpd
 
@@ -93,6 +96,8 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
             extra = tree.attrs.get(key)
             if isinstance(extra, pd.DataFrame):
                 points(extra, "point_id").to_file(tmp, layer=key, geometry_type="Point", **_GPKG)
+        for name, frame in (layers or {}).items():
+            frame.reset_index().to_file(tmp, layer=name, geometry_type="Point", **_GPKG)
         import pyogrio
 
         # attrs go to a small non-spatial table (portable across GDAL versions)

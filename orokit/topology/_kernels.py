@@ -617,3 +617,77 @@ def first_ancestor_above(lp, value, tie):
             x = lp[x]
         out[i] = x
     return out
+
+
+@njit(cache=True, nogil=True)
+def superlevel_death_areas(g, order, nvalid, row_area):
+    """Area of every component of the superlevel filtration of ``g`` when it dies.
+
+    ``order`` lists the flat cells from the highest to the lowest in the total order
+    (its first ``nvalid`` entries are the non-NaN cells). Cells join their already
+    processed 8-neighbours (union-find); at a cell of value ``v`` that touches several
+    components, every component but the one with the highest top dies. The area stored
+    at a dying component's top cell is the sum of ``row_area`` over the cells of its
+    component of ``{g > v}`` (strictly): a snapshot taken when the component is first
+    touched by a cell of value ``v``, before equal-valued cells join anything to it.
+    Returns a flat float64 array, NaN except at those tops.
+    """
+    H, W = g.shape
+    n = H * W
+    uf = np.full(n, -1, np.int64)
+    pos = np.full(n, -1, np.int64)
+    area = np.zeros(n)
+    snap_lvl = np.full(n, np.nan)
+    snap_area = np.zeros(n)
+    top = np.arange(n)
+    out = np.full(n, np.nan)
+    roots = np.empty(8, np.int64)
+    gf = g.ravel()
+    for k in range(nvalid):
+        c = order[k]
+        v = gf[c]
+        a = row_area[c // W]
+        pos[c] = k
+        r = c // W
+        q = c % W
+        nr = 0
+        for dr, dc in _NEIGHBOURS_8:
+            rr = r + dr
+            cc = q + dc
+            if rr < 0 or rr >= H or cc < 0 or cc >= W:
+                continue
+            nb = rr * W + cc
+            if uf[nb] < 0:
+                continue
+            rt = _find(uf, nb)
+            seen = False
+            for t in range(nr):
+                if roots[t] == rt:
+                    seen = True
+                    break
+            if not seen:
+                roots[nr] = rt
+                nr += 1
+                if snap_lvl[rt] != v:
+                    snap_lvl[rt] = v
+                    snap_area[rt] = area[rt]
+        uf[c] = c
+        if nr == 0:
+            area[c] = a
+            snap_lvl[c] = v
+            snap_area[c] = 0.0
+            continue
+        win = roots[0]
+        for t in range(1, nr):
+            if pos[top[roots[t]]] < pos[top[win]]:
+                win = roots[t]
+        total = a
+        for t in range(nr):
+            rt = roots[t]
+            if rt != win:
+                out[top[rt]] = snap_area[rt]
+                uf[rt] = win
+            total += area[rt]
+        uf[c] = win
+        area[win] = total
+    return out

@@ -156,6 +156,8 @@ class AnalysisResult:
     crs : CRS of x/y (None for a local metric grid without CRS).
     attrs : metadata (threshold, outside convention, units, source, dataset, shape,
         ``transform`` (affine a, b, c, d, e, f of the grid), ``crs_geographic``, timings).
+    depressions : GeoDataFrame of the depressions (``analyze(depressions=True)``;
+        :data:`orokit.topology.depressions.DEPRESSION_COLUMNS`), else None.
     """
 
     peaks: Any
@@ -163,6 +165,7 @@ class AnalysisResult:
     divide_tree: DivideTree
     crs: Any = None
     attrs: dict = field(default_factory=dict)
+    depressions: Any = None
 
     def __repr__(self) -> str:  # pragma: no cover - cosmetic
         return (
