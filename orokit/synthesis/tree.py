@@ -438,7 +438,7 @@ def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray
     marginal = _saddle_targets(types, ptype, z, False)
     has_bands = any(t.bands is not None for t in types)
     modes = {"auto": [False, True] if has_bands else [False], True: [True], False: [False]}[p.use_bands]
-    best = None
+    best: tuple[float, np.ndarray, dict, int, bool] | None = None
     for mode in modes:
         cand, info = assign_saddle_elevations(z, px, py, a, b, sz0, _saddle_targets(types, ptype, z, mode),
                                               movable=movable, max_iterations=p.max_ot_iterations, rng=rng)
@@ -447,6 +447,7 @@ def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray
         logger.debug("saddle targets %s: worst max-bin error %.4f", "per band" if mode else "marginal", score)
         if best is None or score < best[0]:
             best = (score, cand, info, below_c, mode)
+    assert best is not None  # modes is never empty
     _, sz, ot_info, below, band_mode = best
     return sz, ot_info, below, band_mode
 
@@ -457,7 +458,9 @@ def _saddle_targets(types, ptype: np.ndarray, z: np.ndarray, use_bands: bool):
     from orokit.synthesis.terrain_type import band_histograms
 
     group = np.zeros(z.size, np.int64)
-    dom, prom, owner = [], [], []
+    dom: list[Any] = []
+    prom: list[Any] = []
+    owner: list[int] = []
     for t, typ in enumerate(types):
         if use_bands:
             edges, ph, dh = band_histograms(typ)
