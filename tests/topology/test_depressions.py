@@ -28,6 +28,7 @@ def _brute_area(z, pit, spill):
     return float((lab == lab[pit]).sum()) * CELL_M2
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(z=grids(10), eps=st.sampled_from([0.0, 1.0, 5.0]))
 def test_depths_are_sublevel_persistence(z, eps):
@@ -66,6 +67,7 @@ def test_depressions_of_minus_h_are_the_peaks_of_h(z):
         np.testing.assert_array_equal(a, b, err_msg=col)
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(z=grids(12, min_side=2), chunk=st.integers(1, 5), eps=st.sampled_from([0.0, 2.0]))
 def test_chunks_give_identical_depressions(z, chunk, eps):
