@@ -16,7 +16,8 @@ pytestmark = pytest.mark.cluster
 
 @pytest.fixture(scope="module")
 def cluster():
-    distributed = pytest.importorskip("distributed")
+    import distributed  # a hard dependency (dask[distributed]): a missing install must fail, not skip
+
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                                   memory_limit="2GiB") as cl, distributed.Client(cl) as client:
         yield cl, client
