@@ -32,6 +32,10 @@ ifeq ($(origin OROKIT_DATA_MIRROR),undefined)
   endif
 endif
 
+# progress bars of the long stages (classification, twins) update at most every 10 s, so that the
+# two bars of `make -j2 report` stay readable in a terminal and in a log
+export TQDM_MININTERVAL := 10
+
 MANIFEST := datasets_manifest/datasets.yaml
 DATASETS := alaska andes-aconcagua andes-chile appalachians gobi highlands \
             himalaya-annapurna himalaya-everest karakoram norway pyrenees rockies sahara
@@ -93,9 +97,6 @@ data: $(DATA_STAMP)  ## fetch and verify every dataset of the manifest
 $(REPORTS)/datasets/%/summary.md: $(DATA_STAMP) $(SUMMARY_SRC) | $(INSTALLED)
 	$(OROKIT) -q report-dataset $* -o $(@D) --overwrite
 
-$(REPORTS)/README.md: $(DATASET_SUMMARIES) orokit/cli/report_index.py | $(INSTALLED)
-	$(OROKIT) -q report-index $(patsubst %/summary.md,%/summary.json,$(DATASET_SUMMARIES)) -o $@ --overwrite
-
 # stage: exact analysis (issues 4, 5) of each manifest DEM at eps = 30 m (units and cell size from
 # the manifest); analysis.json is written last.
 ANALYSIS_SRC := orokit/analysis.py $(wildcard orokit/topology/*.py orokit/tiling/*.py) orokit/metrics/_kernels.py \
@@ -112,8 +113,7 @@ analysis: $(ANALYSIS_README)  ## exact analysis of every DEM, table + Divide Tre
 REGION_MODEL := models/regions-10km.skops
 $(CLASSIFICATION_README) $(REGION_MODEL) &: $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
 	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(REPORTS)/classification --radius 10km \
-	  --features orometry --classifier et --runs 30 --feature-runs 5 --model $(REGION_MODEL) --overwrite \
-	  --no-progress
+	  --features orometry --classifier et --runs 30 --feature-runs 5 --model $(REGION_MODEL) --overwrite
 
 # the paper's protocol and feature set (reference mode), kept beside the default figures
 $(CLASSIFICATION_PAPER_README): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
@@ -145,7 +145,7 @@ REPORT_OUTPUTS += $(ROUNDTRIP_README)
 
 # hillshade.png is the last of the files synthesize writes
 $(REPORTS)/roundtrip/%/hillshade.png: $(REPORTS)/synthesis/types/%.json $(DATA_STAMP) $(SYNTH_SRC) $(ROUNDTRIP_SRC) | $(INSTALLED)
-	$(OROKIT) -q synthesize --type $< --like $* --seed 0 -o $(@D) --overwrite --no-progress
+	$(OROKIT) -q synthesize --type $< --like $* --seed 0 -o $(@D) --overwrite
 
 $(REPORTS)/roundtrip/%/validation.json: $(REPORTS)/roundtrip/%/hillshade.png $(CLASSIFICATION_README) orokit/cli/validate.py | $(INSTALLED)
 	$(OROKIT) -q validate $(@D) --model $(ROUNDTRIP_MODEL) --overwrite
@@ -161,7 +161,7 @@ RELIEF_README := $(REPORTS)/roundtrip/relief/README.md
 REPORT_OUTPUTS += $(RELIEF_README)
 
 $(REPORTS)/roundtrip/relief/%/hillshade.png: $(REPORTS)/synthesis/types/%.json $(DATA_STAMP) $(SYNTH_SRC) $(ROUNDTRIP_SRC) | $(INSTALLED)
-	$(OROKIT) -q synthesize --type $< --like $* --control-elevation like --seed 0 -o $(@D) --overwrite --no-progress
+	$(OROKIT) -q synthesize --type $< --like $* --control-elevation like --seed 0 -o $(@D) --overwrite
 
 $(REPORTS)/roundtrip/relief/%/validation.json: $(REPORTS)/roundtrip/relief/%/hillshade.png $(CLASSIFICATION_README) orokit/cli/validate.py | $(INSTALLED)
 	$(OROKIT) -q validate $(@D) --model $(ROUNDTRIP_MODEL) --overwrite
@@ -204,7 +204,13 @@ $(GEN_README): $(GEN_RESULTS) orokit/reports/generators.py orokit/cli/generators
 
 generators: $(GEN_README)  ## generator ranking table (argudo, belhadj, ...) in reports/generators/
 
-# last, so that every stage above has appended its outputs (prerequisites expand when the rule is read)
+# the index links every section that exists (reports/*/README.md, benchmarks): built after all stages.
+# Keep these two rules last, so that every stage above has appended its outputs (prerequisites expand
+# when a rule is read).
+INDEX_SRC := orokit/cli/report_index.py orokit/reports/index.py orokit/reports/dem_summary.py
+$(REPORTS)/README.md: $(DATASET_SUMMARIES) $(filter-out $(REPORTS)/README.md,$(REPORT_OUTPUTS)) $(INDEX_SRC) | $(INSTALLED)
+	$(OROKIT) -q report-index $(patsubst %/summary.md,%/summary.json,$(DATASET_SUMMARIES)) -o $@ --overwrite
+
 report: $(REPORT_OUTPUTS)  ## main pipeline: data, summaries, analysis, classification, synthesis, round trip
 
 clean-reports:  ## delete generated reports (keeps data and .venv)

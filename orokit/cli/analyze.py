@@ -6,17 +6,24 @@ from pathlib import Path
 
 import click
 
+from orokit.cli.options import (
+    INPUT,
+    InputSource,
+    cell_size_option,
+    min_prominence_option,
+    overwrite_option,
+    progress_option,
+    z_units_option,
+)
+
 
 @click.command()
-@click.argument("dem")
+@click.argument("dem", type=INPUT)
 @click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output folder: peaks.csv, peaks.parquet, saddles.parquet, dividetree.gpkg, analysis.json.")
-@click.option("--min-prominence", default=30.0, show_default=True, type=float,
-              help="Keep peaks with prominence >= this many METRES (0 keeps every peak).")
-@click.option("--z-units", type=click.Choice(["m", "ft"]), default=None,
-              help="Elevation units of the input when the file does not say (required for PNG DEMs).")
-@click.option("--cell-size", type=float, default=None,
-              help="Cell size in metres for rasters without georeference (PNG); gives a local metric grid.")
+@min_prominence_option(help="Keep peaks with prominence >= this")
+@z_units_option()
+@cell_size_option()
 @click.option("--band", type=int, default=None, help="Band number (1-based) of a multi-band raster.")
 @click.option("--outside", type=click.Choice(["unknown", "sea"]), default="unknown", show_default=True,
               help="What lies beyond the data edge and nodata: unknown (edge prominences flagged as upper "
@@ -29,15 +36,15 @@ import click
                    "of a dask.distributed scheduler (tcp://host:8786).")
 @click.option("--checkpoint", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Folder for chunk summaries; rerunning with it reuses the finished chunks.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing analysis in OUTPUT.")
-@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
+@overwrite_option("an existing analysis in OUTPUT")
+@progress_option()
 @click.option("--depressions", is_flag=True,
               help="Also find the depressions (pits) with depth >= the threshold: depressions.parquet and a "
                    "'depressions' layer in dividetree.gpkg.")
 @click.option("--sea-level", "sea_level_m", type=float, default=None,
               help="With --depressions: cells at or below this elevation (metres) are one sea.")
 @click.pass_context
-def analyze(ctx: click.Context, dem: str, outdir: Path, min_prominence: float, z_units: str | None, cell_size: float | None,
+def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence: float, z_units: str | None, cell_size: float | None,
             band: int | None, outside: str, no_isolation: bool, chunks: int | None, scheduler: str | None,
             checkpoint: Path | None, overwrite: bool, progress: bool, depressions: bool,
             sea_level_m: float | None) -> None:
@@ -50,7 +57,6 @@ def analyze(ctx: click.Context, dem: str, outdir: Path, min_prominence: float, z
     prominences and distances are in metres.
     """
     from orokit.analysis import analyze as run
-    from orokit.io.dem import read_dem
 
     from orokit.cli.outputs import claim_outputs
     from orokit.io.analysis_io import ANALYSIS_FILES
@@ -63,22 +69,13 @@ def analyze(ctx: click.Context, dem: str, outdir: Path, min_prominence: float, z
         raise click.BadParameter(f"must be a positive number of cells, got {chunks}", param_hint="--chunks")
     if (scheduler or checkpoint) and chunks is None:
         raise click.UsageError("--scheduler and --checkpoint need --chunks N")
-    if Path(dem).exists():
-        if chunks is None and not Path(dem).is_dir():
-            from orokit.analysis import plan_chunks
+    if chunks is None and dem.dataset is None and not dem.path.is_dir():
+        from orokit.analysis import plan_chunks
 
-            chunks = plan_chunks(dem)
-            if chunks is not None:
-                click.echo(f"{dem} is too large for memory: analysing in {chunks} x {chunks} chunks", err=True)
-        da = read_dem(dem, z_units=z_units, cell_size=cell_size, chunks=chunks, band=band)
-    else:
-        from orokit.data import load_manifest, open_dataset_dem
-
-        names = [d.name for d in load_manifest().dems()]
-        if dem not in names:
-            raise click.BadParameter(f"{dem!r} is neither a file nor a DEM of the manifest ({', '.join(names)})",
-                                     param_hint="DEM")
-        da = open_dataset_dem(dem, chunks=chunks)
+        chunks = plan_chunks(str(dem.path))
+        if chunks is not None:
+            click.echo(f"{dem.path} is too large for memory: analysing in {chunks} x {chunks} chunks", err=True)
+    da = dem.read_dem(z_units=z_units, cell_size=cell_size, chunks=chunks, band=band)
     result = run(da, min_prominence=min_prominence, outside=outside, isolation=not no_isolation,
                  progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint,
                  depressions=depressions, sea_level_m=sea_level_m)

@@ -6,12 +6,12 @@ from pathlib import Path
 
 import click
 
-from orokit.cli.options import common_input_options
+from orokit.cli.options import INPUT, common_input_options, overwrite_option, seed_option
 
 
 @click.command()
 @click.argument("model_path", metavar="MODEL", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.argument("source", metavar="INPUT")
+@click.argument("source", metavar="INPUT", type=INPUT)
 @common_input_options
 @click.option("--min-peaks", type=int, default=None,
               help="Skip disks with fewer peaks (default: the model's training value).")
@@ -24,8 +24,8 @@ from orokit.cli.options import common_input_options
 @click.option("--map", "map_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write every disk as a polygon with its class probabilities to this GeoPackage (DEM's CRS), "
                    "and a PNG map over the hillshade beside it (same name, .png). DEM inputs only.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the disk placement.")
-@click.option("--overwrite", is_flag=True, help="Replace existing --output / --map files.")
+@seed_option(what="the disk placement")
+@overwrite_option("existing --output / --map files")
 def classify(model_path, source, z_units, cell_size, region, isolation, min_peaks, threshold, as_json, output,
              map_path, seed, overwrite):
     """Classify INPUT (DEM file or manifest DEM name, `orokit analyze` folder, or peak list) with MODEL.
@@ -49,10 +49,11 @@ def classify(model_path, source, z_units, cell_size, region, isolation, min_peak
     if map_path is not None and map_path.suffix.lower() != ".gpkg":
         raise click.BadParameter(f"{map_path} must end in .gpkg (GeoPackage)", param_hint="--map")
     model = load_model(model_path)
-    dem = open_input_dem(source, z_units=z_units, cell_size=cell_size) if region is None else None
+    source.dem_options(z_units, cell_size)  # a manifest DEM: refuses contradicting --z-units/--cell-size
+    dem = open_input_dem(str(source), z_units=z_units, cell_size=cell_size) if region is None else None
     if map_path is not None and dem is None:
         raise click.UsageError("--map needs a DEM input (a raster file or a manifest DEM name)")
-    pred = classify_input(model, source, z_units=z_units, cell_size=cell_size, region=region, isolation=isolation,
+    pred = classify_input(model, str(source), z_units=z_units, cell_size=cell_size, region=region, isolation=isolation,
                           min_peaks=min_peaks, threshold=threshold, dem=dem, rng=seed)
     if output is not None:
         with atomic_path(output) as tmp:

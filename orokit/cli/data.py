@@ -5,6 +5,8 @@ import json
 
 import click
 
+from orokit.cli.options import progress_option
+
 
 @click.group("data")
 def data() -> None:
@@ -46,9 +48,9 @@ def list_cmd(as_json: bool) -> None:
 @data.command("fetch")
 @click.argument("names", nargs=-1)
 @click.option("--force", is_flag=True, help="Fetch again even when the cached copy is good.")
-@click.option("--no-progress", is_flag=True, help="No progress bar.")
+@progress_option()
 @click.pass_context
-def fetch_cmd(ctx: click.Context, names: tuple[str, ...], force: bool, no_progress: bool) -> None:
+def fetch_cmd(ctx: click.Context, names: tuple[str, ...], force: bool, progress: bool) -> None:
     """Fetch NAMES (default: all datasets) into the cache, checking sha256.
 
     Copies from $OROKIT_DATA_MIRROR when it is set, else downloads the URLs.
@@ -56,8 +58,8 @@ def fetch_cmd(ctx: click.Context, names: tuple[str, ...], force: bool, no_progre
     from orokit.data import data_dir, fetch
 
     quiet = bool(ctx.find_root().obj and ctx.find_root().obj.get("quiet"))
-    out = fetch(list(names), force=force, progress=not (quiet or no_progress))
-    n = sum(len(v) for v in out.values())
+    out = fetch(list(names), force=force, progress=progress and not quiet)
+    n = len({str(p) for paths in out.values() for p in paths})  # a file shared by datasets counts once, as in verify
     if not quiet:
         click.echo(f"{len(out)} dataset(s), {n} file(s) ready in {data_dir()}")
 

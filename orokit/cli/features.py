@@ -5,20 +5,24 @@ from pathlib import Path
 
 import click
 
-from orokit.cli.options import Length, common_input_options
-
-#: disk radius: a length with unit; a bare number is metres (>= 100, else it was meant as km)
-RADIUS = Length(allow_bare=True, bare_min_m=100.0)
+from orokit.cli.options import (
+    INPUT,
+    RADIUS,
+    common_input_options,
+    min_prominence_option,
+    overwrite_option,
+    progress_option,
+    seed_option,
+)
 
 
 @click.command()
-@click.argument("inputs", nargs=-1, required=True)
+@click.argument("inputs", nargs=-1, required=True, type=INPUT)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Feature table to write (Parquet, one row per disk).")
 @click.option("--radius", type=RADIUS, default="10km", show_default=True,
               help="Disk radius R on the ground, with unit (10km, 5000m; a bare number is metres).")
-@click.option("--min-prominence", type=float, default=30.0, show_default=True,
-              help="eps: only peaks with prominence >= this many METRES count.")
+@min_prominence_option()
 @click.option("--min-peaks", type=int, default=20, show_default=True,
               help="Skip (and count) disks with fewer peaks than this.")
 @click.option("--max-disks", type=int, default=100, show_default=True, help="At most this many disks per input.")
@@ -34,9 +38,9 @@ RADIUS = Length(allow_bare=True, bare_min_m=100.0)
               help="Relative elevation (h-min)/(max-min) over the disk, or h/max.")
 @click.option("--exact-only", is_flag=True, help="Drop peaks whose prominence is flagged not exact (edge effects).")
 @common_input_options
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the disk placement.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing OUTPUT.")
-@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar over inputs.")
+@seed_option(what="the disk placement")
+@overwrite_option("an existing OUTPUT")
+@progress_option()
 def features(inputs, output, radius, min_prominence, min_peaks, max_disks, separation, labels, feature_set_name,
              relative_elevation, exact_only, z_units, cell_size, region, isolation, seed, overwrite, progress):
     """Orometric histograms of disks of radius R placed by blue noise in each INPUT.
@@ -71,12 +75,13 @@ def features(inputs, output, radius, min_prominence, min_peaks, max_disks, separ
 
         it = tqdm(it, desc="features", unit="input")
     for i, src in it:
-        label = (labels[i] if len(labels) == len(inputs) else labels[0]) if labels else None
+        label = (labels[i] if len(labels) == len(inputs) else labels[0]) if labels else src.label
+        z, cell = src.dem_options(z_units, cell_size)
         tables.append(features_for_input(
-            src, radius_m=radius, label=label, min_prominence_m=min_prominence, min_peaks=min_peaks,
+            str(src), radius_m=radius, label=label, min_prominence_m=min_prominence, min_peaks=min_peaks,
             max_disks=max_disks, separation=separation, relative_elevation=relative_elevation,
             feature_set=FeatureSet.named(feature_set_name),
-            exact_only=exact_only, z_units=z_units, cell_size=cell_size, region=region, isolation=isolation,
+            exact_only=exact_only, z_units=z, cell_size=cell, region=region, isolation=isolation,
             rng=np.random.default_rng(seeds[i])))
     table = concat_features(tables)
     write_feature_table(table, output)

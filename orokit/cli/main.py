@@ -2,37 +2,69 @@
 
 Sub-commands are registered lazily by name -> "module:function", so ``orokit --help``
 stays fast and each command lives in its own module under :mod:`orokit.cli`.
+``orokit --help`` lists the user commands first (in pipeline order), then the commands
+that build the pages of ``reports/`` (:data:`REPORT_COMMANDS`).
+
+Warnings (Python warnings and logged warnings) print as one line ``Warning: <message>``
+on stderr; ``-v`` adds the logger name, ``-q`` hides them.
 """
 from __future__ import annotations
 
 import importlib
 import logging
 import sys
+import warnings
 
 import click
 
 from orokit import __version__
 
-#: command name -> "module:attribute" of a click.Command
-COMMANDS: dict[str, str] = {
+#: user commands, in pipeline order: command name -> "module:attribute" of a click.Command
+USER_COMMANDS: dict[str, str] = {
     "data": "orokit.cli.data:data",
-    "report-dataset": "orokit.cli.report_dataset:report_dataset",
-    "report-index": "orokit.cli.report_index:report_index",
     "analyze": "orokit.cli.analyze:analyze",
-    "analysis-report": "orokit.cli.analysis_report:analysis_report",
     "features": "orokit.cli.features:features",
     "train": "orokit.cli.train:train",
     "classify": "orokit.cli.classify:classify",
-    "report": "orokit.cli.report:report",
     "type": "orokit.cli.type_cmd:type_cmd",
     "synthesize-tree": "orokit.cli.synthesize_tree:synthesize_tree",
-    "synthesis-report": "orokit.cli.synthesis_report:synthesis_report",
     "render": "orokit.cli.render:render",
     "generators-run": "orokit.cli.generators_cmd:generators_run",
     "generators-report": "orokit.cli.generators_cmd:generators_report",
     "synthesize": "orokit.cli.synthesize:synthesize",
     "validate": "orokit.cli.validate:validate",
+}
+#: commands that build the pages of reports/ (what `make report` runs)
+REPORT_COMMANDS: dict[str, str] = {
+    "report-dataset": "orokit.cli.report_dataset:report_dataset",
+    "report-index": "orokit.cli.report_index:report_index",
+    "analysis-report": "orokit.cli.analysis_report:analysis_report",
+    "report": "orokit.cli.report:report",
+    "synthesis-report": "orokit.cli.synthesis_report:synthesis_report",
     "roundtrip-report": "orokit.cli.roundtrip_report:roundtrip_report",
+}
+#: every command
+COMMANDS: dict[str, str] = {**USER_COMMANDS, **REPORT_COMMANDS}
+
+#: the short help of each command as `orokit --help` shows it, without importing the
+#: command modules (which import numpy, rasterio...): checked against the commands by the tests
+SHORT_HELP: dict[str, str] = {
+    "data": "Real datasets of the manifest: list, fetch, verify, path.",
+    "analyze": "Peaks, prominence, isolation and the Divide Tree of a DEM.",
+    "features": "Orometric disk histograms of DEMs, analyses or peak lists.",
+    "train": "Train and evaluate the region classifier.",
+    "classify": "Classify a DEM, analysis or peak list with a trained model.",
+    "type": "Terrain type (orometric statistics) of an analysis, DEM or tree.",
+    "synthesize-tree": "Synthesize a Divide Tree following terrain type(s).",
+    "render": "Render a Divide Tree to an elevation raster (COG).",
+    "synthesize": "Synthesize a Divide Tree and its terrain in one go.",
+    "validate": "Round trip of a rendered terrain: re-analysis, histograms, classes.",
+    "report-dataset": "Summary page and hillshade of one manifest DEM.",
+    "report-index": "Index page of the dataset summaries.",
+    "analysis-report": "Table and Divide Tree figures of analysis folders.",
+    "report": "Classification report (Table 2, confusion matrices, model).",
+    "synthesis-report": "Fidelity table of synthesized trees.",
+    "roundtrip-report": "Table and twin figures of the round trip.",
 }
 
 
@@ -40,7 +72,20 @@ class LazyGroup(click.Group):
     """A click group that imports each sub-command only when it is used."""
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        return sorted(COMMANDS)
+        return list(COMMANDS)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """Two sections: user commands (pipeline order), then report-building commands."""
+        for title, names in (("Commands", USER_COMMANDS), ("Report-building commands (make report)", REPORT_COMMANDS)):
+            rows = []
+            for name in names:
+                text = SHORT_HELP.get(name)
+                if text is None:  # a command without a SHORT_HELP entry: ask it (imports its module)
+                    cmd = self.get_command(ctx, name)
+                    text = cmd.get_short_help_str(formatter.width) if cmd is not None else ""
+                rows.append((name, text))
+            with formatter.section(title):
+                formatter.write_dl(rows)
 
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
         target = COMMANDS.get(name)
@@ -126,6 +171,52 @@ def _where(ctx: click.Context, exc: BaseException) -> str:
     return str(name) if name else "the output disk"
 
 
+class _OneLineFormatter(logging.Formatter):
+    """``Warning: message`` / ``Error: message``; with -v also the logger name."""
+
+    def __init__(self, verbose: int) -> None:
+        super().__init__()
+        self.verbose = verbose
+
+    def format(self, record: logging.LogRecord) -> str:
+        msg = record.getMessage()
+        if record.exc_info and self.verbose >= 2:
+            msg += "\n" + self.formatException(record.exc_info)
+        if record.levelno >= logging.WARNING:
+            head = "Error" if record.levelno >= logging.ERROR else "Warning"
+            return f"{head}: {msg}" if not self.verbose else f"{head} ({record.name}): {msg}"
+        return f"{record.levelname.lower()} {record.name}: {msg}"
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+    """``warnings.showwarning`` of the CLI: the message on one line, no source line."""
+    text = " ".join(str(message).split())
+    logger = logging.getLogger("py.warnings")
+    logger.warning("%s", text if category is UserWarning or issubclass(category, _orokit_warning())
+                   else f"{text} ({category.__name__})")
+
+
+def _orokit_warning() -> type[Warning]:
+    from orokit.errors import OrokitWarning
+
+    return OrokitWarning
+
+
+def setup_logging(verbose: int, quiet: bool) -> None:
+    """Log level from -v/-q, one-line messages on stderr, Python warnings through the log."""
+    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_OneLineFormatter(verbose))
+    root = logging.getLogger()
+    for h in list(root.handlers):
+        if getattr(h, "_orokit_cli", False):
+            root.removeHandler(h)
+    handler._orokit_cli = True  # type: ignore[attr-defined]
+    root.addHandler(handler)
+    root.setLevel(level)
+    warnings.showwarning = _show_warning
+
+
 @click.group(cls=LazyGroup)
 @click.version_option(__version__, prog_name="orokit")
 @click.option("-v", "--verbose", count=True, help="More log output (-vv shows tracebacks).")
@@ -136,8 +227,7 @@ def cli(ctx: click.Context, verbose: int, quiet: bool) -> None:
     ctx.ensure_object(dict)
     ctx.obj["verbose"] = verbose
     ctx.obj["quiet"] = quiet
-    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    setup_logging(verbose, quiet)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -6,10 +6,17 @@ from pathlib import Path
 import click
 
 from orokit.cli.generator_options import generator_options
-from orokit.cli.options import Length
-
-#: a length in metres: 30m, 0.03km, or a plain number of metres (strict, see orokit.cli.options)
-LENGTH = Length(allow_bare=True)
+from orokit.cli.options import (
+    INPUT,
+    LENGTH,
+    InputSource,
+    cell_size_option,
+    resolve_input,
+    min_prominence_option,
+    overwrite_option,
+    refuse_existing,
+    seed_option,
+)
 
 
 def read_tree(path: Path, *, cell_size: float | None = None):
@@ -19,34 +26,24 @@ def read_tree(path: Path, *, cell_size: float | None = None):
     return read_divide_tree(path, cell_size=cell_size)
 
 
-def like_dem(like: str | Path, *, cell_size: float | None = None, z_units: str | None = "m",
+def like_dem(like: str | Path | InputSource, *, cell_size: float | None = None, z_units: str | None = "m",
              hint: str = "--like"):
     """The DEM named by ``--like``: a raster file or a manifest dataset name (metres).
 
     A file is read with ``z_units`` (``"m"`` when only its grid matters; ``None`` to use
     the units it declares) and ``cell_size`` for rasters without georeferencing; a
-    dataset comes with the manifest's units and cell size.
+    dataset comes with the manifest's units and cell size (:func:`orokit.cli.options.resolve_input`).
     """
-    from orokit.io.dem import read_dem
-
-    if Path(like).exists():
-        dem = read_dem(str(like), z_units=z_units, cell_size=cell_size)
-    else:
-        from orokit.data import open_dataset_dem
-        from orokit.errors import DataError
-
-        try:
-            dem = open_dataset_dem(str(like))
-        except (DataError, KeyError) as exc:
-            raise click.BadParameter(f"{str(like)!r} is neither a file nor a dataset of the manifest ({exc})",
-                                     param_hint=hint) from None
+    src = like if isinstance(like, InputSource) else resolve_input(like, hint=hint)
+    dem = src.read_dem() if src.dataset else src.read_dem(z_units=z_units, cell_size=cell_size)
     if dem.rio.crs is not None and dem.rio.crs.is_geographic:
         raise click.BadParameter(f"{like} is in a geographic CRS; give --size and --resolution in metres",
                                  param_hint=hint)
     return dem
 
 
-def like_grid(like: str | Path, *, cell_size: float | None = None) -> tuple[tuple[float, float, float, float], float]:
+def like_grid(like: str | Path | InputSource, *, cell_size: float | None = None
+              ) -> tuple[tuple[float, float, float, float], float]:
     """Extent ``(xmin, ymin, xmax, ymax)`` and cell size (m) of a ``--like`` raster or dataset."""
     dem = like_dem(like, cell_size=cell_size)
     t = dem.rio.transform()
@@ -82,22 +79,19 @@ def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None
 @click.option("--resolution", type=LENGTH, default=None,
               help="Cell size: 30m, 0.03km (a plain number is metres) [default: that of --like, else 30m].")
 @click.option("--erosion/--no-erosion", default=True, show_default=True, help="Multi-scale constrained erosion.")
-@click.option("--seed", type=click.IntRange(min=0), default=None,
-              help="Random seed (same seed, same raster) [default: fresh entropy, recorded in the tags].")
+@seed_option(what="the raster", default=None, recorded_in="the GeoTIFF tags")
 @click.option("--extent", type=(float, float, float, float), default=None,
               help="XMIN YMIN XMAX YMAX in the tree's CRS (default: the tree's domain or bounding box).")
-@click.option("--like", default=None,
+@click.option("--like", type=INPUT, default=None,
               help="Raster file or manifest dataset (e.g. the DEM the tree came from): its extent and cell size.")
-@click.option("--min-prominence", type=float, default=30.0, show_default=True,
-              help="eps (m): noise stays below it.")
+@min_prominence_option(help="Prominence threshold eps: the added noise stays below it")
 @click.option("--lambda", "lam", type=LENGTH, default="200m", show_default=True, help="Meshing distance lambda.")
-@click.option("--cell-size", type=float, default=None,
-              help="Cell size (m) of a reference .txt tree or of a --like raster without georeferencing.")
+@cell_size_option(help="Cell size of a reference .txt tree or of a --like raster without georeference")
 @click.option("--preview", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write a hillshade PNG.")
 @click.option("--tin", "tin_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write the TIN as a PLY mesh.")
-@click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
+@overwrite_option("existing outputs")
 @generator_options
 def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, lam, cell_size, preview,
            tin_path, overwrite, generator, params, exemplar) -> None:
@@ -113,9 +107,7 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
     from orokit.raster.render import render_elevation
 
     stage = claim_outputs(out, preview, tin_path)  # locked for the whole run
-    for p in (out, preview, tin_path):
-        if p is not None and p.exists() and not overwrite:
-            raise click.UsageError(f"{p} exists; pass --overwrite to replace it")
+    refuse_existing(out, preview, tin_path, overwrite=overwrite)
     if like is not None:
         if extent is not None:
             raise click.UsageError("give --extent or --like, not both")

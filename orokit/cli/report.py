@@ -5,7 +5,15 @@ from pathlib import Path
 
 import click
 
-from orokit.cli.features import RADIUS  # the shared Length type (orokit.cli.options)
+from orokit.cli.options import (
+    RADIUS,
+    cell_size_option,
+    min_prominence_option,
+    overwrite_option,
+    progress_option,
+    seed_option,
+    z_units_option,
+)
 
 
 @click.command()
@@ -18,12 +26,12 @@ from orokit.cli.features import RADIUS  # the shared Length type (orokit.cli.opt
               help="Disk radius with unit; repeat for several (default 10km, 5km, 15km).")
 @click.option("--runs", type=int, default=100, show_default=True, help="Training runs with fresh splits.")
 @click.option("--feature-runs", type=int, default=20, show_default=True, help="Runs per feature group (Table 2 rows).")
-@click.option("--min-prominence", type=float, default=30.0, show_default=True, help="eps in METRES.")
+@min_prominence_option()
 @click.option("--min-peaks", type=int, default=20, show_default=True, help="Skip disks with fewer peaks.")
 @click.option("--model", "model_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also save a model trained on all disks at the first radius (e.g. models/regions-10km.skops).")
-@click.option("--z-units", type=click.Choice(["m", "ft"]), default=None, help="Units of DEM inputs without units.")
-@click.option("--cell-size", type=float, default=None, help="Cell size in METRES of DEM inputs without georeference.")
+@z_units_option(help="Elevation units of DEM inputs that do not declare them (PNG).")
+@cell_size_option(help="Cell size of DEM inputs without georeference (PNG)")
 @click.option("--features", "feature_set", type=click.Choice(["orometry", "paper"]), default="orometry",
               show_default=True, help="Feature set (paper: Argudo et al. 2019 Table 1, the reference mode).")
 @click.option("--classifier", type=click.Choice(["rf", "et", "hgb"]), default="et", show_default=True,
@@ -33,10 +41,10 @@ from orokit.cli.features import RADIUS  # the shared Length type (orokit.cli.opt
 @click.option("--max-disks", type=int, default=100, show_default=True, help="At most this many disks per region.")
 @click.option("--max-train", type=int, default=80, show_default=True,
               help="At most this many training disks per region in each run (paper: 80).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of disks, splits and forests.")
+@seed_option(what="the disks, the splits and the forests")
 @click.option("--n-jobs", type=int, default=2, show_default=True, help="Parallel fits.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing report / model.")
-@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bars.")
+@overwrite_option("an existing report and model")
+@progress_option()
 def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominence, min_peaks, model_path, z_units,
            cell_size, feature_set, classifier, separation, max_disks, max_train, seed, n_jobs, overwrite, progress):
     """Classification report on INPUTs (DEMs, analysis folders or peak lists; one region each).

@@ -5,11 +5,13 @@ from pathlib import Path
 
 import click
 
+from orokit.cli.options import overwrite_option, refuse_existing
+
 
 @click.command("report-dataset")
 @click.argument("name")
 @click.option("-o", "--outdir", required=True, type=click.Path(file_okay=False), help="Output directory.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing summary.")
+@overwrite_option("an existing summary")
 @click.pass_context
 def report_dataset(ctx: click.Context, name: str, outdir: str, overwrite: bool) -> None:
     """Fetch the manifest DEM NAME, read it, and write DIR/summary.md, summary.json, hillshade.png."""
@@ -20,8 +22,7 @@ def report_dataset(ctx: click.Context, name: str, outdir: str, overwrite: bool) 
     from orokit.cli.outputs import claim_outputs
 
     claim_outputs(out)  # locked for the whole run
-    if (out / "summary.md").exists() and not overwrite:
-        raise click.ClickException(f"{out / 'summary.md'} exists; pass --overwrite to replace it.")
+    refuse_existing(out / "summary.md", overwrite=overwrite)
     manifest = load_manifest()
     ds = manifest[name]
     dem = open_dataset_dem(name, manifest=manifest)

@@ -5,11 +5,13 @@ from pathlib import Path
 
 import click
 
+from orokit.cli.options import overwrite_option, refuse_existing
+
 
 @click.command("report-index")
 @click.argument("summaries", nargs=-1, required=True, type=click.Path(dir_okay=False, exists=True))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Markdown file to write.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing index.")
+@overwrite_option("an existing index")
 @click.pass_context
 def report_index(ctx: click.Context, summaries: tuple[str, ...], output: str, overwrite: bool) -> None:
     """Write a markdown index linking the summary.json files SUMMARIES (made by report-dataset)."""
@@ -20,8 +22,7 @@ def report_index(ctx: click.Context, summaries: tuple[str, ...], output: str, ov
     from orokit.cli.outputs import claim_outputs
 
     claim_outputs(out)  # locked for the whole run
-    if out.exists() and not overwrite:
-        raise click.ClickException(f"{out} exists; pass --overwrite to replace it.")
+    refuse_existing(out, overwrite=overwrite)
     write_text_atomic(out, render_index(list(summaries), out))
     if not (ctx.find_root().obj or {}).get("quiet"):
         click.echo(f"wrote {out} ({len(summaries)} datasets)")

@@ -5,6 +5,8 @@ from pathlib import Path
 
 import click
 
+from orokit.cli.options import overwrite_option, progress_option
+
 
 @click.command(name="roundtrip-report")
 @click.argument("twins", nargs=-1, required=True, type=click.Path(exists=True, file_okay=False, path_type=Path))
@@ -15,8 +17,8 @@ import click
               help="Markdown file to write (TWIN/twin.png figures and the table CSV are written first).")
 @click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="CSV of the table [default: OUTPUT with the suffix .csv, e.g. README.csv].")
-@click.option("--overwrite", is_flag=True, help="Replace existing outputs (OUTPUT, the table, TWIN/twin.png).")
-@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
+@overwrite_option("existing outputs (OUTPUT, the table, TWIN/twin.png)")
+@progress_option()
 def roundtrip_report(twins, per_class, model, output, table_path, overwrite, progress) -> None:
     """Tabulate the round trip of TWINS (folders of `orokit synthesize --like` + `orokit validate`).
 

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from orokit.cli.options import overwrite_option, refuse_existing
+
 #: the paper's reported maximum histogram errors (Argudo et al. 2019, section 7.1)
 PAPER_MAX_ERROR = {"prominence": 0.03, "dominance": 0.03, "isolation_distance": 0.08}
 
@@ -14,7 +16,7 @@ PAPER_MAX_ERROR = {"prominence": 0.03, "dominance": 0.03, "isolation_distance": 
 @click.argument("trees", nargs=-1, required=True, type=click.Path(exists=True, file_okay=False, path_type=Path))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Markdown file to write.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing OUTPUT.")
+@overwrite_option("an existing OUTPUT")
 def synthesis_report(trees: tuple[Path, ...], output: Path, overwrite: bool) -> None:
     """Tabulate per-feature fidelity of `orokit synthesize-tree` output folders TREES."""
     import pandas as pd
@@ -24,8 +26,7 @@ def synthesis_report(trees: tuple[Path, ...], output: Path, overwrite: bool) -> 
     from orokit.cli.outputs import claim_outputs
 
     claim_outputs(output)  # locked for the whole run
-    if output.exists() and not overwrite:
-        raise click.UsageError(f"{output} exists; pass --overwrite to replace it")
+    refuse_existing(output, overwrite=overwrite)
     rows, runs = [], []
     for d in trees:
         meta_path = d / "synthesis.json"

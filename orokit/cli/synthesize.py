@@ -6,6 +6,16 @@ from pathlib import Path
 import click
 
 from orokit.cli.generator_options import generator_options
+from orokit.cli.options import (
+    INPUT,
+    LENGTH,
+    SIZE,
+    InputSource,
+    cell_size_option,
+    overwrite_option,
+    progress_option,
+    seed_option,
+)
 from orokit.cli.render import like_dem
 
 #: files written into OUT besides those of ``orokit synthesize-tree``; hillshade.png is
@@ -17,7 +27,7 @@ MARKER = "hillshade.png"
 STALE_FILES = ("validation.json",)
 
 
-def like_domain(like: str, *, cell_size: float | None = None) -> tuple[float, float, float]:
+def like_domain(like: InputSource, *, cell_size: float | None = None) -> tuple[float, float, float]:
     """Width, height and cell size (metres) of a DEM file or of a manifest dataset."""
     x0, y0, w, h, res, _ = like_box(like, cell_size=cell_size)
     return w, h, res
@@ -34,23 +44,28 @@ def like_box(like: str, *, cell_size: float | None = None):
     return min(xs), min(ys), nx * abs(float(t.a)), ny * abs(float(t.e)), abs(float(t.a)), crs
 
 
+def _like_dem(like: str | InputSource, *, cell_size: float | None = None):
+    """The DEM named by --like (a file or a manifest dataset), in metres (see :func:`like_dem`)."""
+    return like_dem(like, cell_size=cell_size)
+
+
 @click.command(name="synthesize")
 @click.option("--type", "type_file", required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Terrain type JSON (from `orokit type`).")
-@click.option("--size", default="90km", show_default=True, help="Domain size: 90km, 90000m, 90x60km.")
-@click.option("--resolution", default=None, help="Cell size of the raster [default: 30m, or that of --like].")
-@click.option("--like", default=None,
+@click.option("--size", type=SIZE, default="90km", show_default=True,
+              help="Domain size: 90km, 90000m, 90x60km (a plain number is metres).")
+@click.option("--resolution", type=LENGTH, default=None,
+              help="Cell size of the raster (30m; a plain number is metres) [default: 30m, or that of --like].")
+@click.option("--like", type=INPUT, default=None,
               help="A DEM file or a dataset name of the manifest: the domain gets its size (and cell size unless "
                    "--resolution is given), e.g. a synthetic twin of a real DEM.")
-@click.option("--cell-size", type=float, default=None, help="Cell size (m) of a --like file without georeferencing.")
+@cell_size_option(help="Cell size of a --like file without georeference")
 @click.option("--n-peaks", type=int, default=None, help="Number of peaks (default: type density x area).")
 @click.option("--control-elevation", default=None,
               help="Coarse elevation map C_H (m) guiding where high and low peaks go: a raster file, or 'like' for "
                    "the --like DEM itself (a twin then keeps the real large-scale relief).")
 @click.option("--erosion/--no-erosion", default=True, show_default=True, help="Multi-scale constrained erosion.")
-@click.option("--seed", type=click.IntRange(min=0), default=None,
-              help="Random seed of the tree and the raster [default: fresh entropy, recorded in synthesis.json "
-                   "and in the dem.tif tags].")
+@seed_option(what="the tree and the raster", default=None, recorded_in="synthesis.json and the dem.tif tags")
 @click.option("--crs", default=None,
               help="Output CRS (projected EPSG/WKT), or 'local' for a local metric frame with the south-west corner at "
                    "(0, 0) [default: the --like DEM's grid and CRS, else a local frame].")
@@ -59,8 +74,8 @@ def like_box(like: str, *, cell_size: float | None = None):
 @click.option("--tin", "write_tin", is_flag=True, help="Also write the TIN as tin.ply.")
 @click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output folder: dividetree.gpkg/.txt, peaks.csv, synthesis.json, dem.tif, hillshade.png.")
-@click.option("--overwrite", is_flag=True, help="Replace existing outputs in OUTPUT.")
-@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
+@overwrite_option("existing outputs in OUTPUT")
+@progress_option()
 @generator_options
 def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_elevation, erosion, seed, crs, center,
                write_tin,
@@ -77,7 +92,6 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
 
     import numpy as np
 
-    from orokit.cli.options import parse_length
     from orokit.cli.render import write_outputs
     from orokit.raster.params import RenderParams
     from orokit.raster.rasterize import make_grid
@@ -113,12 +127,12 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
     like_origin = None
     if like is not None:
         x0, y0, w, h, like_res, like_crs = like_box(like, cell_size=cell_size)
-        res = parse_length(resolution, hint="--resolution") if resolution is not None else like_res
+        res = resolution if resolution is not None else like_res
         if crs is None and center_ll is None and not local:
             like_origin = (x0, y0, like_crs)  # the twin lands on the DEM's grid, in its CRS
     else:
-        w, h = parse_length(size, pair=True, hint="--size")
-        res = parse_length(resolution or "30m", hint="--resolution")
+        w, h = size
+        res = resolution if resolution is not None else 30.0
     make_grid((0.0, 0.0, w, h), res)  # resolution errors before the synthesis
     parsed = None
     if generator != "argudo" or params:
@@ -173,7 +187,8 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
     # the new files go to a hidden folder beside OUTPUT and replace the old ones only when all
     # are written (the marker first removed, moved in last; the old ones not rewritten removed)
     new = stage.folder(outdir, marker=MARKER, stale=outputs + STALE_FILES)
-    extra = {"seed": seed, "types": [str(type_file)], "resolution_m": res, "erosion": bool(erosion), "like": like,
+    extra = {"seed": seed, "types": [str(type_file)], "resolution_m": res, "erosion": bool(erosion),
+             "like": None if like is None else str(like),
              "generator": generator, "generator_parameters": json.loads(dem.attrs.get("parameters", "{}")),
              "control_elevation": None if control_elevation is None else str(control_elevation),
              "render_timings_s": json.loads(dem.attrs.get("timings", "{}")),

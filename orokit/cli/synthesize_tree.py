@@ -5,10 +5,7 @@ from pathlib import Path
 
 import click
 
-from orokit.cli.options import Length, parse_length
-
-#: domain size: ``90km``, ``90x60km``, ``90000m``; a plain number is metres
-SIZE = Length(allow_bare=True, pair=True)
+from orokit.cli.options import LENGTH, SIZE, overwrite_option, parse_length, progress_option, seed_option
 
 
 def parse_size(text: str) -> tuple[float, float]:
@@ -40,13 +37,13 @@ def parse_size(text: str) -> tuple[float, float]:
 @click.option("--crs", default=None, help="Output CRS (EPSG:xxxx or WKT; projected). Default: local frame.")
 @click.option("--center", type=(float, float), default=None,
               help="Domain centre LON LAT; without --crs a local azimuthal equidistant projection is used.")
-@click.option("--seed", type=int, default=None, help="Random seed (same seed, same tree).")
-@click.option("--txt-cell-size", type=float, default=30.0, show_default=True,
-              help="Virtual cell size (m) of the pixel coordinates in dividetree.txt.")
+@seed_option(what="the tree", default=None, recorded_in="synthesis.json")
+@click.option("--txt-cell-size", type=LENGTH, default="30m", show_default=True,
+              help="Virtual cell size of the pixel coordinates in dividetree.txt (a plain number is metres).")
 @click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output folder: dividetree.gpkg, dividetree.txt, peaks.csv, synthesis.json.")
-@click.option("--overwrite", is_flag=True, help="Replace existing outputs in OUTPUT.")
-@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar.")
+@overwrite_option("existing outputs in OUTPUT")
+@progress_option()
 def synthesize_tree(type_files, size, n_peaks, control_elevation, control_density, type_map, fixed_peaks, fragment,
                     fragment_offset, crs, center, seed, txt_cell_size, outdir, overwrite, progress) -> None:
     """Synthesize a Divide Tree that follows the orometry of the given terrain type(s)."""
@@ -66,6 +63,10 @@ def synthesize_tree(type_files, size, n_peaks, control_elevation, control_densit
     if type_map is None and len(type_files) > 1:
         raise click.BadParameter("several --type need a --type-map telling where each applies", param_hint="--type")
     w, h = size
+    if seed is None:
+        import numpy as np
+
+        seed = int(np.random.SeedSequence().entropy)  # recorded in synthesis.json, so the run can be replayed
     types = [load_terrain_type(p) for p in type_files]
     fixed = _read_points(fixed_peaks) if fixed_peaks is not None else None
     frag = _read_tree(fragment) if fragment is not None else None

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from orokit.cli.options import overwrite_option, progress_option, seed_option
+
 
 @click.command()
 @click.argument("features_path", metavar="FEATURES.parquet", type=click.Path(exists=True, dir_okay=False,
@@ -35,9 +37,9 @@ import click
 @click.option("--json", "as_json", is_flag=True,
               help="Print mean_accuracy, median_accuracy, per_class and per_feature accuracies as JSON.")
 @click.option("--n-jobs", type=int, default=2, show_default=True, help="Parallel fits.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of splits and forests.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing model and report files.")
-@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bars.")
+@seed_option(what="the splits and the forests")
+@overwrite_option("an existing model and report files")
+@progress_option()
 def train(features_path, output, runs, feature_runs, split, buffer_radii, classifier, trees, max_train,
           drop_small_classes, report_dir, as_json, n_jobs, seed, overwrite, progress):
     """Train the region classifier on FEATURES.parquet (from `orokit features`) and evaluate it.

@@ -5,18 +5,26 @@ from pathlib import Path
 
 import click
 
+from orokit.cli.options import (
+    INPUT,
+    InputSource,
+    cell_size_option,
+    min_prominence_option,
+    overwrite_option,
+    progress_option,
+    refuse_existing,
+    z_units_option,
+)
+
 
 @click.command(name="type")
-@click.argument("source", type=click.Path(exists=True, dir_okay=True, path_type=Path))
+@click.argument("src", metavar="SOURCE", type=INPUT)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Terrain type JSON to write.")
 @click.option("--name", default=None, help="Type name (default: the input's name).")
-@click.option("--min-prominence", default=None, type=float,
-              help="Prominence threshold eps in METRES (default: the analysis' threshold, else 30).")
-@click.option("--z-units", type=click.Choice(["m", "ft"]), default=None,
-              help="Elevation units of a DEM or Divide Tree TXT input (PNG DEMs and TXT trees: ft).")
-@click.option("--cell-size", type=float, default=None,
-              help="Cell size in metres for a PNG DEM or a Divide Tree TXT.")
+@min_prominence_option(default=None, help="Prominence threshold eps [default: the analysis' threshold, else 30m]")
+@z_units_option(help="Elevation units of a DEM or Divide Tree TXT input (PNG DEMs and TXT trees: ft).")
+@cell_size_option(help="Cell size of a PNG DEM or a Divide Tree TXT")
 @click.option("--isolation-basis", type=click.Choice(["peaks", "terrain"]), default="peaks", show_default=True,
               help="Isolation to the nearest higher peak (comparable with synthesized trees) or to the "
                    "nearest higher terrain cell (analysis column).")
@@ -27,14 +35,16 @@ import click
 @click.option("--density", type=float, default=None, help="Edit: peak density in peaks per km2.")
 @click.option("--area-km2", type=float, default=None,
               help="Area of a Divide Tree input in km2 (default: extent of its peaks, saddles and runoffs).")
-@click.option("--overwrite", is_flag=True, help="Replace an existing OUTPUT.")
-def type_cmd(source: Path, output: Path, name: str | None, min_prominence: float | None, z_units: str | None,
+@overwrite_option("an existing OUTPUT")
+@progress_option()
+def type_cmd(src: InputSource, output: Path, name: str | None, min_prominence: float | None, z_units: str | None,
              cell_size: float | None, isolation_basis: str, rho: float | None, scale_prominence: float | None,
              scale_elevation: float | None, shift_elevation: float | None, density: float | None,
-             area_km2: float | None, overwrite: bool) -> None:
+             area_km2: float | None, overwrite: bool, progress: bool) -> None:
     """Build the terrain type of SOURCE and write it as versioned JSON.
 
-    SOURCE is an `orokit analyze` output folder, a DEM (analysed first), or a Divide
+    SOURCE is an `orokit analyze` output folder, a DEM (analysed first; a DEM of the
+    manifest by name, e.g. gobi), or a Divide
     Tree (reference .txt or .gpkg; its area is the extent of its peaks, saddles and
     runoffs unless --area-km2 is given).
     """
@@ -43,8 +53,8 @@ def type_cmd(source: Path, output: Path, name: str | None, min_prominence: float
     from orokit.cli.outputs import claim_outputs
 
     claim_outputs(output)  # locked for the whole run
-    if output.exists() and not overwrite:
-        raise click.UsageError(f"{output} exists; pass --overwrite to replace it")
+    refuse_existing(output, overwrite=overwrite)
+    source = src.path
     if source.is_dir():
         tt = TerrainType.from_analysis(source, min_prominence_m=min_prominence, name=name,
                                        isolation_basis=isolation_basis, rho=rho)
@@ -59,11 +69,10 @@ def type_cmd(source: Path, output: Path, name: str | None, min_prominence: float
                                           provenance={"source": str(source), "area_from": "tree extent"})
     else:
         from orokit.analysis import analyze
-        from orokit.io.dem import read_dem
 
-        da = read_dem(source, z_units=z_units, cell_size=cell_size)
-        result = analyze(da, min_prominence=30.0 if min_prominence is None else min_prominence, progress=True)
-        tt = TerrainType.from_analysis(result, name=name or source.stem, isolation_basis=isolation_basis, rho=rho)
+        da = src.read_dem(z_units=z_units, cell_size=cell_size)
+        result = analyze(da, min_prominence=30.0 if min_prominence is None else min_prominence, progress=progress)
+        tt = TerrainType.from_analysis(result, name=name or src.dataset or source.stem, isolation_basis=isolation_basis, rho=rho)
     if scale_prominence is not None:
         tt = tt.scaled("prominence", scale_prominence)
     if scale_elevation is not None:

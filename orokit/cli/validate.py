@@ -6,6 +6,15 @@ from pathlib import Path
 
 import click
 
+from orokit.cli.options import (
+    LENGTH,
+    min_prominence_option,
+    overwrite_option,
+    refuse_existing,
+    seed_option,
+    z_units_option,
+)
+
 
 def append_row(table: Path, row: dict) -> None:
     """Append one row to a CSV table (rewritten atomically; new columns are added)."""
@@ -31,21 +40,21 @@ def append_row(table: Path, row: dict) -> None:
 @click.option("--type", "type_file", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Terrain type JSON to compare histograms with (default: the one in OUT/synthesis.json).")
 @click.option("--label", default=None, help="Expected region (default: the type's name).")
-@click.option("--min-prominence", type=float, default=30.0, show_default=True, help="eps (m) of the re-analysis.")
-@click.option("--z-units", type=click.Choice(["m", "ft"]), default=None,
-              help="Elevation units of a raster that declares none (rasters of `orokit render`/`synthesize` "
+@min_prominence_option(help="Prominence threshold eps of the re-analysis")
+@z_units_option(help="Elevation units of a raster that declares none (rasters of `orokit render`/`synthesize` "
                    "declare metres).")
 @click.option("-o", "--output", "json_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Validation JSON to write [default: OUT/validation.json when OUT is a folder; none for a "
                    "raster, whose summary is only printed].")
 @click.option("--append-to", "append_to", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="CSV log to append the run's summary row to (created if missing). Default: no log.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing validation JSON.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the disk placement.")
+@overwrite_option("an existing validation JSON")
+@seed_option(what="the disk placement")
 @click.option("--real", "real", default=None,
               help="Real DEM (file or manifest dataset) to compare landforms with [default: the --like DEM of "
                    "OUT/synthesis.json, if any].")
-@click.option("--real-cell-size", type=float, default=None, help="Cell size (m) of a --real file without georeferencing.")
+@click.option("--real-cell-size", type=LENGTH, default=None,
+              help="Cell size of a --real file without georeference (a length: 92.6m; a plain number is metres).")
 def validate(out, model_path, tree_path, type_file, label, min_prominence, z_units, json_path, append_to, overwrite,
              seed, real, real_cell_size) -> None:
     """Re-analyse OUT (a synthesize folder or a raster), compare it with its Divide Tree, classify it.
@@ -62,8 +71,7 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, z_uni
     from orokit.cli.outputs import claim_outputs
 
     claim_outputs(json_path)  # locked for the whole run (the --append-to log only while appending)
-    if json_path is not None and json_path.exists() and not overwrite:
-        raise click.UsageError(f"{json_path} exists; pass --overwrite to replace it")
+    refuse_existing(json_path, overwrite=overwrite)
     if append_to is not None and append_to.exists() and append_to.is_dir():
         raise click.BadParameter(f"{append_to} is a folder; give the CSV file to append to", param_hint="--append-to")
     if folder is not None and not raster.is_file():

@@ -526,7 +526,7 @@ def read_dem(
 def raster_cell_count(path: PathLike) -> int | None:
     """Number of cells of a raster file (header only), or None when GDAL cannot open it."""
     try:
-        with rasterio.open(str(path)) as ds:
+        with _open(str(path)) as ds:  # no NotGeoreferencedWarning for a PNG (read_dem handles it)
             return int(ds.width) * int(ds.height)
     except Exception:  # noqa: BLE001 - read_dem reports unreadable inputs with a proper message
         return None

@@ -69,7 +69,10 @@ def save_model_file(pipeline: Any, metadata: dict[str, Any], path: PathLike) -> 
     if metadata.get("format") != MODEL_FORMAT:
         raise SchemaError(f"model metadata must have format {MODEL_FORMAT!r} (use orokit.classify.model)")
     md = json.loads(_canonical({k: v for k, v in metadata.items() if k != "sha256"}))
-    blob = sio.dumps({"pipeline": pipeline, "metadata": _canonical(md)})
+    from orokit.io.reproducible import canonical_skops
+
+    # same model, same bytes: skops names arrays after memory addresses and stamps the clock
+    blob = canonical_skops(sio.dumps({"pipeline": pipeline, "metadata": _canonical(md)}))
     side = dict(md, sha256=hashlib.sha256(blob).hexdigest())
     write_bytes_atomic(path, blob)
     write_bytes_atomic(metadata_path(path), json.dumps(side, indent=2, sort_keys=True).encode())

@@ -17,6 +17,7 @@ import numpy as np
 from orokit._typing import PathLike
 from orokit.io.atomic import write_bytes_atomic, write_text_atomic
 from orokit.raster.shade import hillshade, row_cell_sizes_m
+from orokit.io.reproducible import portable_path
 
 if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
@@ -40,7 +41,7 @@ def summarize_dem(dem: xr.DataArray) -> dict[str, Any]:
         "dataset": dem.attrs.get("dataset", ""),
         "title": dem.attrs.get("title", ""),
         "region": dem.attrs.get("region", ""),
-        "source": dem.attrs.get("source", ""),
+        "source": portable_path(dem.attrs.get("source", "")),
         "rows": ny,
         "cols": nx,
         "crs": crs.to_string() if crs is not None else None,
@@ -188,4 +189,9 @@ def render_index(summary_files: list[PathLike], index_path: PathLike) -> str:
         "| dataset | title | cells | cell (m) | grid | min (m) | max (m) |",
         "|---|---|---|---|---|---|---|",
     ]
+    from orokit.reports.index import render_sections
+
+    sections = render_sections(Path(index_path).parent)
+    if sections:  # before the datasets table, so every page is one click from the index
+        head = head[:4] + sections.splitlines() + [""] + head[4:]
     return "\n".join(head + rows) + "\n"

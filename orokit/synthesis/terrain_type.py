@@ -11,7 +11,6 @@ elevations, replace a histogram) into a new valid type.
 from __future__ import annotations
 
 import dataclasses
-import datetime as _dt
 import json
 import logging
 import math
@@ -329,7 +328,6 @@ class TerrainType:
         if rho is None:
             rho = estimate_rho(divide_tree, min_prominence_m) if divide_tree is not None else 1.0
         prov = {
-            "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "area_km2": float(area_km2),
             "n_peaks": int(len(p)),
             "n_keyed": int(keyed.sum()),
@@ -364,6 +362,7 @@ class TerrainType:
         Distances and directions are in metres and degrees whatever the CRS (see
         :meth:`from_peaks`).
         """
+        from orokit.io.reproducible import portable_path
         from orokit.sampling.grid import analysis_grid, grid_area_km2
 
         src = None
@@ -382,7 +381,8 @@ class TerrainType:
         name = name or Path(str(attrs.get("source") or src or "type")).stem
         return cls.from_peaks(peaks, area_km2=area, min_prominence_m=eps,
                               divide_tree=getattr(result, "divide_tree", None), isolation_basis=isolation_basis,
-                              rho=rho, name=name, provenance={"source": attrs.get("source") or src}, crs=crs)
+                              rho=rho, name=name, provenance={"source": portable_path(attrs.get("source") or src)},
+                              crs=crs)
 
     # --------------------------------------------------------------- editing
     def _edited(self, note: str, **changes: Any) -> "TerrainType":
