@@ -76,7 +76,9 @@ class LazyGroup(click.Group):
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         """Two sections: user commands (pipeline order), then report-building commands."""
-        for title, names in (("Commands", USER_COMMANDS), ("Report-building commands (make report)", REPORT_COMMANDS)):
+        other = [name for name in COMMANDS if name not in USER_COMMANDS and name not in REPORT_COMMANDS]
+        sections = [("Commands", list(USER_COMMANDS)), ("Report-building commands (make report)", list(REPORT_COMMANDS))]
+        for title, names in sections + ([("Other commands", other)] if other else []):
             rows = []
             for name in names:
                 text = SHORT_HELP.get(name)

@@ -145,12 +145,14 @@ PROMINENCE = Length(allow_bare=True, allow_zero=True)
 Decorator = Callable[[Callable[..., Any]], Callable[..., Any]]
 
 
-def min_prominence_option(*, default: str | None = "30m", help: str | None = None) -> Decorator:  # noqa: A002
+def min_prominence_option(*, default: str | None = "30m", help: str | None = None,  # noqa: A002
+                          zero_keeps_all: bool = True) -> Decorator:
     """``--min-prominence``: the prominence threshold eps as a length (value in metres)."""
     text = help or "Prominence threshold eps: only peaks with prominence >= this count"
+    zero = "; 0 keeps every peak" if zero_keeps_all else ""
     return click.option(
         "--min-prominence", "min_prominence", type=PROMINENCE, default=default, show_default=default is not None,
-        help=f"{text} (a length: 30m, 100ft; a plain number is metres; 0 keeps every peak).")
+        help=f"{text} (a length: 30m, 100ft; a plain number is metres{zero}).")
 
 
 def cell_size_option(*, help: str | None = None) -> Decorator:  # noqa: A002

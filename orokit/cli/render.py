@@ -84,7 +84,7 @@ def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None
               help="XMIN YMIN XMAX YMAX in the tree's CRS (default: the tree's domain or bounding box).")
 @click.option("--like", type=INPUT, default=None,
               help="Raster file or manifest dataset (e.g. the DEM the tree came from): its extent and cell size.")
-@min_prominence_option(help="Prominence threshold eps: the added noise stays below it")
+@min_prominence_option(help="Prominence threshold eps: the added noise stays below it", zero_keeps_all=False)
 @click.option("--lambda", "lam", type=LENGTH, default="200m", show_default=True, help="Meshing distance lambda.")
 @cell_size_option(help="Cell size of a reference .txt tree or of a --like raster without georeference")
 @click.option("--preview", type=click.Path(dir_okay=False, path_type=Path), default=None,
