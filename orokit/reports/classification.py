@@ -343,9 +343,8 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
     _write_text(out / "tables" / "table2.md", to_markdown(t2))
     meta = {"orokit_version": __version__, "n_inputs": len(inputs), "labels": labels, "seed": seed, "runs": runs,
             "feature_runs": feature_runs, "radii_m": list(map(float, radii_m)), "min_prominence_m": min_prominence_m,
-            "min_peaks": min_peaks, "max_disks": max_disks, "trees": trees, "timings_s": timings,
+            "min_peaks": min_peaks, "max_disks": max_disks, "trees": trees,
             "feature_set": feature_set, "n_features": len(fset.columns), "classifier": classifier, "separation": separation, "max_train": max_train,
-            "load_average": list(os.getloadavg()),
             "inputs": [str(p) for p in inputs]}
     if model_path is not None:
         rm = model_radius_m or radii_m[0]
@@ -363,5 +362,7 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
         save_model(model, model_path, md)
         meta["model"] = {"path": str(model_path), "sha256": sha256_file(model_path), "radius_m": rm}
     _write_text(out / "manifest.json", json.dumps(meta, indent=2, default=float))
+    # timings change with the machine's load: kept out of the committed manifest (timings.json is not committed)
+    _write_text(out / "timings.json", json.dumps({"timings_s": timings, "load_average": os.getloadavg()}, indent=2))
     _write_text(out / "README.md", _readme(t2, evals, meta))
     return {"table2": t2, "evaluations": evals, "meta": meta}

@@ -143,6 +143,9 @@ def test_synthesis_report_table(tmp_path, type_file):
     assert f"| a | {meta['n_peaks']} |" in text
     prom = next(f for f in meta["fidelity"] if f["feature"] == "prominence")["max_bin_error"]
     assert f"{prom:.4f}" in text
+    assert "(s)" not in text  # timings change with the load: not in the committed page
+    timings = pd.read_csv(tmp_path / "timings.csv")
+    assert list(timings["type"]) == ["a", "b"] and (timings["seconds"] > 0).all()
     assert CliRunner().invoke(cli, ["synthesis-report", *dirs, "-o", str(md)]).exit_code != 0
 
 
