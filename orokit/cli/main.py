@@ -204,18 +204,37 @@ def _orokit_warning() -> type[Warning]:
     return OrokitWarning
 
 
+class _StderrHandler(logging.StreamHandler):
+    """A stream handler that always writes to the current ``sys.stderr`` (click's test
+    runner and pytest swap it between commands)."""
+
+    @property  # type: ignore[override]
+    def stream(self):  # noqa: D102
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:  # noqa: ANN001 - the stream is always sys.stderr
+        pass
+
+
 def setup_logging(verbose: int, quiet: bool) -> None:
-    """Log level from -v/-q, one-line messages on stderr, Python warnings through the log."""
+    """Log level from -v/-q, one-line messages on stderr, Python warnings through the log.
+
+    The handler filters by level (``-q``: errors only); ``-v``/``-vv`` lower the level of
+    the ``orokit`` loggers to INFO/DEBUG (third-party libraries stay at WARNING).
+    """
     level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
-    handler = logging.StreamHandler(sys.stderr)
+    handler = _StderrHandler()
     handler.setFormatter(_OneLineFormatter(verbose))
+    handler.setLevel(level)
+    handler._orokit_cli = True  # type: ignore[attr-defined]
     root = logging.getLogger()
     for h in list(root.handlers):
         if getattr(h, "_orokit_cli", False):
             root.removeHandler(h)
-    handler._orokit_cli = True  # type: ignore[attr-defined]
     root.addHandler(handler)
-    root.setLevel(level)
+    if level < logging.WARNING:
+        logging.getLogger("orokit").setLevel(level)
     warnings.showwarning = _show_warning
 
 
