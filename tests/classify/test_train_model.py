@@ -61,7 +61,7 @@ def test_small_classes():
     with pytest.warns(OrokitWarning, match="c: 1"):
         keep = check_classes(labels, small_classes="drop")
     assert keep.sum() == 9
-    with pytest.raises(InputError, match="at least 2 regions"):
+    with pytest.raises(InputError, match="at least 2 regions"), pytest.warns(OrokitWarning, match="b: 1"):
         check_classes(["a"] * 5 + ["b"], small_classes="drop")
 
 

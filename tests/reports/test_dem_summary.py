@@ -76,7 +76,7 @@ def test_cli_report_dataset(real_data, tmp_path):
     assert "local metric grid" in md and "92.61 m" in md and "sha256" in md
     assert (out / "hillshade.png").stat().st_size < 150_000
     res = runner.invoke(cli, ["report-dataset", "gobi", "-o", str(out)])
-    assert res.exit_code == 1 and "--overwrite" in res.output
+    assert res.exit_code == 2 and "--overwrite" in res.output  # a usage error, as in every command
     assert runner.invoke(cli, ["report-dataset", "gobi", "-o", str(out), "--overwrite"]).exit_code == 0
     res = runner.invoke(cli, ["report-index", str(out / "summary.json"), "-o", str(tmp_path / "README.md")])
     assert res.exit_code == 0 and "[gobi](gobi/summary.md)" in (tmp_path / "README.md").read_text()
