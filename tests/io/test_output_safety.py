@@ -76,6 +76,7 @@ class _OtherProcessLock:
     def release(self):
         self.proc.stdin.close()
         assert self.proc.wait(timeout=60) == 0
+        self.proc.stdout.close()  # no unclosed pipe (ResourceWarning is an error in the test suite)
 
 
 # --- locks ------------------------------------------------------------------------------
