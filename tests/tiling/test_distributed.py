@@ -18,7 +18,7 @@ pytestmark = pytest.mark.cluster
 def cluster():
     import distributed  # a hard dependency (dask[distributed]): a missing install must fail, not skip
 
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                                   memory_limit="2GiB") as cl, distributed.Client(cl) as client:
         yield cl, client
 
