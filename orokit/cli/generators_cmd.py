@@ -6,9 +6,7 @@ from pathlib import Path
 
 import click
 
-from orokit.cli.options import Length
-
-LENGTH = Length(allow_bare=True)
+from orokit.cli.options import LENGTH, min_prominence_option, overwrite_option, seed_option
 
 
 def _real_dem(like: str):
@@ -27,13 +25,13 @@ def _real_dem(like: str):
 @click.option("--param", "params", multiple=True, metavar="K=V", help="Generator parameter (repeatable).")
 @click.option("--exemplar", default=None,
               help="Exemplar DEM (file or dataset) for generators that learn from one [default: the --like DEM].")
-@click.option("--seed", type=click.IntRange(min=0), required=True, help="Seed of the render.")
+@seed_option(what="the render", required=True)
 @click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Region model (.skops) for the reclassification.")
-@click.option("--min-prominence", type=float, default=30.0, show_default=True, help="eps (m) of the re-analysis.")
+@min_prominence_option(help="Prominence threshold eps of the re-analysis")
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="result.json; dem.tif and hillshade.png are written beside it.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing result.")
+@overwrite_option("an existing result")
 def generators_run(tree_dir, type_file, like, generator, params, exemplar, seed, model_path, min_prominence, out,
                    overwrite) -> None:
     """One ranking run: render TREE with GENERATOR in its own process, then measure it.
@@ -138,7 +136,7 @@ def _measure(dem_path: Path, tree, type_file: Path, real, model_path: Path | Non
 @click.argument("results", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="README.md of the ranking (README.csv and <region>.png hillshades beside it).")
-@click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
+@overwrite_option("existing outputs")
 def generators_report(results, out, overwrite) -> None:
     """Rank the generators from the result.json files of `orokit generators-run`."""
     from orokit.reports.generators import write_ranking_report

@@ -29,8 +29,6 @@ USER_COMMANDS: dict[str, str] = {
     "type": "orokit.cli.type_cmd:type_cmd",
     "synthesize-tree": "orokit.cli.synthesize_tree:synthesize_tree",
     "render": "orokit.cli.render:render",
-    "generators-run": "orokit.cli.generators_cmd:generators_run",
-    "generators-report": "orokit.cli.generators_cmd:generators_report",
     "synthesize": "orokit.cli.synthesize:synthesize",
     "validate": "orokit.cli.validate:validate",
 }
@@ -42,6 +40,8 @@ REPORT_COMMANDS: dict[str, str] = {
     "report": "orokit.cli.report:report",
     "synthesis-report": "orokit.cli.synthesis_report:synthesis_report",
     "roundtrip-report": "orokit.cli.roundtrip_report:roundtrip_report",
+    "generators-run": "orokit.cli.generators_cmd:generators_run",
+    "generators-report": "orokit.cli.generators_cmd:generators_report",
 }
 #: every command
 COMMANDS: dict[str, str] = {**USER_COMMANDS, **REPORT_COMMANDS}
@@ -65,6 +65,8 @@ SHORT_HELP: dict[str, str] = {
     "report": "Classification report (Table 2, confusion matrices, model).",
     "synthesis-report": "Fidelity table of synthesized trees.",
     "roundtrip-report": "Table and twin figures of the round trip.",
+    "generators-run": "One generator on one tree: render, re-analysis, scores.",
+    "generators-report": "Generator ranking table and side-by-side hillshades.",
 }
 
 

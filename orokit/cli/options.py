@@ -168,12 +168,17 @@ def z_units_option(*, help: str | None = None) -> Decorator:  # noqa: A002
                         help=help or "Elevation units of an input that does not declare them (required for PNG DEMs).")
 
 
-def seed_option(*, what: str, default: int | None = 0, recorded_in: str | None = None) -> Decorator:
+def seed_option(*, what: str, default: int | None = 0, recorded_in: str | None = None,
+                required: bool = False) -> Decorator:
     """``--seed N``: an int >= 0; the same seed gives the same result.
 
     ``default=None`` draws fresh entropy, which the command records in ``recorded_in``
-    so that the run can be replayed.
+    so that the run can be replayed; ``required=True`` has no default.
     """
+    if required:
+        return click.option("--seed", type=click.IntRange(min=0), required=True,
+                            help=f"Random seed of {what}: an integer >= 0; the same seed gives the same result "
+                                 f"[default: none, required].")
     if default is None:
         where = f", recorded in {recorded_in}" if recorded_in else ""
         dflt = f"fresh entropy{where}"
