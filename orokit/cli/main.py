@@ -192,18 +192,22 @@ class _OneLineFormatter(logging.Formatter):
         return f"{record.levelname.lower()} {record.name}: {msg}"
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
-    """``warnings.showwarning`` of the CLI: the message on one line, no source line."""
+def _format_warning(message, category, filename, lineno, line=None) -> str:  # noqa: ANN001
+    """``warnings.formatwarning`` of the CLI: the message on one line, no source line.
+
+    Only the formatting changes: filters and recorders (``pytest.warns``,
+    ``catch_warnings(record=True)``) see every warning as before.
+    """
     text = " ".join(str(message).split())
-    logger = logging.getLogger("py.warnings")
-    logger.warning("%s", text if category is UserWarning or issubclass(category, _orokit_warning())
-                   else f"{text} ({category.__name__})")
-
-
-def _orokit_warning() -> type[Warning]:
     from orokit.errors import OrokitWarning
 
-    return OrokitWarning
+    if not (category is UserWarning or issubclass(category, OrokitWarning)):
+        text += f" ({category.__name__})"
+    return f"Warning: {text}\n"
+
+
+def _quiet_warning(message, category, filename, lineno, line=None) -> str:  # noqa: ANN001
+    return ""
 
 
 class _StderrHandler(logging.StreamHandler):
@@ -237,7 +241,7 @@ def setup_logging(verbose: int, quiet: bool) -> None:
     root.addHandler(handler)
     if level < logging.WARNING:
         logging.getLogger("orokit").setLevel(level)
-    warnings.showwarning = _show_warning
+    warnings.formatwarning = _quiet_warning if quiet else _format_warning
 
 
 @click.group(cls=LazyGroup)

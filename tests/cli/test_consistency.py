@@ -145,22 +145,39 @@ def test_features_accepts_a_dataset_name(real_data, tmp_path):
 
 
 def test_warnings_print_one_line(capsys):
-    setup_logging(0, False)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("always")
-            from orokit.errors import OrokitWarning
+    from orokit.errors import OrokitWarning
 
-            warnings.showwarning("4 disks skipped:\n fewer than 20 peaks", OrokitWarning, __file__, 1)
-            warnings.showwarning("old API", DeprecationWarning, __file__, 2)
-            logging.getLogger("orokit.test").warning("a logged warning")
-        err = capsys.readouterr().err
+    before = warnings.formatwarning
+    try:
+        setup_logging(0, False)
+        fmt = warnings.formatwarning
+        assert fmt("4 disks skipped:\n fewer than 20 peaks", OrokitWarning, "x.py", 3) == \
+            "Warning: 4 disks skipped: fewer than 20 peaks\n"
+        assert fmt("old API", DeprecationWarning, "x.py", 3) == "Warning: old API (DeprecationWarning)\n"
+        logging.getLogger("orokit.test").warning("a logged warning")
+        assert capsys.readouterr().err == "Warning: a logged warning\n"
+        with pytest.warns(OrokitWarning, match="recorded"):  # recorders still see every warning
+            warnings.warn("recorded", OrokitWarning, stacklevel=1)
+        setup_logging(0, True)  # -q: errors only
+        assert warnings.formatwarning("hidden", OrokitWarning, "x.py", 3) == ""
+        logging.getLogger("orokit.test").warning("hidden too")
+        assert capsys.readouterr().err == ""
     finally:
+        warnings.formatwarning = before
         logging.getLogger().handlers = [h for h in logging.getLogger().handlers
                                         if not getattr(h, "_orokit_cli", False)]
-    lines = err.strip().splitlines()
-    assert lines == ["Warning: 4 disks skipped: fewer than 20 peaks", "Warning: old API (DeprecationWarning)",
-                     "Warning: a logged warning"]
+
+
+@pytest.mark.realdata
+def test_a_warning_is_one_line_in_a_real_run(real_data, tmp_path):
+    real_data("gobi")
+    proc = subprocess.run([sys.executable, "-m", "orokit.cli.main", "features", "gobi", "--max-disks", "2",
+                           "--min-peaks", "400", "--no-progress", "-o", str(tmp_path / "f.parquet")],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.splitlines() == [
+        "Warning: 2 of 2 disks of 'gobi' have fewer than 400 peaks with prominence >= 30 m and were skipped "
+        "(min_peaks / --min-peaks)"], proc.stderr
 
 
 @pytest.mark.realdata
