@@ -12,6 +12,7 @@ from orokit.data.fetch import (
     fetch_file,
     mirror_dir,
     open_dataset_dem,
+    portable_path,
     sha256_file,
     verify,
 )
@@ -20,4 +21,5 @@ from orokit.data.manifest import DataFile, Dataset, Manifest, default_manifest_p
 __all__ = [
     "DataFile", "Dataset", "Manifest", "FileStatus", "load_manifest", "default_manifest_path", "data_dir",
     "mirror_dir", "sha256_file", "fetch_file", "fetch", "verify", "dataset_path", "open_dataset_dem",
+    "portable_path",
 ]

@@ -51,6 +51,34 @@ def data_dir() -> Path:
     return Path(pooch.os_cache("orokit"))
 
 
+def portable_path(path: PathLike | None) -> str:
+    """``path`` without this machine's absolute prefix, for files that are committed.
+
+    A file of the data cache or mirror becomes its manifest path (``dems/gobi.png``), a
+    file under the working directory its relative path; anything else is kept.
+
+    Examples
+    --------
+    >>> portable_path(Path.cwd() / "reports" / "x.json")
+    'reports/x.json'
+    >>> portable_path("relative/name.tif")
+    'relative/name.tif'
+    """
+    if path is None or str(path) == "":
+        return ""
+    p = Path(path)
+    if not p.is_absolute():
+        return p.as_posix()
+    for base in (data_dir(), mirror_dir(), Path.cwd()):
+        if base is None:
+            continue
+        try:
+            return p.resolve().relative_to(Path(base).resolve()).as_posix()
+        except ValueError:
+            continue
+    return p.as_posix()
+
+
 def mirror_dir() -> Path | None:
     """The local mirror from ``$OROKIT_DATA_MIRROR`` (resolved), or None."""
     env = os.environ.get("OROKIT_DATA_MIRROR")

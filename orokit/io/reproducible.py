@@ -3,22 +3,17 @@
 - :func:`canonical_skops` rewrites a skops archive so that its bytes depend only on the
   model: skops names array files and memo ids after ``id(obj)`` (memory addresses) and
   stamps zip entries with the current time; both are replaced by canonical values.
-- :func:`portable_path` records a path without the machine's absolute prefix: files of
-  the data cache as their manifest path (``dems/gobi.png``), files under the working
-  directory relative to it.
+(:func:`orokit.data.portable_path` records paths without the machine's prefix.)
 """
 from __future__ import annotations
 
 import io
 import json
-import os
 import zipfile
-from pathlib import Path
 from typing import Any
 
-from orokit._typing import PathLike
 
-__all__ = ["canonical_skops", "portable_path"]
+__all__ = ["canonical_skops"]
 
 #: the zip timestamp of every entry (the earliest a zip file can hold)
 ZIP_EPOCH = (1980, 1, 1, 0, 0, 0)
@@ -82,31 +77,3 @@ def canonical_skops(blob: bytes) -> bytes:
             entry.external_attr = info.external_attr
             dst.writestr(entry, data)
     return out.getvalue()
-
-
-def portable_path(path: PathLike | None) -> str:
-    """``path`` without this machine's absolute prefix (see the module docstring).
-
-    Examples
-    --------
-    >>> portable_path(Path.cwd() / "reports" / "x.json")
-    'reports/x.json'
-    >>> portable_path("relative/name.tif")
-    'relative/name.tif'
-    """
-    if path is None or str(path) == "":
-        return ""
-    p = Path(path)
-    if not p.is_absolute():
-        return p.as_posix()
-    from orokit.data import data_dir
-
-    for base in (data_dir(), Path(os.environ["OROKIT_DATA_MIRROR"]) if os.environ.get("OROKIT_DATA_MIRROR") else None,
-                 Path.cwd()):
-        if base is None:
-            continue
-        try:
-            return p.resolve().relative_to(Path(base).resolve()).as_posix()
-        except ValueError:
-            continue
-    return p.as_posix()

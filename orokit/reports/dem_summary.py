@@ -17,7 +17,7 @@ import numpy as np
 from orokit._typing import PathLike
 from orokit.io.atomic import write_bytes_atomic, write_text_atomic
 from orokit.raster.shade import hillshade, row_cell_sizes_m
-from orokit.io.reproducible import portable_path
+from orokit.data import portable_path
 
 if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr

@@ -362,7 +362,7 @@ class TerrainType:
         Distances and directions are in metres and degrees whatever the CRS (see
         :meth:`from_peaks`).
         """
-        from orokit.io.reproducible import portable_path
+        from orokit.data import portable_path
         from orokit.sampling.grid import analysis_grid, grid_area_km2
 
         src = None

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orokit.io.reproducible import ZIP_EPOCH, canonical_skops, portable_path
+from orokit.data import portable_path
+from orokit.io.reproducible import ZIP_EPOCH, canonical_skops
 
 
 def _model(seed: int = 0):
