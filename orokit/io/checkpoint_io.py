@@ -66,7 +66,8 @@ def read_chunk(path: PathLike) -> dict[str, np.ndarray]:
         The file is truncated, empty or not an npz of arrays (it is never unpickled).
     """
     try:
-        with np.load(path, allow_pickle=False) as data:
+        # the file is opened here, so it is closed even when np.load fails on a truncated archive
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
             if not hasattr(data, "files"):
                 raise ValueError("not an npz archive")
             return {k: data[k] for k in data.files}
