@@ -411,7 +411,8 @@ def kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, border_z):
     ea, eb : endpoints of each edge (sorted, see above); ez, ekey : saddle elevation
         and saddle key of each edge.
     border_z : highest "border" elevation of every node's basin (-inf if none). A
-        dying component whose border maximum is strictly above the saddle touched the
+        dying component whose border is reachable from its top strictly above the saddle
+        (bottleneck, carried through the merges) touched the
         edge of the data above the key saddle: its prominence is only an upper bound.
 
     Returns
@@ -467,10 +468,14 @@ def kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, border_z):
             uf[rb] = ra
             ta = top[ra]
             tb = top[rb]
-            if not above(node_z[ta], node_key[ta], node_z[tb], node_key[tb]):
+            # bmax of a component: the highest level at which its top reaches the border
+            # (bottleneck); the losing side's border is reached through this saddle only
+            w = ez[g]
+            if above(node_z[ta], node_key[ta], node_z[tb], node_key[tb]):
+                bmax[ra] = max(bmax[ra], min(bmax[rb], w))
+            else:
                 top[ra] = tb
-            if bmax[rb] > bmax[ra]:
-                bmax[ra] = bmax[rb]
+                bmax[ra] = max(min(bmax[ra], w), bmax[rb])
         for t in range(k):
             w = top[_find(uf, roots[t])]
             if tops[t] != w:

@@ -96,7 +96,19 @@ def test_strictly_increasing_map_keeps_cells(z, data):
 def test_pruning_keeps_survivors(z, eps):
     full, pruned = _peaks(z, 0.0), _peaks(z, eps)
     key = ["row", "col"]
-    kept = full[full["prominence"] >= eps]
+    # a domain's root is also kept when another peak of its domain is (its prominence,
+    # = elevation, can be below eps when the saddles lie below zero): follow island parents
+    rc = list(zip(full["row"], full["col"]))
+    par = dict(zip(rc, zip(full["island_parent_row"], full["island_parent_col"])))
+
+    def root(p):
+        while par[p][0] >= 0:
+            p = (int(par[p][0]), int(par[p][1]))
+        return p
+
+    big = full["prominence"].to_numpy() >= eps
+    roots_needed = {root(p) for p, b in zip(rc, big) if b}
+    kept = full[big | np.array([p in roots_needed for p in rc], bool)]
     cols = ["row", "col", "prominence", "saddle_row", "saddle_col", "saddle_elevation", "island_parent_row", "island_parent_col"]
     np.testing.assert_array_equal(
         kept.sort_values(key)[cols].to_numpy(float), pruned.sort_values(key)[cols].to_numpy(float)

@@ -15,8 +15,15 @@ from orokit.topology.engine import orometry
 FIELDS = ["peak_cell", "peak_z", "prominence", "key_saddle_cell", "parent", "prominence_exact"]
 
 
+#: line and prominence parents are walks on each engine's pruned Divide Tree, whose ridges can join
+#: the same kept peaks through the same saddle at different ends (NOTES.md, known gaps);
+#: tests/topology/test_parents.py checks them on the chunked tree itself
+WALK_PARENTS = {f"{p}_parent{s}" for p in ("line", "prominence") for s in ("", "_row", "_col")}
+
+
 def _assert_same_tables(a, b):
-    cols = [c for c in a.peaks.columns if c != "geometry"]
+    cols = [c for c in a.peaks.columns if c != "geometry" and c not in WALK_PARENTS]
+    assert WALK_PARENTS <= set(a.peaks.columns) and "island_parent" in cols
     for c in cols:
         np.testing.assert_array_equal(a.peaks[c].to_numpy(), b.peaks[c].to_numpy(), err_msg=c)
     sc = [c for c in a.saddles.columns if c != "geometry"]
