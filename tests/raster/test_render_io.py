@@ -123,13 +123,13 @@ def test_basins_come_from_the_engine_kernels(monkeypatch):
     """cap_basins labels the raster's basins with the orometry engine's kernels, not a copy."""
     assert not hasattr(raster_kernels, "basin_labels")
     calls = []
-    real = engine_kernels.label_basins
+    real = engine_kernels.ascent_labels
 
-    def counting(ptr):
-        calls.append(ptr.size)
-        return real(ptr)
+    def counting(z, label):
+        calls.append(z.size)
+        return real(z, label)
 
-    monkeypatch.setattr(engine_kernels, "label_basins", counting)
+    monkeypatch.setattr(engine_kernels, "ascent_labels", counting)
     dem = render_elevation(two_peaks(), resolution_m=100.0, erosion=False, params=FAST, rng=4)
     assert calls and calls[0] == dem.size
 
