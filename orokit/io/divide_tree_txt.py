@@ -99,6 +99,10 @@ def _parse_sections(path: Path) -> dict[str, list[tuple[int, list[str]]]]:
     return sections
 
 
+#: largest id or pixel coordinate a TXT tree may hold
+_MAX_INDEX = 2**31 - 1
+
+
 def _points_frame(path: Path, name: str, rows: list[tuple[int, list[str]]]) -> pd.DataFrame:
     data = np.empty((len(rows), 6), dtype=float)
     for i, (lineno, tokens) in enumerate(rows):
@@ -113,6 +117,10 @@ def _points_frame(path: Path, name: str, rows: list[tuple[int, list[str]]]) -> p
             raise InputError(f"{path}:{lineno}: non-numeric field in {name} line {' '.join(tokens)[:80]!r}") from None
         if not np.all(np.isfinite(data[i])):
             raise InputError(f"{path}:{lineno}: non-finite value in {name} line {' '.join(tokens)[:80]!r}")
+        if np.any(np.abs(data[i, [0, 4, 5]]) > _MAX_INDEX):
+            raise InputError(
+                f"{path}:{lineno}: id, x and y must be integers below 2^31 in {name} line {' '.join(tokens)[:80]!r}"
+            )
         if data[i, 0] != int(data[i, 0]) or data[i, 4] != int(data[i, 4]) or data[i, 5] != int(data[i, 5]):
             raise InputError(f"{path}:{lineno}: id, x and y must be integers in {name} line {' '.join(tokens)!r}")
     frame = pd.DataFrame(

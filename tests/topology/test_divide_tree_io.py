@@ -213,3 +213,12 @@ def test_reference_files_round_trip(real_data, tmp_path, name):
     back = read_divide_tree_gpkg(write_divide_tree_gpkg(tree, tmp_path / "rt.gpkg"))
     assert back.equals(tree)
     np.testing.assert_allclose(back.prominence(), tree.prominence())
+
+
+@pytest.mark.parametrize("pos", [33, 35])
+def test_huge_pixel_coordinates_are_an_input_error(tmp_path, pos):
+    """Found by the fuzz test: 1E100 in an integer field is refused, not cast with a warning."""
+    p = tmp_path / "huge.txt"
+    p.write_text(SMALL_TXT[:pos] + "1E100" + SMALL_TXT[pos + 1:])
+    with pytest.raises((InputError, DivideTreeError)):
+        read_divide_tree_txt(p)
