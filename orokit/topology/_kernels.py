@@ -251,23 +251,8 @@ def basin_graph(z, lab, npk, r0, r1):
                     key = lb * np.int64(npk) + la
                 count += _insert(keys, vals, key, p, zf)
                 if 2 * count > keys.size:
-                    old_k = keys
-                    old_v = vals
-                    keys = np.full(old_k.size * 2, -1, np.int64)
-                    vals = np.empty(old_k.size * 2, np.int64)
-                    for s in range(old_k.size):
-                        if old_k[s] != -1:
-                            _insert(keys, vals, old_k[s], old_v[s], zf)
-    ea = np.empty(count, np.int64)
-    eb = np.empty(count, np.int64)
-    ec = np.empty(count, np.int64)
-    k = 0
-    for s in range(keys.size):
-        if keys[s] != -1:
-            ea[k] = keys[s] // npk
-            eb[k] = keys[s] % npk
-            ec[k] = vals[s]
-            k += 1
+                    keys, vals = _grow_pass_table(keys, vals, zf)
+    ea, eb, ec = _unpack_pass_table(keys, vals, count, npk)
     return bmax, nmin, ea, eb, ec
 
 
@@ -309,6 +294,33 @@ def _insert(keys, vals, key, cell, zf):
 
 
 @njit(cache=True, nogil=True)
+def _grow_pass_table(keys, vals, zf):
+    """The open-addressing pass table at twice its size, entries re-inserted."""
+    new_k = np.full(keys.size * 2, -1, np.int64)
+    new_v = np.empty(keys.size * 2, np.int64)
+    for s in range(keys.size):
+        if keys[s] != -1:
+            _insert(new_k, new_v, keys[s], vals[s], zf)
+    return new_k, new_v
+
+
+@njit(cache=True, nogil=True)
+def _unpack_pass_table(keys, vals, count, npk):
+    """(basin a, basin b, pass cell) of every entry of the pass table, in slot order."""
+    ea = np.empty(count, np.int64)
+    eb = np.empty(count, np.int64)
+    ec = np.empty(count, np.int64)
+    k = 0
+    for s in range(keys.size):
+        if keys[s] != -1:
+            ea[k] = keys[s] // npk
+            eb[k] = keys[s] % npk
+            ec[k] = vals[s]
+            k += 1
+    return ea, eb, ec
+
+
+@njit(cache=True, nogil=True)
 def basin_passes(z, label, npk):
     """Highest pass between every pair of adjacent basins.
 
@@ -346,23 +358,8 @@ def basin_passes(z, label, npk):
                     key = lb * npk + la
                 count += _insert(keys, vals, key, p, zf)
                 if 2 * count > keys.size:
-                    old_k = keys
-                    old_v = vals
-                    keys = np.full(old_k.size * 2, -1, np.int64)
-                    vals = np.empty(old_k.size * 2, np.int64)
-                    for s in range(old_k.size):
-                        if old_k[s] != -1:
-                            _insert(keys, vals, old_k[s], old_v[s], zf)
-    ea = np.empty(count, np.int64)
-    eb = np.empty(count, np.int64)
-    ec = np.empty(count, np.int64)
-    k = 0
-    for s in range(keys.size):
-        if keys[s] != -1:
-            ea[k] = keys[s] // npk
-            eb[k] = keys[s] % npk
-            ec[k] = vals[s]
-            k += 1
+                    keys, vals = _grow_pass_table(keys, vals, zf)
+    ea, eb, ec = _unpack_pass_table(keys, vals, count, npk)
     return ea, eb, ec
 
 
