@@ -34,7 +34,8 @@ from orokit.classify.features import check_feature_table, feature_set_of
 
 logger = logging.getLogger(__name__)
 
-SplitKind = Literal["random", "spatial"]
+SplitKind = Literal["random", "spatial", "blocks"]
+SPLIT_KINDS = ("random", "spatial", "blocks")
 
 
 ClassifierKind = Literal["rf", "et", "hgb"]
@@ -206,6 +207,66 @@ def spatial_split(labels: Sequence[Any], x: NDArray, y: NDArray, *, groups: Sequ
     return _cat(tr), _cat(va)
 
 
+def block_folds(labels: Sequence[Any], x: NDArray, y: NDArray, *, groups: Sequence[Any] | None = None,
+                block_m: float, buffer_m: float = 0.0, max_train: int | None = 80, rng: SeedLike = None
+                ) -> list[tuple[NDArray[np.int64], NDArray[np.int64]]]:
+    """Spatial k-fold split: every disk is a validation disk exactly once.
+
+    Each group's disk centres (metres; distances only within a group) are cut into square
+    blocks of side ``block_m`` on a grid with a random rotation and offset. The blocks of
+    each group are shuffled; fold ``j`` holds out the ``j``-th block of every group. Its
+    training disks are all other disks whose centre is farther than ``buffer_m`` from every
+    held-out centre of the same group (disks of other groups always train), at most
+    ``max_train`` per class (random subset). Returns one ``(train, validation)`` pair of
+    positional indices per fold.
+
+    Examples
+    --------
+    >>> folds = block_folds(["a"] * 4, np.array([0.0, 1.0, 50.0, 51.0]), np.zeros(4), block_m=10.0,
+    ...                     buffer_m=20.0, rng=0)
+    >>> sorted(int(i) for _, va in folds for i in va)
+    [0, 1, 2, 3]
+    """
+    if not block_m > 0:
+        raise InputError(f"block size must be > 0 metres, got {block_m!r}")
+    rng = np.random.default_rng(rng)
+    lab = np.asarray(labels, dtype=object)
+    grp = np.asarray(groups if groups is not None else labels, dtype=object)
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    blocks: list[list[NDArray[np.int64]]] = []  # per group: its blocks in fold order
+    for g in pd.unique(grp):
+        idx = np.flatnonzero(grp == g)
+        theta = rng.uniform(0, 2 * np.pi)
+        u = (x[idx] * np.cos(theta) + y[idx] * np.sin(theta)) / block_m + rng.random()
+        v = (-x[idx] * np.sin(theta) + y[idx] * np.cos(theta)) / block_m + rng.random()
+        _, block_of = np.unique(np.column_stack([np.floor(u), np.floor(v)]), axis=0, return_inverse=True)
+        block_of = np.asarray(block_of).ravel()
+        order = rng.permutation(int(block_of.max()) + 1) if len(idx) else np.zeros(0, dtype=int)
+        blocks.append([idx[block_of == b] for b in order])
+    folds = []
+    for j in range(max((len(b) for b in blocks), default=0)):
+        val = [b[j] for b in blocks if j < len(b)]
+        va = _cat(val)
+        train_mask = np.ones(len(lab), dtype=bool)
+        train_mask[va] = False
+        if buffer_m > 0:
+            for v in val:
+                same = np.flatnonzero(train_mask & (grp == grp[v[0]]))
+                if len(same):
+                    d = np.hypot(x[same, None] - x[None, v], y[same, None] - y[None, v]).min(axis=1)
+                    train_mask[same[d <= buffer_m]] = False
+        tr = np.flatnonzero(train_mask)
+        if max_train is not None:
+            parts = []
+            for c in pd.unique(lab[tr]):
+                t = tr[lab[tr] == c]
+                parts.append(np.sort(rng.choice(t, max_train, replace=False)) if len(t) > max_train else t)
+            tr = _cat(parts)
+        folds.append((tr.astype(np.int64), va))
+    return folds
+
+
 @dataclasses.dataclass
 class Evaluation:
     """Result of repeated train/validation runs (one split kind)."""
@@ -265,14 +326,19 @@ class Evaluation:
 
 
 def _fit_score(X: NDArray, y: NDArray, tr: NDArray, va: NDArray, cols: NDArray | None, seed: int,
-               n_estimators: int, classes: list[str], kind: ClassifierKind = "rf"
+               n_estimators: int, classes: list[str], kind: ClassifierKind = "rf", strict: bool = True
                ) -> tuple[float, NDArray[np.int64], list[tuple[str, str, float]]]:
     from sklearn.metrics import confusion_matrix
 
+    empty = np.zeros((len(classes), len(classes)), dtype=np.int64)
+    if not strict and len(va):
+        # a fold of the block split can leave a region without a training disk far enough from its
+        # held-out block: those disks cannot be tested in this fold (they are counted as untested)
+        va = va[np.isin(y[va], y[tr])]
     # a spatial split can leave a region with no training disk far enough from its held-out strip:
     # that run cannot test the region (its disks could only be misclassified), so it is not counted
     if len(va) == 0 or len(np.unique(y[tr])) < 2 or not np.isin(np.unique(y[va]), y[tr]).all():
-        return float("nan"), np.zeros((len(classes), len(classes)), dtype=np.int64), []
+        return float("nan"), empty, []
     Xs = X if cols is None else X[:, cols]
     clf = make_classifier(kind, n_estimators=n_estimators, n_jobs=1, random_state=seed)
     clf.fit(Xs[tr], y[tr])
@@ -292,7 +358,7 @@ def _fit_score(X: NDArray, y: NDArray, tr: NDArray, va: NDArray, cols: NDArray |
 def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "random",
              feature_groups: bool = True, feature_runs: int | None = None, n_estimators: int = 100,
              max_train: int = 80, max_val: int = 20, val_fraction: float = 0.2, buffer_m: float | None = None,
-             min_disks: int = 2, small_classes: Literal["error", "drop"] = "error", n_jobs: int = 2,
+             block_m: float | None = None, min_disks: int = 2, small_classes: Literal["error", "drop"] = "error", n_jobs: int = 2,
              classifier: ClassifierKind = "et", progress: bool = False, rng: SeedLike = None) -> Evaluation:
     """Repeated-split evaluation of the classifier on a feature table.
 
@@ -302,15 +368,19 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
         Feature table (:func:`orokit.classify.features.feature_table`).
     runs : int
         Number of runs with fresh splits (paper: 100).
-    split : {"random", "spatial"}
-        Random 80:20 per region (paper) or spatially held-out strips (see module doc).
+    split : {"random", "spatial", "blocks"}
+        Random 80:20 per region (paper), spatially held-out strips (see module doc), or
+        spatial k-fold blocks (:func:`block_folds`: every disk is tested once per run, and
+        training keeps all ground farther than the buffer from the held-out block).
     feature_groups : bool
         Also score each feature group alone (Table 2 rows).
     feature_runs : int, optional
         Runs for each feature group (default: ``runs``).
     buffer_m : float, optional
-        Spatial split only: minimum distance of training centres from validation
+        Spatial and block splits: minimum distance of training centres from validation
         centres (default 2 R, so training and validation disks share no peak).
+    block_m : float, optional
+        Block split: side of the square blocks (default R).
     min_disks, small_classes
         See :func:`check_classes`: a region with fewer disks is an error, or dropped.
     n_jobs : int
@@ -324,12 +394,14 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
     -------
     Evaluation
     """
-    from joblib import Parallel, delayed
+    # scikit-learn's wrappers pass its configuration to the worker threads (a forest's own joblib calls warn
+    # when they are nested in plain joblib ones)
+    from sklearn.utils.parallel import Parallel, delayed
 
     if runs < 1:
         raise InputError(f"runs must be >= 1, got {runs}")
-    if split not in ("random", "spatial"):
-        raise InputError(f"split must be 'random' or 'spatial', got {split!r}")
+    if split not in SPLIT_KINDS:
+        raise InputError(f"split must be one of {', '.join(SPLIT_KINDS)}, got {split!r}")
     fs = feature_set_of(features)
     cols = check_feature_table(features)
     keep = check_classes(features["label"].astype(str).to_numpy(), min_disks=min_disks, small_classes=small_classes)
@@ -340,59 +412,83 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
     radius = float(np.nanmax(f["radius_m"])) if len(f) else float("nan")
     if buffer_m is None:
         buffer_m = 2.0 * radius
+    if block_m is None:
+        block_m = radius
     groups = (f["label"].astype(str) + "|" + f["source"].astype(str)).to_numpy()
-    if split == "spatial":  # metres: lon/lat tables (peak lists, geographic DEMs) are projected per group
+    if split != "random":  # metres: lon/lat tables (peak lists, geographic DEMs) are projected per group
         mx, my = metric_coordinates(f["x"].to_numpy(float), f["y"].to_numpy(float), groups,
                                     lon=f["lon"].to_numpy(float) if "lon" in f else None,
                                     lat=f["lat"].to_numpy(float) if "lat" in f else None)
     rng = np.random.default_rng(rng)
     seeds = rng.integers(0, 2**31 - 1, size=runs)
-    splits = []
+    # every run is a list of (train, validation) folds: one for the random and strip splits
+    splits: list[list[tuple[NDArray[np.int64], NDArray[np.int64]]]] = []
     for s in seeds:
         if split == "random":
-            splits.append(random_split(y, max_train=max_train, max_val=max_val, val_fraction=val_fraction, rng=s))
+            splits.append([random_split(y, max_train=max_train, max_val=max_val, val_fraction=val_fraction, rng=s)])
+        elif split == "spatial":
+            splits.append([spatial_split(y, mx, my, groups=groups, buffer_m=buffer_m, max_train=max_train,
+                                         max_val=max_val, val_fraction=val_fraction, rng=s)])
         else:
-            splits.append(spatial_split(y, mx, my, groups=groups,
-                                        buffer_m=buffer_m, max_train=max_train, max_val=max_val,
-                                        val_fraction=val_fraction, rng=s))
-    tasks = [(None, None, i) for i in range(runs)]
+            splits.append(block_folds(y, mx, my, groups=groups, block_m=block_m, buffer_m=buffer_m,
+                                      max_train=max_train, rng=s))
+    strict = split != "blocks"
+    tasks = [(None, None, i, k) for i in range(runs) for k in range(len(splits[i]))]
     groups_cols: dict[str, NDArray] = {}
     if feature_groups:
         fr = runs if feature_runs is None else min(feature_runs, runs)
         for name, gcols in fs.groups().items():
             groups_cols[name] = np.array([cols.index(c) for c in gcols])
-            tasks += [(name, groups_cols[name], i) for i in range(fr)]
+            tasks += [(name, groups_cols[name], i, k) for i in range(fr) for k in range(len(splits[i]))]
     else:
         fr = 0
-    it = (delayed(_fit_score)(X, y, splits[i][0], splits[i][1], gc, int(seeds[i]), n_estimators, classes, classifier)
-          for _, gc, i in tasks)
+    it = (delayed(_fit_score)(X, y, splits[i][k][0], splits[i][k][1], gc, int(seeds[i]) + k, n_estimators, classes,
+                              classifier, strict)
+          for _, gc, i, k in tasks)
     if progress:
         from tqdm.auto import tqdm
 
         it = tqdm(it, total=len(tasks), desc=f"training ({split} split)", unit="fit")
     results = Parallel(n_jobs=n_jobs, prefer="threads")(it)
-    accs = np.array([r[0] for (name, _, _), r in zip(tasks, results) if name is None])
-    terrain = [t for (name, _, _), r in zip(tasks, results) if name is None for t in r[2]]
-    conf = sum((r[1] for (name, _, _), r in zip(tasks, results) if name is None),
-               np.zeros((len(classes), len(classes)), dtype=np.int64))
+    nc = len(classes)
+
+    def pooled(name: str | None, n_runs: int) -> tuple[NDArray[np.float64], list[NDArray[np.int64]]]:
+        """Per run: accuracy over all its folds (NaN when a strict run could not test a region), confusion."""
+        accs, confs = [], []
+        for i in range(n_runs):
+            rs = [r for (n, _, j, _), r in zip(tasks, results) if n == name and j == i]
+            cm = sum((r[1] for r in rs), np.zeros((nc, nc), dtype=np.int64))
+            bad = strict and any(not np.isfinite(r[0]) for r in rs)
+            accs.append(float("nan") if bad or cm.sum() == 0 else float(np.trace(cm) / cm.sum()))
+            confs.append(cm)
+        return np.array(accs), confs
+
+    accs, run_confs = pooled(None, runs)
+    terrain = [t for (name, _, _, _), r in zip(tasks, results) if name is None for t in r[2]]
+    conf = sum(run_confs, np.zeros((nc, nc), dtype=np.int64))
     per_feature = {}
     for name in groups_cols:
-        a = np.array([r[0] for (n, _, _), r in zip(tasks, results) if n == name])
+        a, _ = pooled(name, fr)
         per_feature[name] = float(np.mean(a[np.isfinite(a)])) if np.isfinite(a).any() else float("nan")
-    recalls = {c: [] for c in classes}
-    for (name, _, _), r in zip(tasks, results):
-        if name is None:
-            cm = r[1]
-            for k, c in enumerate(classes):
-                if cm[k].sum():
-                    recalls[c].append(cm[k, k] / cm[k].sum())
+    recalls: dict[str, list[float]] = {c: [] for c in classes}
+    for cm in run_confs:
+        for k, c in enumerate(classes):
+            if cm[k].sum():
+                recalls[c].append(cm[k, k] / cm[k].sum())
     per_class = {c: float(np.mean(v)) if v else float("nan") for c, v in recalls.items()}
-    mean_train = {c: float(np.mean([np.sum(y[s[0]] == c) for s in splits])) for c in classes}
-    mean_val = {c: float(np.mean([np.sum(y[s[1]] == c) for s in splits])) for c in classes}
+    all_folds = [f for run in splits for f in run]
+    mean_train = {c: float(np.mean([np.sum(y[t] == c) for t, _ in all_folds])) for c in classes}
+    # validation disks per run (a block run tests every disk once, minus untestable ones)
+    if split == "blocks":
+        mean_val = {c: float(np.mean([cm[k].sum() for cm in run_confs])) for k, c in enumerate(classes)}
+    else:
+        mean_val = {c: float(np.mean([np.sum(y[v] == c) for _, v in all_folds])) for c in classes}
     params = {"runs": runs, "split": split, "classifier": classifier, "feature_set": fs.name,
               "n_estimators": n_estimators, "max_train": max_train,
               "max_val": max_val, "val_fraction": val_fraction, "radius_m": radius,
-              "buffer_m": float(buffer_m) if split == "spatial" else None, "n_disks": int(len(f)),
+              "buffer_m": float(buffer_m) if split != "random" else None,
+              "block_m": float(block_m) if split == "blocks" else None, "n_disks": int(len(f)),
+              "untested_disks_per_run": float(len(f) - conf.sum() / runs) if split == "blocks" else None,
               "dropped_classes": sorted(set(features["label"].astype(str)[~keep]))}
     ev = Evaluation(split, classes, accs, conf, per_class, per_feature, fr, mean_train, mean_val, params, terrain)
     logger.info("%s split, %d runs: mean accuracy %.3f, median %.3f", split, runs, ev.mean_accuracy,

@@ -18,12 +18,17 @@ from orokit.cli.options import overwrite_option, progress_option, seed_option
               help="Evaluation runs, each with a fresh split (per region <= 80 training / 20 validation disks; paper: 100).")
 @click.option("--feature-runs", type=int, default=5, show_default=True,
               help="Runs for the accuracy of each feature group alone (Table 2 rows); 0 skips them.")
-@click.option("--split", type=click.Choice(["random", "spatial", "both"]), default="both", show_default=True,
+@click.option("--split", type=click.Choice(["random", "spatial", "blocks", "both", "all"]), default="both",
+              show_default=True,
               help="random: the paper's 80:20 split; spatial: a held-out strip of each region, training disks "
-                   "farther than --buffer from it (honest when disks overlap).")
+                   "farther than --buffer from it (honest when disks overlap); blocks: spatial k-fold, every "
+                   "disk held out once with its block, training on all disks farther than --buffer; "
+                   "both: random and spatial; all: the three.")
 @click.option("--buffer", "buffer_radii", type=float, default=2.0, show_default=True,
-              help="Spatial split: minimum training-to-validation centre distance, in units of R (2 = no shared "
-                   "peak).")
+              help="Spatial and block splits: minimum training-to-validation centre distance, in units of R "
+                   "(2 = no shared peak).")
+@click.option("--block", "block_radii", type=click.FloatRange(min=0.0, min_open=True), default=1.0,
+              show_default=True, help="Block split: side of the square blocks, in units of R.")
 @click.option("--classifier", type=click.Choice(["rf", "et", "hgb"]), default="et", show_default=True,
               help="et: extremely randomized trees, 2x --trees (default, chosen on the spatial hold-out); rf: the paper's Random Forest; hgb: scikit-learn HistGradientBoostingClassifier.")
 @click.option("--trees", type=int, default=100, show_default=True,
@@ -40,7 +45,7 @@ from orokit.cli.options import overwrite_option, progress_option, seed_option
 @seed_option(what="the splits and the forests")
 @overwrite_option("an existing model and report files")
 @progress_option()
-def train(features_path, output, runs, feature_runs, split, buffer_radii, classifier, trees, max_train,
+def train(features_path, output, runs, feature_runs, split, buffer_radii, block_radii, classifier, trees, max_train,
           drop_small_classes, report_dir, as_json, n_jobs, seed, overwrite, progress):
     """Train the region classifier on FEATURES.parquet (from `orokit features`) and evaluate it.
 
@@ -52,7 +57,7 @@ def train(features_path, output, runs, feature_runs, split, buffer_radii, classi
     from orokit.data.fetch import sha256_file
     from orokit.io.model_io import read_feature_table
 
-    kinds = ["random", "spatial"] if split == "both" else [split]
+    kinds = {"both": ["random", "spatial"], "all": ["random", "spatial", "blocks"]}.get(split, [split])
     feats = read_feature_table(features_path)
     check_feature_table(feats, name=str(features_path))
     radius = float(feats["radius_m"].max()) if len(feats) else 0.0
@@ -78,6 +83,7 @@ def train(features_path, output, runs, feature_runs, split, buffer_radii, classi
     for kind in kinds:
         evals[kind] = evaluate(feats, runs=runs, split=kind, feature_groups=feature_runs > 0,
                                feature_runs=feature_runs, n_estimators=trees, buffer_m=buffer_radii * radius,
+                               block_m=block_radii * radius,
                                max_train=max_train, classifier=classifier, small_classes=small, n_jobs=n_jobs,
                                progress=progress, rng=seed)
     model = train_classifier(feats, n_estimators=trees, small_classes=small, classifier=classifier, n_jobs=n_jobs,
@@ -97,10 +103,11 @@ def train(features_path, output, runs, feature_runs, split, buffer_radii, classi
         out = {"mean_accuracy": main.mean_accuracy, "median_accuracy": main.median_accuracy,
                "per_class": main.per_class, "per_feature": main.per_feature, "split": main.split,
                "runs": runs, "model": str(output)}
-        if "spatial" in evals and main.split != "spatial":
-            s = evals["spatial"]
-            out["spatial"] = {"mean_accuracy": s.mean_accuracy, "median_accuracy": s.median_accuracy,
-                              "per_class": s.per_class, "per_feature": s.per_feature}
+        for k in ("spatial", "blocks"):
+            if k in evals and main.split != k:
+                s = evals[k]
+                out[k] = {"mean_accuracy": s.mean_accuracy, "median_accuracy": s.median_accuracy,
+                          "per_class": s.per_class, "per_feature": s.per_feature}
         click.echo(json.dumps(out, indent=2))
     else:
         for k, e in evals.items():

@@ -138,3 +138,59 @@ def test_cli_features_train_classify(tmp_path):
     assert res.exit_code == 0, res.output
     js = json.loads(res.output[res.output.index("{"):])
     assert js["label"] == "alpine" and abs(sum(js["probabilities"].values()) - 1) < 1e-6
+
+
+@settings(max_examples=40, deadline=None)
+@given(counts=st.lists(st.integers(1, 60), min_size=1, max_size=4), sources=st.integers(1, 3),
+       block_km=st.floats(2.0, 30.0), buffer_km=st.floats(0.0, 25.0), seed=st.integers(0, 999))
+def test_block_folds_buffer_and_cover(counts, sources, block_km, buffer_km, seed):
+    from orokit.classify.train import block_folds
+
+    labels = np.repeat([f"c{i}" for i in range(len(counts))], counts)
+    g = np.random.default_rng(seed)
+    groups = np.array([f"{lab}|s{g.integers(sources)}" for lab in labels], dtype=object)
+    x, y = g.uniform(0, 6e4, len(labels)), g.uniform(-6e4, 0, len(labels))
+    folds = block_folds(labels, x, y, groups=groups, block_m=block_km * 1e3, buffer_m=buffer_km * 1e3,
+                        max_train=None, rng=seed)
+    tested = np.concatenate([va for _, va in folds])
+    assert sorted(tested.tolist()) == list(range(len(labels)))  # every disk held out exactly once
+    for tr, va in folds:
+        assert not set(tr) & set(va)
+        for gname in set(groups[va]):  # no training centre of the same DEM within the buffer of a held-out one
+            t, v = tr[groups[tr] == gname], va[groups[va] == gname]
+            if len(t):
+                assert np.hypot(x[t, None] - x[None, v], y[t, None] - y[None, v]).min() > buffer_km * 1e3
+        # a disk that is far from every held-out disk of its DEM trains (nothing else is thrown away)
+        rest = np.setdiff1d(np.arange(len(labels)), np.concatenate([tr, va]))
+        for i in rest:
+            v = va[groups[va] == groups[i]]
+            assert np.hypot(x[i] - x[v], y[i] - y[v]).min() <= buffer_km * 1e3
+    capped = block_folds(labels, x, y, groups=groups, block_m=block_km * 1e3, max_train=3, rng=seed)
+    for tr, _ in capped:
+        assert all(np.sum(labels[tr] == c) <= 3 for c in set(labels))
+
+
+def test_block_split_tests_every_disk(feats):
+    ev = evaluate(feats, runs=2, split="blocks", feature_groups=False, rng=0)
+    assert ev.params["block_m"] == 10_000.0 and ev.params["buffer_m"] == 20_000.0
+    n = len(feats)
+    # each run tests every disk once, but for those whose region kept no training disk in their fold
+    assert ev.confusion.sum() == 2 * (n - ev.params["untested_disks_per_run"])
+    assert ev.params["untested_disks_per_run"] < 0.2 * n
+    assert np.isfinite(ev.accuracies).all() and ev.mean_accuracy > 0.6  # 3 styles; chance is 1/3
+    sp = evaluate(feats, runs=2, split="spatial", feature_groups=False, rng=0)
+    # the block split trains on more ground than the strip: that is its point
+    assert sum(ev.mean_train.values()) > sum(sp.mean_train.values())
+
+
+def test_cli_train_block_split(feats, tmp_path):
+    path = tmp_path / "f.parquet"
+    write_features(feats, path)
+    res = CliRunner().invoke(cli, ["train", str(path), "-o", str(tmp_path / "m.skops"), "--runs", "1",
+                                   "--feature-runs", "0", "--split", "blocks", "--block", "0.5", "--trees", "20",
+                                   "--json", "--no-progress", "--seed", "0"])
+    assert res.exit_code == 0, res.output
+    js = json.loads(res.output[res.output.index("{"):])
+    assert js["split"] == "blocks" and js["mean_accuracy"] > 0.6
+    md = json.loads(metadata_path(tmp_path / "m.skops").read_text())
+    assert md["evaluation"]["blocks"]["params"]["block_m"] == 5_000.0
