@@ -433,7 +433,8 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
             splits.append(block_folds(y, mx, my, groups=groups, block_m=block_m, buffer_m=buffer_m,
                                       max_train=max_train, rng=s))
     strict = split != "blocks"
-    tasks = [(None, None, i, k) for i in range(runs) for k in range(len(splits[i]))]
+    tasks: list[tuple[str | None, NDArray | None, int, int]] = [(None, None, i, k) for i in range(runs)
+                                                                 for k in range(len(splits[i]))]
     groups_cols: dict[str, NDArray] = {}
     if feature_groups:
         fr = runs if feature_runs is None else min(feature_runs, runs)
