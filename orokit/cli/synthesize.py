@@ -33,6 +33,15 @@ def like_domain(like: InputSource, *, cell_size: float | None = None) -> tuple[f
     return w, h, res
 
 
+def texture_params(ttype) -> dict:
+    """RenderParams keywords for the texture a terrain type recorded (none: {})."""
+    t = ttype.texture
+    if not t:
+        return {}
+    return {"texture_rms_m": float(t["rms_m"]), "texture_beta": float(t["beta"]),
+            "texture_largest_m": float(t.get("largest_m", 1000.0))}
+
+
 def like_box(like: str, *, cell_size: float | None = None):
     """South-west corner, width, height, cell size (metres) and CRS (None: local grid) of a
     ``--like`` DEM, so a twin lands on the DEM's own grid."""
@@ -68,7 +77,8 @@ def _like_dem(like: str | InputSource, *, cell_size: float | None = None):
 @seed_option(what="the tree and the raster", default=None, recorded_in="synthesis.json and the dem.tif tags")
 @click.option("--crs", default=None,
               help="Output CRS (projected EPSG/WKT), or 'local' for a local metric frame with the south-west corner at "
-                   "(0, 0) [default: the --like DEM's grid and CRS, else a local frame].")
+                   "(0, 0) [default: the --like DEM's grid and CRS, else a local azimuthal-equidistant CRS centred "
+                   "where the type was measured, else a local frame].")
 @click.option("--center", default=None,
               help="LON,LAT of the domain centre: a local azimuthal-equidistant CRS (written as WKT) centred there.")
 @click.option("--tin", "write_tin", is_flag=True, help="Also write the TIN as tin.ply.")
@@ -144,6 +154,10 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
             params = (f"erosion={erosion}",) + tuple(params)
         parsed = check_generator_inputs(generator, params, exemplar)
     ttype = load_terrain_type(type_file)
+    if like_origin is None and center_ll is None and not local:
+        # the terrain goes where its type was measured (a local azimuthal-equidistant CRS centred
+        # there, or the given --crs centred there), not to a CRS's false origin
+        center_ll = ttype.source_center
     if seed is None:
         seed = int(np.random.SeedSequence().entropy)  # recorded, so the run can be replayed
     bar = None
@@ -174,7 +188,8 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
         bar.update(1)
     if parsed is None:
         dem, skel = render_elevation(tree, resolution_m=res, extent=tree_extent(tree), erosion=erosion,
-                                     params=RenderParams(min_prominence=float(tree.attrs.get("min_prominence", 30.0))),
+                                     params=RenderParams(min_prominence=float(tree.attrs.get("min_prominence", 30.0)),
+                                                         **texture_params(ttype)),
                                      return_skeleton=True, rng=seed)
     else:
         from orokit.cli.generator_options import render_generator

@@ -34,7 +34,9 @@ def parse_size(text: str) -> tuple[float, float]:
               help="Divide Tree fragment (.gpkg from orokit, or reference .txt) to keep and complete around.")
 @click.option("--fragment-offset", type=(float, float), default=(0.0, 0.0), show_default=True,
               help="Shift (metres) applied to the fragment.")
-@click.option("--crs", default=None, help="Output CRS (EPSG:xxxx or WKT; projected). Default: local frame.")
+@click.option("--crs", default=None,
+              help="Output CRS (EPSG:xxxx or WKT; projected), or 'local' for a local metric frame. Default: a local "
+                   "azimuthal-equidistant CRS centred where the (first) type was measured, else a local frame.")
 @click.option("--center", type=(float, float), default=None,
               help="Domain centre LON LAT; without --crs a local azimuthal equidistant projection is used.")
 @seed_option(what="the tree", default=None, recorded_in="synthesis.json")
@@ -68,6 +70,10 @@ def synthesize_tree(type_files, size, n_peaks, control_elevation, control_densit
 
         seed = int(np.random.SeedSequence().entropy)  # recorded in synthesis.json, so the run can be replayed
     types = [load_terrain_type(p) for p in type_files]
+    if crs is not None and str(crs).lower() == "local":
+        crs = None
+    elif center is None:
+        center = types[0].source_center  # where the type was measured (None: a local frame)
     fixed = _read_points(fixed_peaks) if fixed_peaks is not None else None
     frag = _read_tree(fragment) if fragment is not None else None
     bar = None

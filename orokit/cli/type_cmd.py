@@ -58,6 +58,9 @@ def type_cmd(src: InputSource, output: Path, name: str | None, min_prominence: f
     if source.is_dir():
         tt = TerrainType.from_analysis(source, min_prominence_m=min_prominence, name=name,
                                        isolation_basis=isolation_basis, rho=rho)
+        dem = _analysed_dem(source)
+        if dem is not None:
+            tt = _with_texture(tt, dem)
     elif source.suffix.lower() in (".txt", ".gpkg"):
         from orokit.io.divide_tree_io import read_divide_tree
 
@@ -73,6 +76,7 @@ def type_cmd(src: InputSource, output: Path, name: str | None, min_prominence: f
         da = src.read_dem(z_units=z_units, cell_size=cell_size)
         result = analyze(da, min_prominence=30.0 if min_prominence is None else min_prominence, progress=progress)
         tt = TerrainType.from_analysis(result, name=name or src.dataset or source.stem, isolation_basis=isolation_basis, rho=rho)
+        tt = _with_texture(tt, da)
     if scale_prominence is not None:
         tt = tt.scaled("prominence", scale_prominence)
     if scale_elevation is not None:
@@ -104,3 +108,40 @@ def _tree_area_km2(tree) -> float:
         w, h = float(xy["x"].max() - xy["x"].min()), float(xy["y"].max() - xy["y"].min())
         return grid_area_km2(Affine(w, 0.0, float(xy["x"].min()), 0.0, -h, float(xy["y"].max())), tree.crs, (1, 1))
     return float((xy["x"].max() - xy["x"].min() + cell) * (xy["y"].max() - xy["y"].min() + cell)) / 1e6
+
+
+def _with_texture(tt, dem):
+    """The type with the DEM's short-wavelength texture (what the renderer adds back)."""
+    import numpy as np
+
+    from orokit.raster.noise import texture_spectrum
+    from orokit.raster.shade import row_cell_sizes_m
+
+    dx, dy = row_cell_sizes_m(dem)
+    rms, beta = texture_spectrum(np.asarray(dem.values), float(np.sqrt(np.mean(dx) * dy)))
+    return tt.with_texture(rms, beta)
+
+
+def _analysed_dem(folder: Path):
+    """The DEM an ``orokit analyze`` folder was made from (its manifest dataset or source file), or None."""
+    import json
+    import logging
+
+    log = logging.getLogger(__name__)
+    try:
+        attrs = json.loads((folder / "analysis.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    try:
+        if attrs.get("dataset"):
+            from orokit.data import open_dataset_dem
+
+            return open_dataset_dem(str(attrs["dataset"]))
+        src = attrs.get("source")
+        if src and Path(src).is_file():
+            from orokit.io.dem import read_dem
+
+            return read_dem(src, z_units=attrs.get("z_units_in") or "m")
+    except Exception as exc:  # noqa: BLE001 - the texture is optional; the type is still valid without it
+        log.warning("no texture for the type: cannot read the analysed DEM (%s)", exc)
+    return None

@@ -41,6 +41,7 @@ def sample_elevation(
     river_w: np.ndarray,
     *,
     ridge_slope: np.ndarray | None = None,
+    ridge_floor: np.ndarray | None = None,
     k_neighbours: int = 16,
     floor_slope: float = 0.05,
     profile: Callable[[np.ndarray], np.ndarray] | None = None,
@@ -56,6 +57,8 @@ def sample_elevation(
     (orokit): flanks then fall faster than the ridge rises, so the ground beside a
     saddle stays below it and the saddle stays the highest pass; the floor is
     ``h(r) + floor_slope * max(d(p, R) - w, 0)`` (no pit below the drainage).
+    ``ridge_floor`` (one value per ridge point) bounds how deep the cones dig
+    (:func:`flank_envelope`).
     Returns ``(h, d_ridge, d_river)``.
     """
     tree = cKDTree(ridge_xy)
@@ -70,7 +73,8 @@ def sample_elevation(
     else:
         h = np.where(dR < w, hr, hr + (hq - hr) * np.asarray(profile(1.0 - alpha), dtype=np.float64))
     if ridge_slope is not None:
-        env = flank_envelope(points, ridge_xy, ridge_z, ridge_slope, k_neighbours=k_neighbours, tree=tree)
+        env = flank_envelope(points, ridge_xy, ridge_z, ridge_slope, ridge_floor=ridge_floor,
+                             k_neighbours=k_neighbours, tree=tree)
         # the cones only cap; far from every ridge they would dig pits far below the rivers, so
         # the floor rises gently from the nearest river bed (valley sides, not flat plains)
         floor = np.minimum(hr + floor_slope * np.maximum(dR - w, 0.0), h)
@@ -79,10 +83,26 @@ def sample_elevation(
 
 
 def flank_envelope(points: np.ndarray, ridge_xy: np.ndarray, ridge_z: np.ndarray, ridge_slope: np.ndarray,
-                   *, k_neighbours: int = 16, tree: cKDTree | None = None) -> np.ndarray:
-    """Upper envelope of cones ``h(q) - s_q |p - q|`` over the nearest ridge points q."""
+                   *, ridge_floor: np.ndarray | None = None, k_neighbours: int = 16,
+                   tree: cKDTree | None = None) -> np.ndarray:
+    """Upper envelope of cones ``h(q) - s_q |p - q|`` over the nearest ridge points q.
+
+    With ``ridge_floor``, the envelope never falls below the lowest ``ridge_floor`` of
+    those points: the cones keep the ground beside a saddle below it, but far from the
+    ridges they no longer dig canyons far below every saddle around (issue 11:
+    plateaus cut by deep valleys, > 60 deg walls).
+
+    >>> q = np.array([[0.0, 0.0]]); z = np.array([100.0]); s = np.array([1.0])
+    >>> flank_envelope(np.array([[30.0, 40.0], [300.0, 400.0]]), q, z, s).tolist()
+    [50.0, -400.0]
+    >>> flank_envelope(np.array([[30.0, 40.0], [300.0, 400.0]]), q, z, s, ridge_floor=np.array([20.0])).tolist()
+    [50.0, 20.0]
+    """
     tree = tree if tree is not None else cKDTree(ridge_xy)
     k = min(k_neighbours, ridge_xy.shape[0])
     dk, ik = tree.query(points, k=k)
     dk, ik = dk.reshape(points.shape[0], -1), ik.reshape(points.shape[0], -1)
-    return np.max(ridge_z[ik] - ridge_slope[ik] * dk, axis=1)
+    env = np.max(ridge_z[ik] - ridge_slope[ik] * dk, axis=1)
+    if ridge_floor is not None:
+        env = np.maximum(env, np.min(ridge_floor[ik], axis=1))
+    return env

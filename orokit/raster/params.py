@@ -29,6 +29,17 @@ class RenderParams:
         regions it gives slope distances equal or worse, so it is not the default).
     flank_slope, flank_ratio : flanks fall at least ``max(flank_slope, flank_ratio * ridge slope)``
         from every ridge point (keeps saddles the highest passes).
+    texture_rms_m, texture_beta, texture_largest_m : short-wavelength texture of the real terrain
+        (a terrain type's ``texture``, :func:`orokit.raster.noise.texture_spectrum`): RMS (metres)
+        and spectral slope of its wavelengths below ``texture_largest_m``; 0 = none.
+    texture_gain : share of that RMS added as spectral noise before the erosion
+        (:func:`orokit.raster.noise.spectral_noise`; the skeleton and erosion make the rest).
+        Spurious hills it makes are cut by the orometry enforcement.
+    texture_slope_power : the texture's amplitude follows the skeleton's slope to this power
+        (normalised to an RMS of 1; 0 = uniform).
+    texture_clearance_m : the texture fades to 0 within this distance of peaks and saddles.
+    flank_depth : the cones of a ridge piece reach at most ``flank_depth * (peak - saddle)``
+        below its saddle (None: no limit; far from ridges steep cones dug canyons).
     """
 
     lam: float = 200.0
@@ -46,6 +57,13 @@ class RenderParams:
     flank_slope: float = 0.05
     flank_ratio: float = 1.5
     profiles: str = "linear"
+    flank_depth: float | None = None
+    texture_rms_m: float = 0.0
+    texture_beta: float = 4.5
+    texture_gain: float = 0.4
+    texture_largest_m: float = 1000.0
+    texture_clearance_m: float = 300.0
+    texture_slope_power: float = 1.0
 
     def __post_init__(self) -> None:
         from orokit.errors import InputError

@@ -23,7 +23,7 @@ from orokit._typing import SeedLike
 from orokit.errors import CRSError, DivideTreeError, InputError, OrokitWarning
 from orokit.raster.enforce import enforce_orometry
 from orokit.raster.erosion import erode_multiscale
-from orokit.raster.noise import falloff, fractal_noise
+from orokit.raster.noise import falloff, fractal_noise, spectral_noise
 from orokit.raster.params import RenderParams
 from orokit.raster.rasterize import MAX_CELLS, burn_max, make_grid, rasterize_tin, set_cells
 from orokit.raster.refine import densify
@@ -61,6 +61,17 @@ def resolve_seed(rng: SeedLike | np.random.SeedSequence) -> int:
     if isinstance(rng, np.random.Generator):
         return int(rng.integers(0, 2**63 - 1))
     raise InputError(f"rng must be an int seed, a numpy Generator, a SeedSequence or None, got {type(rng).__name__}")
+
+
+def _slope_weight(z: np.ndarray, res: float, smooth_m: float, power: float) -> np.ndarray:
+    """``(s / mean s) ** power`` of the slope ``s`` of ``z`` smoothed over ``smooth_m`` (RMS 1 when power=1)."""
+    if power == 0:
+        return np.ones(z.shape, np.float32)
+    zs = ndimage.gaussian_filter(z.astype(np.float32), max(0.5 * smooth_m / res, 0.5))
+    gy, gx = np.gradient(zs, res)
+    s = np.hypot(gx, gy) ** power
+    m = float(np.sqrt(np.mean(s * s)))
+    return (s / m).astype(np.float32) if m > 0 else np.ones(z.shape, np.float32)
 
 
 def _check_crs(tree) -> Any:
@@ -173,6 +184,14 @@ def render_elevation(
     mask[row[ok], col[ok]] = False
     dist = ndimage.distance_transform_edt(mask, sampling=grid.res).astype(np.float32)
     uplift = falloff(dist / np.float32(params.uplift_radius))
+    if params.texture_rms_m * params.texture_gain > 0:
+        # texture where the skeleton is steep (real valley floors and glaciers are smooth),
+        # faded near peaks and saddles; mean amplitude = gain x the type's texture RMS
+        fade = 1.0 - falloff(dist / np.float32(max(params.texture_clearance_m, grid.res)))
+        amp = _slope_weight(z, grid.res, params.texture_largest_m, params.texture_slope_power) * fade
+        z += spectral_noise(z.shape, grid.res, rms=params.texture_gain * params.texture_rms_m,
+                            beta=params.texture_beta, largest_m=params.texture_largest_m, rng=rng) * amp
+        del fade, amp
     del dist, mask
     amp = params.noise_ratio * params.min_prominence
     if amp > 0:

@@ -108,6 +108,26 @@ def separate_saddles(p: np.ndarray, s: np.ndarray, e: np.ndarray, clearance_m: f
     return s
 
 
+def _cone_floor(lines: Polylines, point_origin: np.ndarray, pieces: RidgeSegments, node_z: np.ndarray,
+                depth_ratio: float | None) -> np.ndarray | None:
+    """Lowest elevation the flank cone of each densified ridge point may reach:
+    ``saddle - depth_ratio * (peak - saddle)`` of its ridge piece (peak -> saddle); a
+    refined vertex shared by several pieces takes the lowest. None: no floor."""
+    if depth_ratio is None:
+        return None
+    hp, hs = node_z[pieces.node0], node_z[pieces.node1]
+    piece_floor = hs - float(depth_ratio) * (hp - hs)
+    seg_floor = piece_floor[lines.origin] if lines.origin is not None else piece_floor
+    vert = np.full(lines.xy.shape[0], np.inf)
+    np.minimum.at(vert, lines.segments[:, 0], seg_floor)
+    np.minimum.at(vert, lines.segments[:, 1], seg_floor)
+    n_dense = point_origin.size - lines.xy.shape[0]
+    out = np.empty(point_origin.size)
+    out[:n_dense] = piece_floor[point_origin[:n_dense]]
+    out[n_dense:] = np.where(np.isfinite(vert), vert, lines.z)
+    return out
+
+
 def build_skeleton(
     tree, *, extent: tuple[float, float, float, float], params: RenderParams = RenderParams(),
     saddle_clearance_m: float = 0.0, rng: SeedLike = None
@@ -151,12 +171,13 @@ def build_skeleton(
     fine = ridge_lines.segments
     fine_ridges = RidgeSegments(ridge_lines.xy[fine[:, 0]], ridge_lines.xy[fine[:, 1]],
                                 ridge_lines.z[fine[:, 0]], ridge_lines.z[fine[:, 1]], fine[:, 0], fine[:, 1])
-    rxy, rz, rs = densify(ridge_lines, lam / 4.0, value="slope")
+    rxy, rz, rs, rorig = densify(ridge_lines, lam / 4.0, value="slope", origin=True)
     rs = np.maximum(params.flank_slope, params.flank_ratio * rs)
+    rfloor = _cone_floor(ridge_lines, rorig, ridges, nodes[:, 2], params.flank_depth)
     rtree = cKDTree(rxy)
 
     def envelope(xy: np.ndarray) -> np.ndarray:
-        return flank_envelope(xy, rxy, rz, rs, tree=rtree)
+        return flank_envelope(xy, rxy, rz, rs, ridge_floor=rfloor, tree=rtree)
 
     rivers = river_network(fine_ridges, ridge_lines.xy, extent, base_elevation=base,
                            margin_m=params.river_margin, slope=params.river_slope, cap=envelope)
@@ -189,7 +210,7 @@ def build_skeleton(
     vxy, vz, va = densify(river_lines, dense) if river_seg.size else (rivers.xy, rivers.elevation, area)
     pts = np.concatenate([samples, ring])
     h, dT, dR = sample_elevation(pts, rxy, rz, vxy, vz, valley_width(va, coef=params.valley_coef), ridge_slope=rs,
-                                 profile=hillslope_profile if learned else None)
+                                 ridge_floor=rfloor, profile=hillslope_profile if learned else None)
     far = (np.minimum(dT, dR) >= 0.5 * lam)
     far[samples.shape[0]:] = True  # keep the ring
     pts, h = pts[far], h[far]

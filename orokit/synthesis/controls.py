@@ -84,7 +84,8 @@ def make_domain(
     Parameters
     ----------
     crs : output CRS (EPSG code, "EPSG:xxxx", WKT, pyproj CRS). Must be projected
-        (metres). None with ``center`` -> a local azimuthal equidistant projection
+        (metres); without ``center`` the domain is centred on the CRS's area of use (not
+        its false origin). None with ``center`` -> a local azimuthal equidistant projection
         centred on ``center`` (lon, lat); None without ``center`` -> a local frame
         with the domain's south-west corner at (0, 0).
     center : domain centre, in ``center_crs`` (default lon/lat degrees).
@@ -117,7 +118,11 @@ def make_domain(
             "(e.g. UTM) or give only a centre lon/lat for a local projection"
         )
     if center is None:
-        return Domain(0.0, 0.0, w, h, out, shape)
+        # not the CRS's false origin (often in the ocean): the centre of its area of use
+        aou = out.area_of_use
+        if aou is None:
+            return Domain(0.0, 0.0, w, h, out, shape)
+        center, center_crs = (0.5 * (aou.west + aou.east), 0.5 * (aou.south + aou.north)), "EPSG:4326"
     cx, cy = Transformer.from_crs(center_crs, out, always_xy=True).transform(*center)
     return Domain(cx - w / 2, cy - h / 2, w, h, out, shape)
 

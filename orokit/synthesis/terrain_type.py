@@ -190,6 +190,12 @@ class TerrainType:
     isolation_basis : "peaks" (distance to the nearest higher peak of the tree, what a
         synthesized Divide Tree can measure) or "terrain" (nearest higher cell).
     provenance : free metadata (source, area, counts, edits).
+    source_crs : WKT of the CRS of the data the type was measured on (None: a local grid).
+    source_center : ``(lon, lat)`` of the centre of that data (None: not georeferenced);
+        ``orokit synthesize`` places new terrain there by default.
+    texture : ``{"rms_m", "beta", "largest_m"}`` of the source DEM's short-wavelength
+        texture (:func:`orokit.raster.noise.texture_spectrum`; None: no DEM was seen), which
+        the renderer adds back (:class:`orokit.raster.params.RenderParams`).
     bands : optional joint statistics (orokit): ``{"elevation_bins": [i0, ..., iK],
         "prominence": [[...]] * K, "dominance": [[...]] * K}``: prominence and dominance
         counts (on the marginal histograms' bins) of the peaks whose elevation falls in
@@ -206,6 +212,9 @@ class TerrainType:
     isolation_basis: str = "peaks"
     provenance: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     bands: Mapping[str, Any] | None = None
+    source_crs: str | None = None
+    source_center: tuple[float, float] | None = None
+    texture: Mapping[str, float] | None = None
 
     def __post_init__(self) -> None:
         missing = set(FEATURES) - set(self.histograms)
@@ -222,6 +231,16 @@ class TerrainType:
             raise SchemaError(f"isolation_basis must be 'peaks' or 'terrain', got {self.isolation_basis!r}")
         if self.bands is not None:
             _check_bands(self.bands, self.histograms)
+        if self.source_center is not None:
+            lon, lat = (float(v) for v in self.source_center)
+            if not (np.isfinite(lon) and np.isfinite(lat) and -180 <= lon <= 360 and -90 <= lat <= 90):
+                raise SchemaError(f"source_center must be (lon, lat) in degrees, got {self.source_center!r}")
+            object.__setattr__(self, "source_center", (lon, lat))
+        if self.texture is not None:
+            t = {k: float(v) for k, v in dict(self.texture).items()}
+            if not (np.isfinite(t.get("rms_m", np.nan)) and t["rms_m"] >= 0 and np.isfinite(t.get("beta", np.nan))):
+                raise SchemaError(f"texture needs a finite rms_m >= 0 and beta, got {self.texture!r}")
+            object.__setattr__(self, "texture", t)
         e = self.histograms["elevation"]
         if e.edges[-1] <= 0:
             raise SchemaError("the elevation histogram lies entirely at or below 0 m: peaks need positive elevations")
@@ -335,8 +354,9 @@ class TerrainType:
         }
         prov.update(dict(provenance or {}))
         bands = _elevation_bands(z[keyed], values["prominence"], values["dominance"], hists)
+        src_crs, center = source_location(crs, 0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max()))
         return cls(name, hists, len(p) / float(area_km2), float(rho), float(min_prominence_m),
-                   isolation_basis, prov, bands)
+                   isolation_basis, prov, bands, source_crs=src_crs, source_center=center)
 
     @classmethod
     def from_divide_tree(cls, tree: Any, *, area_km2: float, min_prominence_m: float = 30.0,
@@ -379,10 +399,20 @@ class TerrainType:
         crs = grid_crs if crs is None else crs
         area = float(attrs["area_km2"]) if "area_km2" in attrs else grid_area_km2(transform, crs, shape)
         name = name or Path(str(attrs.get("source") or src or "type")).stem
-        return cls.from_peaks(peaks, area_km2=area, min_prominence_m=eps,
-                              divide_tree=getattr(result, "divide_tree", None), isolation_basis=isolation_basis,
-                              rho=rho, name=name, provenance={"source": portable_path(attrs.get("source") or src)},
-                              crs=crs)
+        tt = cls.from_peaks(peaks, area_km2=area, min_prominence_m=eps,
+                            divide_tree=getattr(result, "divide_tree", None), isolation_basis=isolation_basis,
+                            rho=rho, name=name, provenance={"source": portable_path(attrs.get("source") or src)},
+                            crs=crs)
+        if transform is not None and shape is not None and crs is not None and not attrs.get("local_grid"):
+            cx, cy = transform * (0.5 * shape[1], 0.5 * shape[0])
+            src_crs, center = source_location(crs, cx, cy)
+            tt = dataclasses.replace(tt, source_crs=src_crs, source_center=center)
+        return tt
+
+    def with_texture(self, rms_m: float, beta: float, largest_m: float = 1000.0) -> "TerrainType":
+        """New type with the source DEM's texture (:func:`orokit.raster.noise.texture_spectrum`)."""
+        return dataclasses.replace(self, texture={"rms_m": float(rms_m), "beta": float(beta),
+                                                  "largest_m": float(largest_m)})
 
     # --------------------------------------------------------------- editing
     def _edited(self, note: str, **changes: Any) -> "TerrainType":
@@ -463,6 +493,9 @@ class TerrainType:
             "histograms": {k: self.histograms[k].to_dict() for k in FEATURES},
             "provenance": dict(self.provenance),
             "bands": None if self.bands is None else {k: v for k, v in self.bands.items()},
+            "source_crs": self.source_crs,
+            "source_center": None if self.source_center is None else list(self.source_center),
+            "texture": None if self.texture is None else dict(self.texture),
         }
 
     @classmethod
@@ -481,7 +514,10 @@ class TerrainType:
                      for k, v in data["histograms"].items() if k in FEATURES}
             return cls(str(data["name"]), hists, float(data["peak_density_per_km2"]), float(data["rho"]),
                        float(data["min_prominence_m"]), str(data.get("isolation_basis", "peaks")),
-                       dict(data.get("provenance", {})), data.get("bands"))
+                       dict(data.get("provenance", {})), data.get("bands"),
+                       source_crs=data.get("source_crs"),
+                       source_center=None if data.get("source_center") is None else tuple(data["source_center"]),
+                       texture=data.get("texture"))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, SchemaError):
                 raise
@@ -678,3 +714,24 @@ def band_histograms(tt: TerrainType) -> tuple[np.ndarray, list[FeatureHistogram]
     prom = [FeatureHistogram(ph.edges, tuple(float(c) for c in row), ph.open_last) for row in tt.bands["prominence"]]
     dom = [FeatureHistogram(dh.edges, tuple(float(c) for c in row), dh.open_last) for row in tt.bands["dominance"]]
     return e[idx], prom, dom
+
+
+def source_location(crs: Any, x: float, y: float) -> tuple[str | None, tuple[float, float] | None]:
+    """``(WKT, (lon, lat))`` of the point ``(x, y)`` in ``crs``; ``(None, None)`` without a CRS.
+
+    >>> wkt, (lon, lat) = source_location("EPSG:32633", 500000.0, 0.0)
+    >>> wkt.startswith("PROJCRS"), round(lon, 6), round(lat, 6)
+    (True, 15.0, 0.0)
+    """
+    if crs is None:
+        return None, None
+    from pyproj import CRS, Transformer
+
+    c = CRS.from_user_input(crs)
+    if c.is_geographic:
+        lon, lat = float(x), float(y)
+    else:
+        lon, lat = Transformer.from_crs(c, "EPSG:4326", always_xy=True).transform(float(x), float(y))
+    if not (np.isfinite(lon) and np.isfinite(lat)):
+        return c.to_wkt(), None
+    return c.to_wkt(), (float(lon), float(lat))

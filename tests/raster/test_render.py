@@ -1,6 +1,8 @@
 """Renderer: rivers, orometry of the raster, reproducibility, bad inputs."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -202,3 +204,35 @@ def test_learned_profiles_shape_ridges_and_flanks():
     assert RenderParams().profiles == "linear"
     with pytest.raises(Exception, match="profiles"):
         RenderParams(profiles="cubic")
+
+
+def test_texture_adds_short_wavelength_relief_and_keeps_the_orometry():
+    """A type's texture (RMS, spectral slope) is added back: the render gains short-wavelength
+    relief measured by texture_spectrum (a measure the renderer does not steer), the peaks
+    and prominences of the tree stay, and no extra peak >= eps appears."""
+    from orokit.raster.noise import texture_spectrum
+
+    tree = small_tree()
+    plain = render_elevation(tree, resolution_m=50.0, erosion=False, params=FAST, rng=3)
+    rough = render_elevation(tree, resolution_m=50.0, erosion=False, rng=3,
+                             params=RenderParams(lam=200.0, erosion_steps=2, texture_rms_m=40.0, texture_beta=4.0,
+                                                 texture_gain=1.0))
+    r0, _ = texture_spectrum(plain.values, 50.0)
+    r1, _ = texture_spectrum(rough.values, 50.0)
+    assert r1 > r0 + 5.0
+    assert json.loads(rough.attrs["parameters"])["texture_rms_m"] == 40.0
+    res = orokit.analyze(rough, min_prominence=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+    np.testing.assert_allclose(comp.peaks["raster_prominence"].to_numpy(), [1500.0, 200.0, 200.0, 150.0, 100.0],
+                               atol=6.0)
+
+
+def test_spectral_noise_follows_its_spectral_slope():
+    from orokit.raster.noise import spectral_noise, texture_spectrum
+
+    for beta in (3.0, 4.5):
+        n = spectral_noise((512, 512), 30.0, rms=10.0, beta=beta, largest_m=4000.0, rng=5)
+        rms, got = texture_spectrum(n, 30.0, largest_m=4000.0, fit_m=(150.0, 1000.0))
+        assert got == pytest.approx(beta, abs=0.4)
+        assert rms == pytest.approx(10.0, rel=0.25)

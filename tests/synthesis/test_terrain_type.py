@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -189,3 +190,25 @@ def test_elevation_bands_partition_the_peaks(peak_table, small_type):
     data["bands"]["elevation_bins"] = [0, 5]
     with pytest.raises(SchemaError, match="bands"):
         TerrainType.from_dict(data)
+
+
+def test_source_location_and_texture_survive_json_and_bad_ones_are_refused(tmp_path):
+    from orokit.errors import SchemaError
+    from orokit.synthesis.terrain_type import TerrainType, load_terrain_type
+
+    rng = np.random.default_rng(2)
+    n = 60
+    z = rng.uniform(500, 1500, n)
+    peaks = pd.DataFrame({"x": rng.uniform(0, 2e4, n), "y": rng.uniform(0, 2e4, n), "elevation": z,
+                          "prominence": np.minimum(30 + rng.exponential(80, n), z)})
+    peaks["saddle_x"], peaks["saddle_y"] = peaks["x"] + 300.0, peaks["y"]
+    tt = TerrainType.from_peaks(peaks, area_km2=400.0, crs="EPSG:32633").with_texture(25.0, 4.2)
+    assert tt.source_center is not None and tt.source_crs.startswith("PROJCRS")
+    back = load_terrain_type(tt.save(tmp_path / "t.json"))
+    assert back.source_center == pytest.approx(tt.source_center) and back.source_crs == tt.source_crs
+    assert back.texture == {"rms_m": 25.0, "beta": 4.2, "largest_m": 1000.0}
+    assert TerrainType.from_peaks(peaks, area_km2=400.0).source_center is None  # local metres: nowhere
+    with pytest.raises(SchemaError, match="source_center"):
+        TerrainType.from_dict({**tt.to_dict(), "source_center": [15.0, 95.0]})
+    with pytest.raises(SchemaError, match="texture"):
+        TerrainType.from_dict({**tt.to_dict(), "texture": {"rms_m": -1.0, "beta": 4.0}})

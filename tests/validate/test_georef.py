@@ -57,3 +57,70 @@ def test_center_places_the_domain_centre_within_one_cell(small_type_file, tmp_pa
     r = CliRunner().invoke(cli, ["synthesize", "--type", str(small_type_file), "--size", "20km", "--center", "86.9",
                                  "--no-progress", "-o", str(tmp_path / "bad")])
     assert r.exit_code != 0 and "--center" in r.output
+
+
+def _located_type_file(small_type_file, tmp_path, center=(86.925, 27.988)):
+    """The small type with a recorded source (UTM 45N) and centre."""
+    from orokit.synthesis.terrain_type import TerrainType, load_terrain_type
+
+    tt = load_terrain_type(small_type_file)
+    tt = TerrainType.from_dict({**tt.to_dict(), "source_crs": CRS.from_epsg(32645).to_wkt(),
+                                "source_center": list(center)})
+    return tt.save(tmp_path / "located.json")
+
+
+def test_type_of_a_georeferenced_dem_remembers_crs_centre_and_texture(tmp_path):
+    from orokit.synthesis.terrain_type import load_terrain_type
+
+    dem = tmp_path / "real.tif"
+    rng = np.random.default_rng(4)
+    z = (np.add.outer(np.linspace(0, 400, 150), np.linspace(0, 300, 200)) + 800 + rng.normal(0, 20, (150, 200)))
+    hills = 300 * np.sin(np.linspace(0, 9, 150))[:, None] * np.cos(np.linspace(0, 11, 200))[None, :]
+    with rasterio.open(dem, "w", driver="GTiff", width=200, height=150, count=1, dtype="float32", crs="EPSG:32633",
+                       transform=from_origin(612_300, 5_123_400, 100, 100)) as ds:
+        ds.write((z + hills).astype("float32"), 1)
+        ds.update_tags(1, units="m")
+    r = CliRunner().invoke(cli, ["type", str(dem), "-o", str(tmp_path / "t.json"), "--no-progress"])
+    assert r.exit_code == 0, r.output
+    tt = load_terrain_type(tmp_path / "t.json")
+    assert CRS.from_user_input(tt.source_crs) == CRS.from_epsg(32633)
+    # the grid's centre, (622 300, 5 115 900) in UTM 33N, as lon/lat
+    lon, lat = Transformer.from_crs("EPSG:32633", "EPSG:4326", always_xy=True).transform(622_300, 5_115_900)
+    assert Geod(ellps="WGS84").inv(lon, lat, *tt.source_center)[2] < 1.0
+    assert tt.texture is not None and tt.texture["rms_m"] > 5.0 and np.isfinite(tt.texture["beta"])
+
+
+def test_synthesize_places_the_terrain_where_its_type_was_measured(small_type_file, tmp_path):
+    lon, lat = 86.925, 27.988
+    typ = _located_type_file(small_type_file, tmp_path, (lon, lat))
+    r = CliRunner().invoke(cli, ["synthesize", "--type", str(typ), "--size", "20km", "--resolution", "100m",
+                                 "--seed", "1", "--no-erosion", "--no-progress", "-o", str(tmp_path / "here")])
+    assert r.exit_code == 0, r.output
+    with rasterio.open(tmp_path / "here" / "dem.tif") as b:
+        assert b.crs is not None and "Azimuthal" in CRS.from_user_input(b.crs).to_wkt().replace("_", " ").title()
+        cx, cy = b.transform * (b.width / 2, b.height / 2)
+        clon, clat = Transformer.from_crs(b.crs, "EPSG:4326", always_xy=True).transform(cx, cy)
+        assert Geod(ellps="WGS84").inv(lon, lat, clon, clat)[2] <= b.transform.a
+    # a projected CRS alone: centred there too, not at the CRS's false origin
+    r = CliRunner().invoke(cli, ["synthesize-tree", "--type", str(typ), "--size", "20km", "--crs", "EPSG:32645",
+                                 "--seed", "1", "--no-progress", "-o", str(tmp_path / "utm")])
+    assert r.exit_code == 0, r.output
+    import pandas as pd
+
+    peaks = pd.read_csv(tmp_path / "utm" / "peaks.csv")
+    assert peaks["lon"].between(lon - 0.2, lon + 0.2).all() and peaks["lat"].between(lat - 0.2, lat + 0.2).all()
+    # a local frame only when asked for
+    r = CliRunner().invoke(cli, ["synthesize", "--type", str(typ), "--size", "20km", "--resolution", "100m",
+                                 "--crs", "local", "--seed", "1", "--no-erosion", "--no-progress",
+                                 "-o", str(tmp_path / "local")])
+    assert r.exit_code == 0, r.output
+    with rasterio.open(tmp_path / "local" / "dem.tif") as b:
+        assert b.crs is None and b.transform.c == 0.0
+
+
+def test_a_crs_without_centre_is_centred_on_its_area_of_use():
+    from orokit.synthesis.controls import make_domain
+
+    d = make_domain(20_000.0, crs="EPSG:32645")
+    lon, lat = Transformer.from_crs(d.crs, "EPSG:4326", always_xy=True).transform(d.x0 + 10_000, d.y0 + 10_000)
+    assert 84.0 <= lon <= 90.0 and 0.0 < lat < 84.0  # in UTM 45N's zone, not at its false origin (about 82.5 E, 0 N)
