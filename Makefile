@@ -150,8 +150,14 @@ $(REPORTS)/roundtrip/%/hillshade.png: $(REPORTS)/synthesis/types/%.json $(DATA_S
 $(REPORTS)/roundtrip/%/validation.json: $(REPORTS)/roundtrip/%/hillshade.png $(CLASSIFICATION_README) orokit/cli/validate.py | $(INSTALLED)
 	$(OROKIT) -q validate $(@D) --model $(ROUNDTRIP_MODEL) --overwrite
 
-$(ROUNDTRIP_README): $(ROUNDTRIP_VALIDATIONS) orokit/reports/roundtrip.py orokit/cli/roundtrip_report.py | $(INSTALLED)
+# the render of each region's own (real) Divide Tree on the real DEM's grid, defaults (issue 11)
+ROUNDTRIP_RENDERS := $(DATASETS:%=$(REPORTS)/roundtrip/render/%.tif)
+$(REPORTS)/roundtrip/render/%.tif: $(REPORTS)/analysis/%/analysis.json $(ROUNDTRIP_SRC) | $(INSTALLED)
+	$(OROKIT) -q render $(<D)/dividetree.gpkg --like $* --seed 0 -o $@ --overwrite
+
+$(ROUNDTRIP_README): $(ROUNDTRIP_VALIDATIONS) $(ROUNDTRIP_RENDERS) orokit/reports/roundtrip.py orokit/reports/landform.py orokit/cli/roundtrip_report.py | $(INSTALLED)
 	$(OROKIT) -q roundtrip-report $(ROUNDTRIP_VALIDATIONS:%/validation.json=%) --model $(ROUNDTRIP_MODEL) \
+	  --renders $(REPORTS)/roundtrip/render \
 	  --classification $(REPORTS)/classification/tables/per_class_10km.csv -o $@ --overwrite --no-progress
 
 # the same twins with the real DEM's elevation as the coarse elevation control C_H (paper section 5):

@@ -18,6 +18,7 @@ checked), reported apart. Results: ``reports/benchmarks/realism.json``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -45,7 +46,7 @@ def _table(df) -> dict:
     return {k: {c: (bool(v) if c == "ok" else float(v)) for c, v in row.items()} for k, row in df.iterrows()}
 
 
-def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, params=None) -> dict:
+def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, params=None, model=None) -> dict:
     import orokit
     from orokit.data import open_dataset_dem
     from orokit.raster.params import RenderParams
@@ -55,6 +56,8 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
     from orokit.synthesis.tree import synthesize_divide_tree
     from orokit.validate.landform import compare_landforms, landform_statistics, split_halves
     from orokit.validate.roundtrip import roundtrip
+    from orokit.cli.synthesize import texture_params
+    from orokit.raster.noise import texture_spectrum
 
     params = params or RenderParams(min_prominence=EPS)
     dem = open_dataset_dem(name)
@@ -75,17 +78,21 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
                      "landform": _table(compare_landforms(real, rs, halves=halves)),
                      "recovered": rt.get("recovered_share"), "extra": rt.get("extra_share")}
 
-    ttype = TerrainType.from_analysis(result, name=name)
+    # the type as `orokit type` makes it from the DEM: orometry + the DEM's texture
+    ttype = TerrainType.from_analysis(result, name=name).with_texture(*texture_spectrum(dem.values, res))
     t0 = time.perf_counter()
     ttree = synthesize_divide_tree(ttype, size_m=(nx * res, ny * res), rng=seed)
-    twin = render_elevation(ttree, resolution_m=res, extent=tree_extent(ttree), erosion=erosion, params=params,
-                            rng=seed)
+    twin = render_elevation(ttree, resolution_m=res, extent=tree_extent(ttree), erosion=erosion,
+                            params=dataclasses.replace(params, **texture_params(ttype)), rng=seed)
     t_twin = time.perf_counter() - t0
     ts = landform_statistics(twin)
-    rt2 = roundtrip(twin, ttree, min_prominence=EPS).summary()
+    rt2 = roundtrip(twin, ttree, min_prominence=EPS, model=model, expected_label=name if model else None).summary()
     out["twin"] = {"time_s": t_twin, "summary": ts.summary,
                    "landform": _table(compare_landforms(real, ts, halves=halves)),
-                   "recovered": rt2.get("recovered_share"), "extra": rt2.get("extra_share")}
+                   "recovered": rt2.get("recovered_share"), "extra": rt2.get("extra_share"),
+                   "texture": dict(ttype.texture or {}),
+                   "disk_accuracy": rt2.get("disk_accuracy"), "n_disks": rt2.get("n_disks"),
+                   "vote": rt2.get("predicted")}
     if figures is not None:
         _figure(figures / f"{name}.png", name, dem, ren, twin)
     return out
@@ -129,6 +136,28 @@ def _markdown(results: dict) -> str:
     return "\n".join(lines)
 
 
+def _reclassification(results: dict, real_accuracy: Path) -> dict:
+    """Twins' disks classified as their own region vs the real disks' spatial hold-out accuracy."""
+    import pandas as pd
+
+    real = pd.read_csv(real_accuracy).set_index("region") if real_accuracy.is_file() else None
+    rows, met, known = [], 0, 0
+    for name, r in results.items():
+        acc = r["twin"].get("disk_accuracy")
+        sp = float(real.loc[name, "spatial_accuracy_%"]) if real is not None and name in real.index else float("nan")
+        ok = acc is not None and np.isfinite(sp) and 100.0 * float(acc) >= sp
+        known += int(np.isfinite(sp))
+        met += int(ok)
+        rows.append(f"| {name} | {r['twin'].get('n_disks')} | "
+                    f"{'-' if acc is None else f'{100 * float(acc):.0f}'} | {'-' if not np.isfinite(sp) else f'{sp:.0f}'} | "
+                    f"{r['twin'].get('vote')} | {'yes' if ok else 'no'} |")
+    md = "\n".join(["### reclassification: twin disks right % vs real disks right % (spatial hold-out)", "",
+                    "| region | twin disks | twin right % | real right % (spatial) | twin vote | twin >= real |",
+                    "|---|---:|---:|---:|---|---|", *rows, "",
+                    f"Twins at least as often right as the real disks: {met} of {known} regions the model knows."])
+    return {"met": met, "known": known, "markdown": md}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--regions", default=None, help="comma-separated dataset names (default: the group)")
@@ -139,21 +168,35 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-record", dest="record", action="store_false",
                     help="do not write reports/benchmarks/realism.json")
     ap.add_argument("--json", type=Path, default=None, help="also write the results to this file")
+    ap.add_argument("--model", type=Path, default=Path(__file__).resolve().parents[1] / "models" / "regions-10km.skops",
+                    help="region model: the twins' disks are classified (reclassification)")
+    ap.add_argument("--real-accuracy", type=Path,
+                    default=Path(__file__).resolve().parents[1] / "reports" / "classification" / "tables"
+                    / "per_class_10km.csv", help="real disks' per-region accuracy (classification report)")
     a = ap.parse_args(argv)
     groups = {"tune": TUNE, "hold": HOLD, "all": TUNE + HOLD}
     names = a.regions.split(",") if a.regions else list(groups[a.group])
     results = {}
+    model = None
+    if a.model is not None and a.model.is_file():
+        from orokit.classify.model import load_model
+
+        model = load_model(a.model)
     for name in names:
         t0 = time.perf_counter()
-        r = run_region(name, seed=a.seed, erosion=a.erosion, figures=a.figures)
+        r = run_region(name, seed=a.seed, erosion=a.erosion, figures=a.figures, model=model)
         r["group"] = "tune" if name in TUNE else "hold" if name in HOLD else "other"
         r["load_average_1_5_15"] = list(os.getloadavg())
         results[name] = r
         print(f"{name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     md = _markdown(results)
+    recl = _reclassification(results, a.real_accuracy) if model is not None else None
+    if recl:
+        md += "\n\n" + recl["markdown"]
     print(md)
     doc = {"seed": a.seed, "erosion": a.erosion, "eps_m": EPS, "tune": list(TUNE), "hold": list(HOLD),
-           "regions": results, "table_markdown": md}
+           "model": None if model is None else str(a.model.name), "regions": results,
+           "reclassification": recl, "table_markdown": md}
     if a.json is not None:
         a.json.write_text(json.dumps(doc, indent=1, default=float))
     if a.record and not a.regions:

@@ -17,25 +17,40 @@ from orokit.cli.options import overwrite_option, progress_option
               help="Markdown file to write (TWIN/twin.png figures and the table CSV are written first).")
 @click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="CSV of the table [default: OUTPUT with the suffix .csv, e.g. README.csv].")
-@overwrite_option("existing outputs (OUTPUT, the table, TWIN/twin.png)")
+@click.option("--renders", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
+              help="Folder of renders of the real Divide Trees, REGION.tif (`orokit render ... --like REGION`): "
+                   "landforms compare real, render of the real tree and twin.")
+@overwrite_option("existing outputs (OUTPUT, the table, TWIN/twin.png, TWIN/landforms.png)")
 @progress_option()
-def roundtrip_report(twins, per_class, model, output, table_path, overwrite, progress) -> None:
+def roundtrip_report(twins, per_class, model, output, table_path, renders, overwrite, progress) -> None:
     """Tabulate the round trip of TWINS (folders of `orokit synthesize --like` + `orokit validate`).
 
-    Writes TWIN/twin.png for every twin, the table as CSV (--table) and, last, OUTPUT.
+    Writes TWIN/twin.png and TWIN/landforms.png (real DEM, render of its real tree with
+    --renders, twin: hillshades and slope / 1 km relief distributions) for every twin, the
+    table as CSV (--table) and, last, OUTPUT with a landform table per region.
     """
+    import logging
+
     import pandas as pd
     from tqdm.auto import tqdm
 
+    from orokit.errors import InputError
     from orokit.io.atomic import write_text_atomic
     from orokit.io.dem import read_dem
-    from orokit.reports.roundtrip import real_dem_of, render_roundtrip_markdown, roundtrip_rows, write_twin_png
+    from orokit.reports.roundtrip import (
+        landform_table,
+        real_dem_of,
+        render_roundtrip_markdown,
+        roundtrip_rows,
+        write_landform_png,
+        write_twin_png,
+    )
 
     table_path = table_path if table_path is not None else default_table_path(output)
     if table_path.resolve() == output.resolve():
         raise click.BadParameter(f"the table {table_path} would replace OUTPUT; give another --table",
                                  param_hint="--table")
-    outputs = [output, table_path] + [d / "twin.png" for d in twins]
+    outputs = [output, table_path] + [d / "twin.png" for d in twins] + [d / "landforms.png" for d in twins]
     from orokit.cli.outputs import claim_outputs
 
     claim_outputs(*outputs)  # locked for the whole run
@@ -49,8 +64,22 @@ def roundtrip_report(twins, per_class, model, output, table_path, overwrite, pro
                                          param_hint="TWINS")
     real = pd.read_csv(per_class) if per_class is not None else None
     table = roundtrip_rows(list(twins), real_accuracy=real)
-    for d in tqdm(twins, desc="twin figures", disable=not progress):
-        write_twin_png(real_dem_of(d), read_dem(str(d / "dem.tif"), z_units="m"), d / "twin.png", title=d.name)
+    landforms = {}
+    for d in tqdm(twins, desc="twin figures and landforms", disable=not progress):
+        real_dem, twin = real_dem_of(d), read_dem(str(d / "dem.tif"), z_units="m")
+        write_twin_png(real_dem, twin, d / "twin.png", title=d.name)
+        if real_dem is None:
+            continue
+        synthetic = {}
+        if renders is not None and (renders / f"{d.name}.tif").is_file():
+            synthetic["render of its real tree"] = read_dem(str(renders / f"{d.name}.tif"), z_units="m")
+        synthetic["free twin"] = twin
+        try:
+            landforms[d.name] = landform_table(real_dem, synthetic)
+        except InputError as exc:  # e.g. a twin at another cell size than its real DEM
+            logging.getLogger(__name__).warning("%s: no landform table (%s)", d.name, exc)
+            continue
+        write_landform_png({"real DEM": real_dem, **synthetic}, d / "landforms.png", title=d.name)
     import json
 
     controls = {json.loads((d / "synthesis.json").read_text()).get("control_elevation")
@@ -69,7 +98,7 @@ def roundtrip_report(twins, per_class, model, output, table_path, overwrite, pro
     if per_class is not None:
         header += f" Real accuracies from `{per_class}`."
     write_text_atomic(table_path, table.to_csv(index=False))
-    write_text_atomic(output, render_roundtrip_markdown(table, header=header, model=model))
+    write_text_atomic(output, render_roundtrip_markdown(table, header=header, model=model, landforms=landforms))
     click.echo(f"{len(table)} twins -> {output}, {table_path}")
 
 

@@ -22,7 +22,11 @@ from orokit._typing import PathLike
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["roundtrip_rows", "render_roundtrip_markdown", "write_twin_png", "real_dem_of"]
+__all__ = ["landform_table", "render_landform_markdown", "roundtrip_rows", "render_roundtrip_markdown",
+           "write_landform_png", "write_twin_png", "real_dem_of"]
+
+#: the six floored statistics of issue 11, in table order
+SIX = ("slope_deg", "curvature_per_km", "relief_1km", "spectral_slope", "flat_share", "hypsometry")
 
 #: per-region accuracy of the paper's synthetic terrains (Argudo et al. 2019, §7.1)
 PAPER_SYNTHETIC_ACCURACY = {"sahara": 100, "appalachians": 100, "karakoram": 100, "himalaya": 99, "norway": 89}
@@ -111,8 +115,10 @@ def _n_ge(a: pd.Series, b: pd.Series) -> int:
     return int((a[ok] >= b[ok]).sum())
 
 
-def render_roundtrip_markdown(table: pd.DataFrame, *, header: str = "", model: str = "") -> str:
-    """Markdown page: the round-trip table, totals and the twin figures."""
+def render_roundtrip_markdown(table: pd.DataFrame, *, header: str = "", model: str = "",
+                              landforms: dict[str, pd.DataFrame] | None = None) -> str:
+    """Markdown page: the round-trip table, totals, the landform tables (region ->
+    :func:`landform_table`) and the twin figures."""
     cols = [("region", 0), ("shape", 0), ("tree_peaks", 0), ("recovered_%", 1), ("extra_%", 1),
             ("max_bin_error", 3), ("max_emd_prominence_m", 1), ("disks", 0), ("synthetic_disk_acc_%", 0),
             ("real_disk_acc_%", 0), ("real_disk_acc_spatial_%", 0), ("vote", 0), ("render_s", 1)]
@@ -170,6 +176,19 @@ def render_roundtrip_markdown(table: pd.DataFrame, *, header: str = "", model: s
         ]
     if model:
         lines += [f"Model: `{model}`.", ""]
+    if landforms:
+        labels = [c for c in next(iter(landforms.values())).columns if c not in ("halves", "floor", "target")
+                  and not c.endswith(" met")]
+        lines += ["## Landforms: real DEM, render of its real Divide Tree and free twin (issue 11)", "",
+                  "Distances between each synthetic DEM and the real one at the same cell size "
+                  "(`orokit.validate.landform`), beside the same distance between the real DEM's north and south "
+                  "halves; target = max(2 x halves, floor). The render of the real tree is `orokit render "
+                  "dividetree.gpkg --like REGION --seed 0` of the region's own analysis (defaults).", ""]
+        totals = {lab: sum(int(t.loc[list(SIX), f"{lab} met"].all()) for t in landforms.values()) for lab in labels}
+        lines += ["Regions with all six floored statistics within target: "
+                  + "; ".join(f"{lab} {n} of {len(landforms)}" for lab, n in totals.items()) + ".", ""]
+        for name, t in landforms.items():
+            lines += render_landform_markdown(name, t, labels)
     figs = [r["region"] for _, r in table.iterrows()]
     if figs:
         lines += ["## Real DEM and synthetic twin (paper Fig. 17)", ""]
@@ -198,3 +217,60 @@ def write_twin_png(real, synthetic, path: PathLike, *, title: str = "", dpi: int
     finally:
         plt.close(fig)
     return write_bytes_atomic(Path(path), _small_png(buf.getvalue(), colors))
+
+
+def landform_table(real, synthetic: dict) -> pd.DataFrame:
+    """Landform distances of every synthetic DEM (label -> DataArray) to the real DEM.
+
+    One row per statistic (:data:`orokit.validate.landform.DISTANCES`): the real north/south
+    halves' distance, the target ``max(2 x halves, floor)``, and per synthetic DEM its
+    distance and whether it meets the target (``<label>`` and ``<label> met`` columns).
+    """
+    from orokit.validate.landform import compare_landforms, landform_statistics, split_halves
+
+    rs = landform_statistics(real)
+    halves = tuple(landform_statistics(h) for h in split_halves(real))
+    out = None
+    for label, dem in synthetic.items():
+        c = compare_landforms(rs, landform_statistics(dem), halves=halves)  # type: ignore[arg-type]
+        if out is None:
+            out = c[["halves", "floor", "target"]].copy()
+        out[label] = c["distance"]
+        out[f"{label} met"] = c["ok"]
+    return out if out is not None else pd.DataFrame()
+
+
+def render_landform_markdown(name: str, table: pd.DataFrame, labels: list[str]) -> list[str]:
+    """Markdown lines of one region's landform table and its figure."""
+    from orokit.validate.landform import DISTANCES
+
+    lines = [f"### {name}", "", "| statistic | real halves | target | " + " | ".join(labels) + " |",
+             "|---|---:|---:|" + "---:|" * len(labels)]
+    for stat, r in table.iterrows():
+        cells = [f"{_fmt(float(r[lab]), 3)}{'' if bool(r[f'{lab} met']) else ' (over)'}" for lab in labels]
+        floor = "" if not math.isfinite(float(r["floor"])) else f", floor {float(r['floor']):g}"
+        lines.append(f"| {DISTANCES.get(str(stat), stat)}{' *' if stat in SIX else ''} | "
+                     f"{_fmt(float(r['halves']), 3)} | {_fmt(float(r['target']), 3)}{floor} | " + " | ".join(cells) + " |")
+    met = [f"{lab}: {int(table.loc[list(SIX), f'{lab} met'].sum())} of 6" for lab in labels]
+    lines += ["", f"Six floored statistics (*) within target: {'; '.join(met)}.", "",
+              f"![{name} landforms]({name}/landforms.png)", ""]
+    return lines
+
+
+def write_landform_png(dems: dict, path: PathLike, *, title: str = "") -> Path:
+    """The landform figure (:func:`orokit.reports.landform.plot_landforms`) as a 150 dpi PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from orokit.io.atomic import write_bytes_atomic
+    from orokit.reports.landform import plot_landforms
+
+    fig = plot_landforms(dems, title=title)
+    try:
+        buf = io.BytesIO()
+        fig.savefig(buf, dpi=150, format="png", metadata={"Software": None})
+    finally:
+        plt.close(fig)
+    return write_bytes_atomic(Path(path), buf.getvalue())

@@ -157,3 +157,47 @@ def test_classify_reads_rendered_rasters_without_flags(rendered_folder, tmp_path
         assert r.exit_code == 0, r.output
         doc, _ = json.JSONDecoder().raw_decode(r.output[r.output.index("{"):])  # warnings may follow on stderr
         assert doc["n_disks"] >= 1
+
+
+def test_roundtrip_report_landform_tables_and_figures(rendered_folder, tmp_path):
+    """Per region: real vs render of the real tree vs twin, distances beside the halves' yardstick,
+    and a 150 dpi landform figure. A 'render' identical to the real DEM is at distance 0."""
+    import shutil
+
+    import rasterio
+
+    from orokit.io.raster_io import write_cog
+    from orokit.raster.params import RenderParams
+    from orokit.raster.render import render_elevation
+
+    folder, tree = rendered_folder
+    if not (folder / "validation.json").exists():
+        r = CliRunner().invoke(cli, ["validate", str(folder)])
+        assert r.exit_code == 0, r.output
+    twin = tmp_path / "twins" / "somewhere"
+    shutil.copytree(folder, twin)
+    with rasterio.open(folder / "dem.tif") as ds:
+        b = ds.bounds
+    real = render_elevation(tree, resolution_m=100.0, extent=(b.left, b.bottom, b.right, b.top), erosion=False,
+                            params=RenderParams(erosion_steps=1), rng=9)
+    write_cog(real, tmp_path / "real.tif")
+    meta = json.loads((twin / "synthesis.json").read_text()) if (twin / "synthesis.json").is_file() else {}
+    (twin / "synthesis.json").write_text(json.dumps({**meta, "like": str(tmp_path / "real.tif")}))
+    renders = tmp_path / "renders"
+    renders.mkdir()
+    shutil.copy(tmp_path / "real.tif", renders / "somewhere.tif")
+    out = tmp_path / "twins" / "README.md"
+    r = CliRunner().invoke(cli, ["roundtrip-report", str(twin), "--renders", str(renders), "-o", str(out),
+                                 "--no-progress"])
+    assert r.exit_code == 0, r.output
+    text = out.read_text()
+    assert "## Landforms" in text and "### somewhere" in text and "somewhere/landforms.png" in text
+    row = next(line for line in text.splitlines() if line.startswith("| slope distribution"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[3] == "0.000"  # the render column: the real DEM itself
+    assert "render of its real tree: 6 of 6" in text
+    png = twin / "landforms.png"
+    from PIL import Image
+
+    with Image.open(png) as im:
+        assert im.info.get("dpi", (0, 0))[0] >= 149 and im.size[0] > 1000
