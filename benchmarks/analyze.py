@@ -47,9 +47,9 @@ def main() -> None:
     base = open_dataset_dem(args.dem)
     small = base.copy()
     # warm-up: numba kernels are compiled once and cached on disk
-    orokit.analyze(small, min_prominence=30.0)
+    orokit.analyze(small, min_prominence_m=30.0)
     t = time.perf_counter()
-    orokit.analyze(small, min_prominence=100 * FT, isolation=False)
+    orokit.analyze(small, min_prominence_m=100 * FT, isolation=False)
     t648 = time.perf_counter() - t
     print(f"{args.dem} 648x648: tree+prominence {t648:.3f} s (Kirmse reference {KIRMSE_S_648} s, "
           f"ratio {KIRMSE_S_648 / t648:.2f}x)")
@@ -67,7 +67,7 @@ def main() -> None:
     rows = []
     for eps_ft in (100.0, 0.0):
         t0 = time.perf_counter()
-        r = orokit.analyze(dem, min_prominence=eps_ft * FT)
+        r = orokit.analyze(dem, min_prominence_m=eps_ft * FT)
         total = time.perf_counter() - t0
         tm = r.attrs["timings_s"]
         core = tm["tree_and_prominence"]

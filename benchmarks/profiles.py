@@ -30,7 +30,7 @@ def measure(name: str) -> tuple[np.ndarray, np.ndarray]:
     from realism import _extent
 
     dem = open_dataset_dem(name)
-    tree = orokit.analyze(dem, min_prominence=30.0, isolation=False).divide_tree
+    tree = orokit.analyze(dem, min_prominence_m=30.0, isolation=False).tree
     z = np.asarray(dem.values, float)
     t = dem.rio.transform()
 

@@ -59,21 +59,21 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
     from orokit.cli.synthesize import texture_params
     from orokit.raster.noise import texture_spectrum
 
-    params = params or RenderParams(min_prominence=EPS)
+    params = params or RenderParams(min_prominence_m=EPS)
     dem = open_dataset_dem(name)
     res = abs(float(dem.rio.transform().a))
     ny, nx = dem.shape
     real = landform_statistics(dem)
     halves = tuple(landform_statistics(h) for h in split_halves(dem))
-    result = orokit.analyze(dem, min_prominence=EPS)
-    tree = result.divide_tree
+    result = orokit.analyze(dem, min_prominence_m=EPS)
+    tree = result.tree
     out: dict = {"shape": [ny, nx], "cell_size_m": res, "real": real.summary, "tree_peaks": int(tree.n_peaks)}
 
     t0 = time.perf_counter()
     ren = render_elevation(tree, resolution_m=res, extent=_extent(dem), erosion=erosion, params=params, rng=seed)
     t_render = time.perf_counter() - t0
     rs = landform_statistics(ren)
-    rt = roundtrip(ren, tree, min_prominence=EPS).summary()
+    rt = roundtrip(ren, tree, min_prominence_m=EPS).summary()
     out["render"] = {"time_s": t_render, "summary": rs.summary,
                      "landform": _table(compare_landforms(real, rs, halves=halves)),
                      "recovered": rt.get("recovered_share"), "extra": rt.get("extra_share")}
@@ -86,7 +86,7 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
                             params=dataclasses.replace(params, **texture_params(ttype)), rng=seed)
     t_twin = time.perf_counter() - t0
     ts = landform_statistics(twin)
-    rt2 = roundtrip(twin, ttree, min_prominence=EPS, model=model, expected_label=name if model else None).summary()
+    rt2 = roundtrip(twin, ttree, min_prominence_m=EPS, model=model, expected_label=name if model else None).summary()
     out["twin"] = {"time_s": t_twin, "summary": ts.summary,
                    "landform": _table(compare_landforms(real, ts, halves=halves)),
                    "recovered": rt2.get("recovered_share"), "extra": rt2.get("extra_share"),

@@ -28,16 +28,16 @@ FT = 0.3048
 from orokit.validate.reference import near_share  # noqa: E402
 
 
-def compare(png: Path, txt: Path, cell_size: float) -> dict[str, float]:
+def compare(png: Path, txt: Path, cell_size_m: float) -> dict[str, float]:
     """Shares (see the module docstring) for one DEM and its reference tree."""
     import orokit
     from orokit.io.dem import read_dem
     from orokit.io.divide_tree_io import read_divide_tree_txt
 
-    dem = read_dem(png, z_units="ft", cell_size=cell_size)
+    dem = read_dem(png, z_units="ft", cell_size_m=cell_size_m)
     ref = read_divide_tree_txt(txt, height=dem.shape[0])
     t0 = time.perf_counter()
-    peaks = orokit.analyze(dem, min_prominence=0.0, isolation=False).peaks
+    peaks = orokit.analyze(dem, min_prominence_m=0.0, isolation=False).peaks
     seconds = time.perf_counter() - t0
     ref_rc = ref.peaks[["row", "col"]].to_numpy()
     ours = peaks[["row", "col"]].to_numpy()

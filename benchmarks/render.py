@@ -28,7 +28,7 @@ def run(dem_name: str, size_km: float, res: float, erosion: bool, seed: int) -> 
     from orokit.validate.roundtrip import roundtrip
 
     dem = open_dataset_dem(dem_name)  # the manifest knows the units and the cell size
-    ttype = TerrainType.from_analysis(orokit.analyze(dem, min_prominence=30.0), name=dem_name)
+    ttype = TerrainType.from_analysis(orokit.analyze(dem, min_prominence_m=30.0), name=dem_name)
     t0 = time.perf_counter()
     tree = synthesize_divide_tree(ttype, size_m=size_km * 1000.0, rng=seed)
     t_tree = time.perf_counter() - t0
@@ -38,7 +38,7 @@ def run(dem_name: str, size_km: float, res: float, erosion: bool, seed: int) -> 
     t_render = time.perf_counter() - t0
     rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
     t0 = time.perf_counter()
-    s = roundtrip(out, tree, min_prominence=30.0).summary()
+    s = roundtrip(out, tree, min_prominence_m=30.0).summary()
     t_rt = time.perf_counter() - t0
     return {"dem": dem_name, "size_km": size_km, "res_m": res, "erosion": erosion, "peaks": tree.n_peaks,
             "shape": f"{out.shape[1]}x{out.shape[0]}", "tree_s": round(t_tree, 2), "render_s": round(t_render, 2),

@@ -113,7 +113,7 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None) -> dict:
     tiling_engine._tile_task = timed(tiling_engine._tile_task, "chunk")
     t0 = time.perf_counter()
     dem = read_dem(vrt, chunks=chunks)
-    r = orokit.analyze(dem, min_prominence=eps, chunks=chunks)
+    r = orokit.analyze(dem, min_prominence_m=eps, chunks=chunks)
     dt = time.perf_counter() - t0
     if out:
         r.peaks.drop(columns="geometry").to_parquet(out)

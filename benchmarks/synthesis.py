@@ -49,8 +49,8 @@ def main(argv: list[str] | None = None) -> int:
     for region in args.regions.split(","):
         png = data / f"{region}.png"
         t0 = time.perf_counter()
-        dem = read_dem(png, z_units="ft", cell_size=92.6)
-        res = analyze(dem, min_prominence=30.0)
+        dem = read_dem(png, z_units="ft", cell_size_m=92.6)
+        res = analyze(dem, min_prominence_m=30.0)
         tt = TerrainType.from_analysis(res, name=region)
         t_type = time.perf_counter() - t0
         types[region] = tt

@@ -17,7 +17,8 @@ import pandas as pd
 
 from orokit import __version__
 from orokit.errors import InputError
-from orokit.topology.tables import PEAK_COLUMNS, AnalysisResult
+from orokit.geodesy import cell_size_key
+from orokit.topology.tables import PEAK_COLUMNS, AnalysisResult, upgrade_attrs
 
 logger = logging.getLogger(__name__)
 
@@ -41,12 +42,12 @@ def write_analysis(result: AnalysisResult, outdir: str | Path, *, overwrite: boo
 def analyze(
     dem,
     *,
-    min_prominence: float = 30.0,
+    min_prominence_m: float = 30.0,
     outside: Literal["unknown", "sea"] = "unknown",
     isolation: bool = True,
     progress: bool = False,
     z_units: str | None = None,
-    cell_size: float | None = None,
+    cell_size_m: float | None = None,
     chunks: int | tuple[int, int] | None = None,
     scheduler: Any = None,
     checkpoint: str | Path | None = None,
@@ -59,21 +60,21 @@ def analyze(
     ----------
     dem : DataArray from :func:`orokit.io.dem.read_dem` (dims y, x; metres; NaN =
         nodata; CRS and transform through rioxarray) or a path to read with it.
-    min_prominence : keep peaks with prominence >= this many metres (0 = every peak).
+    min_prominence_m : keep peaks with prominence >= this many metres (0 = every peak).
     outside : what lies beyond the data (raster edge and NaN cells). ``"unknown"``
         (default): prominences whose key saddle is below a path to the edge are upper
         bounds and flagged ``prominence_exact=False``. ``"sea"``: the outside is sea,
         every prominence is exact.
     isolation : compute isolation (nearest strictly higher cell).
     progress : show a progress bar over the stages.
-    z_units, cell_size : forwarded to ``read_dem`` when ``dem`` is a path.
+    z_units, cell_size_m : forwarded to ``read_dem`` when ``dem`` is a path.
     chunks : cells per chunk side (int or (rows, cols)). When given, or when ``dem``
         is dask-backed, the raster is analysed chunk by chunk (out of core) with the
         exact tiled engine; results are identical to the in-memory engine.
     scheduler : dask scheduler for the chunked engine: None (default threads or the
         active distributed client), a name, a ``distributed.Client`` or an address.
     checkpoint : folder for chunk summaries; a rerun with it reuses finished chunks.
-    depressions : also find the depressions (pits) with depth >= ``min_prominence``:
+    depressions : also find the depressions (pits) with depth >= ``min_prominence_m``:
         the same engine on ``-h`` (same tie rules and edge flags), in
         ``result.depressions`` (:data:`orokit.topology.depressions.DEPRESSION_COLUMNS`).
         With ``outside="sea"`` a depression that reaches the edge spills into the sea.
@@ -99,21 +100,21 @@ def analyze(
        exact unless ``outside="sea"``. It is kept when its elevation reaches the
        threshold or when another peak of its domain is kept (every kept peak's
        parent is in the table). A domain that is entirely flat has no peak.
-    4. Pruning at ``min_prominence`` keeps every surviving peak's exact prominence.
+    4. Pruning at ``min_prominence_m`` keeps every surviving peak's exact prominence.
     """
     from orokit.topology import engine
 
     t0 = time.perf_counter()
     if outside not in ("unknown", "sea"):
         raise InputError(f"outside must be 'unknown' or 'sea', got {outside!r}")
-    if not np.isfinite(min_prominence) or min_prominence < 0:
-        raise InputError(f"min_prominence must be a finite number >= 0 (metres), got {min_prominence!r}")
+    if not np.isfinite(min_prominence_m) or min_prominence_m < 0:
+        raise InputError(f"min_prominence_m must be a finite number >= 0 (metres), got {min_prominence_m!r}")
     if not hasattr(dem, "dims"):
         from orokit.io.dem import read_dem
 
         if chunks is None:
             chunks = plan_chunks(dem)
-        dem = read_dem(dem, z_units=z_units, cell_size=cell_size, chunks=chunks)
+        dem = read_dem(dem, z_units=z_units, cell_size_m=cell_size_m, chunks=chunks)
     if dem.ndim != 2:
         raise InputError(f"the DEM must be 2-D (y, x); got dims {dem.dims}")
     units = dem.attrs.get("units", "m")
@@ -145,7 +146,7 @@ def analyze(
             from orokit.metrics.isolation import GridMetric
 
             metric = GridMetric.from_grid(transform, crs) if isolation else None
-            tiled_core = tiled_orometry(data, min_prominence=min_prominence, outside=outside, scheduler=scheduler,
+            tiled_core = tiled_orometry(data, min_prominence_m=min_prominence_m, outside=outside, scheduler=scheduler,
                                         checkpoint=checkpoint, progress=progress, isolation_metric=metric)
             core = tiled_core.orometry
             t_core = time.perf_counter()
@@ -163,7 +164,7 @@ def analyze(
         if not np.issubdtype(z.dtype, np.floating):
             z = z.astype(np.float64)
         z = np.ascontiguousarray(z)
-        core = engine.orometry(z, min_prominence=min_prominence, outside=outside)
+        core = engine.orometry(z, min_prominence_m=min_prominence_m, outside=outside)
         t_core = time.perf_counter()
         _advance(bar)
         iso = None
@@ -181,7 +182,7 @@ def analyze(
     result.attrs.update(
         {
             "orokit_version": __version__,
-            "min_prominence": float(min_prominence),
+            "min_prominence_m": float(min_prominence_m),
             "outside": outside,
             "units": "m",
             "connectivity": 8,
@@ -189,7 +190,7 @@ def analyze(
             "source": str(dem.attrs.get("source", "")),
             "dataset": str(dem.attrs.get("dataset", "")),
             "z_units_in": str(dem.attrs.get("z_units_in", "m")),
-            "cell_size": [abs(transform.a), abs(transform.e)],
+            cell_size_key(crs is not None and crs.is_geographic): [abs(transform.a), abs(transform.e)],
             "transform": [transform.a, transform.b, transform.c, transform.d, transform.e, transform.f],
             "crs_geographic": bool(crs is not None and crs.is_geographic),
             "shape": list(dem.shape),
@@ -204,10 +205,10 @@ def analyze(
     )
     logger.info(
         "%d peaks with prominence >= %g m (of %d maxima) in %.2f s",
-        len(result.peaks), min_prominence, core.n_maxima, t_end - t0,
+        len(result.peaks), min_prominence_m, core.n_maxima, t_end - t0,
     )
     if depressions:
-        result.depressions = _depressions(dem, transform, crs, min_prominence=min_prominence, outside=outside,
+        result.depressions = _depressions(dem, transform, crs, min_prominence_m=min_prominence_m, outside=outside,
                                           sea_level_m=sea_level_m, chunks=chunks if tiled else None,
                                           scheduler=scheduler)
         result.attrs["sea_level_m"] = sea_level_m
@@ -217,7 +218,7 @@ def analyze(
     return result
 
 
-def _depressions(dem, transform, crs, *, min_prominence, outside, sea_level_m, chunks, scheduler):
+def _depressions(dem, transform, crs, *, min_prominence_m, outside, sea_level_m, chunks, scheduler):
     """Depressions table: the engine on -h (see :mod:`orokit.topology.depressions`)."""
     import geopandas as gpd
     import xarray as xr
@@ -232,11 +233,12 @@ def _depressions(dem, transform, crs, *, min_prominence, outside, sea_level_m, c
     t = transform
     gt = Affine(t.a, t.b, t.c - (t.a + t.b) * pad, t.d, t.e, t.f - (t.d + t.e) * pad)
     gda = xr.DataArray(g, dims=("y", "x"), attrs={"units": "m", "local_grid": crs is None,
-                                                   "cell_size": abs(t.a)})
+                                                   cell_size_key(crs is not None and crs.is_geographic):
+                                                       (abs(t.a), abs(t.e))})
     gda = gda.rio.write_transform(gt)
     if crs is not None:
         gda = gda.rio.write_crs(crs)
-    neg = analyze(gda, min_prominence=min_prominence, outside="unknown", isolation=False,
+    neg = analyze(gda, min_prominence_m=min_prominence_m, outside="unknown", isolation=False,
                   chunks=chunks, scheduler=scheduler)
     area = None
     need = int(np.prod(g.shape)) * 40
@@ -247,7 +249,7 @@ def _depressions(dem, transform, crs, *, min_prominence, outside, sea_level_m, c
     else:
         logger.warning("depressions: area_m2 not computed (the raster does not fit in memory)")
     table = depressions_table(neg.peaks, area_m2=area, sea=sea, pad=pad)
-    logger.info("%d depressions with depth >= %g m in %.2f s", len(table), min_prominence,
+    logger.info("%d depressions with depth >= %g m in %.2f s", len(table), min_prominence_m,
                 time.perf_counter() - t0)
     return gpd.GeoDataFrame(table, geometry=gpd.points_from_xy(table["x"], table["y"]), crs=crs)
 
@@ -300,8 +302,9 @@ def _georef(dem):
     except Exception:  # noqa: BLE001 - no rioxarray metadata at all
         pass
     if transform is None or transform == Affine.identity() and "x" not in dem.coords:
-        cell = float(dem.attrs.get("cell_size", 1.0))
-        transform = Affine(cell, 0.0, 0.0, 0.0, -cell, 0.0)
+        cell = upgrade_attrs(dem.attrs, geographic=False).get("cell_size_m", 1.0)
+        dx, dy = (float(cell[0]), float(cell[1])) if np.ndim(cell) else (float(cell), float(cell))
+        transform = Affine(dx, 0.0, 0.0, 0.0, -dy, 0.0)
     if dem.attrs.get("local_grid"):
         crs = None
     return transform, crs

@@ -29,11 +29,16 @@ from orokit.errors import CRSError
 if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
 
-__all__ = ["CellMetric", "cell_distance", "point_distance", "parse_crs", "WGS84"]
+__all__ = ["CellMetric", "cell_distance", "point_distance", "parse_crs", "cell_size_key", "WGS84"]
 
 #: The ellipsoid used for every geodesic computation in orokit.
 WGS84 = Geod(ellps="WGS84")
 _EPSG4326 = CRS.from_epsg(4326)
+
+
+def cell_size_key(geographic: bool) -> str:
+    """Attrs key of a grid's cell size (dx, dy): ``cell_size_deg`` on lon/lat grids, else ``cell_size_m``."""
+    return "cell_size_deg" if geographic else "cell_size_m"
 
 
 @functools.lru_cache(maxsize=32)

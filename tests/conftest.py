@@ -45,6 +45,8 @@ def build_dem(
     from pyproj import CRS
     from rasterio.transform import Affine
 
+    from orokit.geodesy import cell_size_key
+
     a = np.asarray(array)
     if a.ndim != 2:
         raise ValueError(f"make_dem needs a 2-D array, got shape {a.shape}")
@@ -69,8 +71,7 @@ def build_dem(
             "z_units_in": "m",
             "z_units_assumed": False,
             "local_grid": c is None,
-            "cell_size": dx,
-            "res": (dx, dy),
+            cell_size_key(c is not None and c.is_geographic): (dx, dy),
             "band": 1,
             "nodata_in": nodata,
         },

@@ -235,7 +235,7 @@ def features_from_dem(dem: Any, *, radius_m: float, label: str | None = None, an
     if analysis is None:
         import orokit
 
-        analysis = orokit.analyze(dem, min_prominence=min_prominence_m)
+        analysis = orokit.analyze(dem, min_prominence_m=min_prominence_m)
     valid = np.isfinite(np.asarray(dem.values, dtype=float))
     crs = dem.rio.crs
     disks = sample_disks_in_mask(valid, transform=dem.rio.transform(), radius_m=radius_m, crs=crs,

@@ -88,7 +88,7 @@ def _analysis_domain(peaks: pd.DataFrame, meta: dict[str, Any]) -> tuple[np.ndar
 
             # a local grid needs its cell size again; a georeferenced file brings its own
             cell = [abs(transform.a), abs(transform.e)] if meta.get("local_grid") else None
-            dem = read_dem(str(src), z_units=meta.get("z_units_in") or "m", cell_size=cell)
+            dem = read_dem(str(src), z_units=meta.get("z_units_in") or "m", cell_size_m=cell)
             same = dem.shape == valid.shape and np.allclose(tuple(dem.rio.transform())[:6], tuple(transform)[:6],
                                                             rtol=1e-9, atol=1e-9)
             if same:
@@ -101,7 +101,7 @@ def _analysis_domain(peaks: pd.DataFrame, meta: dict[str, Any]) -> tuple[np.ndar
     return valid, transform
 
 
-def open_input_dem(source: PathLike, *, z_units: str | None = None, cell_size: float | None = None) -> Any:
+def open_input_dem(source: PathLike, *, z_units: str | None = None, cell_size_m: float | None = None) -> Any:
     """The DEM behind an input when it is one: a raster file, or a DEM of the datasets
     manifest given by name (``himalaya-everest``; units and cell size from the manifest).
     ``None`` for analysis folders and peak lists; an error for a name that is neither."""
@@ -110,7 +110,7 @@ def open_input_dem(source: PathLike, *, z_units: str | None = None, cell_size: f
         if p.is_file() and p.suffix.lower() in RASTER_SUFFIXES and not _is_table(p):
             from orokit.io.dem import read_dem
 
-            return read_dem(str(p), z_units=z_units, cell_size=cell_size)
+            return read_dem(str(p), z_units=z_units, cell_size_m=cell_size_m)
         return None
     from orokit.data import load_manifest, open_dataset_dem
 
@@ -126,7 +126,7 @@ def open_input_dem(source: PathLike, *, z_units: str | None = None, cell_size: f
 def features_for_input(source: PathLike, *, radius_m: float, label: str | None = None,
                        min_prominence_m: float = 30.0, min_peaks: int = 20, max_disks: int = 100,
                        separation: float = 0.5, feature_set: FeatureSet | None = None, relative_elevation: str = "minmax",
-                       exact_only: bool = False, z_units: str | None = None, cell_size: float | None = None,
+                       exact_only: bool = False, z_units: str | None = None, cell_size_m: float | None = None,
                        region: Any = None, isolation: PathLike | None = None, crs: Any = None,
                        rng: SeedLike = None) -> pd.DataFrame:
     """Feature table of one input (see the module table for where disks go; a DEM of the
@@ -138,7 +138,7 @@ def features_for_input(source: PathLike, *, radius_m: float, label: str | None =
               exact_only=exact_only, rng=rng)
     if region is not None and not hasattr(region, "geometry"):
         region = read_region(region)
-    dem = open_input_dem(p, z_units=z_units, cell_size=cell_size)
+    dem = open_input_dem(p, z_units=z_units, cell_size_m=cell_size_m)
     if dem is not None:
         return features_from_dem(dem, **kw)
     peaks = read_peaks(p, crs=crs, z_units=z_units if not p.is_dir() else None, isolation=isolation)

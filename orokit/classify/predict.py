@@ -84,7 +84,7 @@ def predict_regions(model: RegionModel, features: pd.DataFrame, *, threshold: fl
                       None if threshold is None else float(threshold))
 
 
-def classify_input(model: RegionModel, source: Any, *, z_units: str | None = None, cell_size: float | None = None,
+def classify_input(model: RegionModel, source: Any, *, z_units: str | None = None, cell_size_m: float | None = None,
                    region: Any = None, min_peaks: int | None = None, isolation: Any = None,
                    threshold: float | None = None, dem: Any = None, rng: SeedLike = 0) -> Prediction:
     """Compute features of a DEM, ``orokit analyze`` folder or peak list (or of ``dem``, an
@@ -102,7 +102,7 @@ def classify_input(model: RegionModel, source: Any, *, z_units: str | None = Non
     if dem is not None:
         feats = features_from_dem(dem, label=default_label(source), **kw)
     else:
-        feats = features_for_input(source, z_units=z_units, cell_size=cell_size, region=region, isolation=isolation,
+        feats = features_for_input(source, z_units=z_units, cell_size_m=cell_size_m, region=region, isolation=isolation,
                                    **kw)
     if len(feats) == 0:
         raise InputError(f"no usable disk in {source}: every disk of radius {model.radius_m:g} m had fewer than "

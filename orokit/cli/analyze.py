@@ -44,7 +44,7 @@ from orokit.cli.options import (
 @click.option("--sea-level", "sea_level_m", type=float, default=None,
               help="With --depressions: cells at or below this elevation (metres) are one sea.")
 @click.pass_context
-def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence: float, z_units: str | None, cell_size: float | None,
+def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m: float, z_units: str | None, cell_size_m: float | None,
             band: int | None, outside: str, no_isolation: bool, chunks: int | None, scheduler: str | None,
             checkpoint: Path | None, overwrite: bool, progress: bool, depressions: bool,
             sea_level_m: float | None) -> None:
@@ -75,8 +75,8 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence: 
         chunks = plan_chunks(str(dem.path))
         if chunks is not None:
             click.echo(f"{dem.path} is too large for memory: analysing in {chunks} x {chunks} chunks", err=True)
-    da = dem.read_dem(z_units=z_units, cell_size=cell_size, chunks=chunks, band=band)
-    result = run(da, min_prominence=min_prominence, outside=outside, isolation=not no_isolation,
+    da = dem.read_dem(z_units=z_units, cell_size_m=cell_size_m, chunks=chunks, band=band)
+    result = run(da, min_prominence_m=min_prominence_m, outside=outside, isolation=not no_isolation,
                  progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint,
                  depressions=depressions, sea_level_m=sea_level_m)
     from orokit.io.analysis_io import write_analysis
@@ -86,7 +86,7 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence: 
     if (ctx.find_root().obj or {}).get("quiet"):
         return
     click.echo(
-        f"{n} peaks with prominence >= {min_prominence:g} m, {len(result.saddles)} saddles, "
+        f"{n} peaks with prominence >= {min_prominence_m:g} m, {len(result.saddles)} saddles, "
         f"{da.shape[0]}x{da.shape[1]} cells in {time.perf_counter() - t0:.2f} s -> {outdir}"
         + ("" if result.depressions is None else f" ({len(result.depressions)} depressions)")
     )

@@ -26,7 +26,7 @@ from orokit.cli.options import INPUT, common_input_options, overwrite_option, se
                    "and a PNG map over the hillshade beside it (same name, .png). DEM inputs only.")
 @seed_option(what="the disk placement")
 @overwrite_option("existing --output / --map files")
-def classify(model_path, source, z_units, cell_size, region, isolation, min_peaks, threshold, as_json, output,
+def classify(model_path, source, z_units, cell_size_m, region, isolation, min_peaks, threshold, as_json, output,
              map_path, seed, overwrite):
     """Classify INPUT (DEM file or manifest DEM name, `orokit analyze` folder, or peak list) with MODEL.
 
@@ -49,11 +49,11 @@ def classify(model_path, source, z_units, cell_size, region, isolation, min_peak
     if map_path is not None and map_path.suffix.lower() != ".gpkg":
         raise click.BadParameter(f"{map_path} must end in .gpkg (GeoPackage)", param_hint="--map")
     model = load_model(model_path)
-    source.dem_options(z_units, cell_size)  # a manifest DEM: refuses contradicting --z-units/--cell-size
-    dem = open_input_dem(str(source), z_units=z_units, cell_size=cell_size) if region is None else None
+    source.dem_options(z_units, cell_size_m)  # a manifest DEM: refuses contradicting --z-units/--cell-size
+    dem = open_input_dem(str(source), z_units=z_units, cell_size_m=cell_size_m) if region is None else None
     if map_path is not None and dem is None:
         raise click.UsageError("--map needs a DEM input (a raster file or a manifest DEM name)")
-    pred = classify_input(model, str(source), z_units=z_units, cell_size=cell_size, region=region, isolation=isolation,
+    pred = classify_input(model, str(source), z_units=z_units, cell_size_m=cell_size_m, region=region, isolation=isolation,
                           min_peaks=min_peaks, threshold=threshold, dem=dem, rng=seed)
     if output is not None:
         with atomic_path(output) as tmp:

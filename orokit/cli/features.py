@@ -41,8 +41,8 @@ from orokit.cli.options import (
 @seed_option(what="the disk placement")
 @overwrite_option("an existing OUTPUT")
 @progress_option()
-def features(inputs, output, radius, min_prominence, min_peaks, max_disks, separation, labels, feature_set_name,
-             relative_elevation, exact_only, z_units, cell_size, region, isolation, seed, overwrite, progress):
+def features(inputs, output, radius, min_prominence_m, min_peaks, max_disks, separation, labels, feature_set_name,
+             relative_elevation, exact_only, z_units, cell_size_m, region, isolation, seed, overwrite, progress):
     """Orometric histograms of disks of radius R placed by blue noise in each INPUT.
 
     INPUT is a DEM file or the name of a DEM of the datasets manifest (analysed on the
@@ -76,12 +76,12 @@ def features(inputs, output, radius, min_prominence, min_peaks, max_disks, separ
         it = tqdm(it, desc="features", unit="input")
     for i, src in it:
         label = (labels[i] if len(labels) == len(inputs) else labels[0]) if labels else src.label
-        z, cell = src.dem_options(z_units, cell_size)
+        z, cell = src.dem_options(z_units, cell_size_m)
         tables.append(features_for_input(
-            str(src), radius_m=radius, label=label, min_prominence_m=min_prominence, min_peaks=min_peaks,
+            str(src), radius_m=radius, label=label, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
             max_disks=max_disks, separation=separation, relative_elevation=relative_elevation,
             feature_set=FeatureSet.named(feature_set_name),
-            exact_only=exact_only, z_units=z, cell_size=cell, region=region, isolation=isolation,
+            exact_only=exact_only, z_units=z, cell_size_m=cell, region=region, isolation=isolation,
             rng=np.random.default_rng(seeds[i])))
     table = concat_features(tables)
     write_feature_table(table, output)

@@ -32,7 +32,7 @@ def _real_dem(like: str):
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="result.json; dem.tif and hillshade.png are written beside it.")
 @overwrite_option("an existing result")
-def generators_run(tree_dir, type_file, like, generator, params, exemplar, seed, model_path, min_prominence, out,
+def generators_run(tree_dir, type_file, like, generator, params, exemplar, seed, model_path, min_prominence_m, out,
                    overwrite) -> None:
     """One ranking run: render TREE with GENERATOR in its own process, then measure it.
 
@@ -85,7 +85,7 @@ def generators_run(tree_dir, type_file, like, generator, params, exemplar, seed,
         result.update({"failed": True, "stage": "render", "error": lines[-1] if lines else f"exit {proc.returncode}"})
     else:
         try:
-            result.update(_measure(dem_path, tree, type_file, real, model_path, min_prominence, like))
+            result.update(_measure(dem_path, tree, type_file, real, model_path, min_prominence_m, like))
         except Exception as exc:  # noqa: BLE001 - a failed measure is reported, not dropped
             result.update({"failed": True, "stage": "measure", "error": f"{type(exc).__name__}: {exc}"})
     write_text_atomic(out, json.dumps(result, indent=1, default=float))
@@ -94,7 +94,7 @@ def generators_run(tree_dir, type_file, like, generator, params, exemplar, seed,
     click.echo(f"{generator} seed {seed} on {like}: {state} -> {out}")
 
 
-def _measure(dem_path: Path, tree, type_file: Path, real, model_path: Path | None, min_prominence: float,
+def _measure(dem_path: Path, tree, type_file: Path, real, model_path: Path | None, min_prominence_m: float,
              label: str) -> dict:
     from orokit.io.dem import read_dem
     from orokit.synthesis.terrain_type import load_terrain_type
@@ -112,7 +112,7 @@ def _measure(dem_path: Path, tree, type_file: Path, real, model_path: Path | Non
         from orokit.classify.model import load_model
 
         model = load_model(model_path)
-    rt = roundtrip(dem, tree, min_prominence=min_prominence, terrain_type=ttype, model=model, expected_label=label)
+    rt = roundtrip(dem, tree, min_prominence_m=min_prominence_m, terrain_type=ttype, model=model, expected_label=label)
     s = rt.summary()
     r = {k: s[k] for k in ("tree_peaks", "recovered_share", "extra_peaks", "extra_share", "raster_peaks")}
     for k in ("predicted", "n_disks", "disk_accuracy", "vote_correct"):

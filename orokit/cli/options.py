@@ -151,14 +151,14 @@ def min_prominence_option(*, default: str | None = "30m", help: str | None = Non
     text = help or "Prominence threshold eps: only peaks with prominence >= this count"
     zero = "; 0 keeps every peak" if zero_keeps_all else ""
     return click.option(
-        "--min-prominence", "min_prominence", type=PROMINENCE, default=default, show_default=default is not None,
+        "--min-prominence", "min_prominence_m", type=PROMINENCE, default=default, show_default=default is not None,
         help=f"{text} (a length: 30m, 100ft; a plain number is metres{zero}).")
 
 
 def cell_size_option(*, help: str | None = None) -> Decorator:  # noqa: A002
     """``--cell-size``: the cell size of a raster without georeference (value in metres)."""
     text = help or "Cell size of a raster without georeference (PNG); gives a local metric grid"
-    return click.option("--cell-size", "cell_size", type=LENGTH, default=None,
+    return click.option("--cell-size", "cell_size_m", type=LENGTH, default=None,
                         help=f"{text} (a length: 92.6m; a plain number is metres).")
 
 
@@ -230,31 +230,31 @@ class InputSource:
     z_units: str | None = None
     cell_size_m: float | None = None
 
-    def dem_options(self, z_units: str | None, cell_size: float | None) -> tuple[str | None, float | None]:
+    def dem_options(self, z_units: str | None, cell_size_m: float | None) -> tuple[str | None, float | None]:
         """The units and cell size to read this input with: the user's, else the manifest's.
 
         Raises ``click.UsageError`` when the user's value contradicts the manifest.
         """
         if self.dataset is None:
-            return z_units, cell_size
+            return z_units, cell_size_m
         if z_units is not None and self.z_units is not None and z_units != self.z_units:
             raise click.UsageError(f"{self.dataset} is a manifest DEM in {self.z_units}; drop --z-units {z_units}")
-        if cell_size is not None and self.cell_size_m is not None and not math.isclose(cell_size, self.cell_size_m):
+        if cell_size_m is not None and self.cell_size_m is not None and not math.isclose(cell_size_m, self.cell_size_m):
             raise click.UsageError(f"{self.dataset} is a manifest DEM with {self.cell_size_m:g} m cells; drop "
-                                   f"--cell-size {cell_size:g}")
+                                   f"--cell-size {cell_size_m:g}")
         return (z_units or self.z_units,
-                cell_size if cell_size is not None else self.cell_size_m)
+                cell_size_m if cell_size_m is not None else self.cell_size_m)
 
-    def read_dem(self, *, z_units: str | None = None, cell_size: float | None = None, **kwargs: Any) -> Any:
+    def read_dem(self, *, z_units: str | None = None, cell_size_m: float | None = None, **kwargs: Any) -> Any:
         """Read the DEM (``orokit.io.dem.read_dem`` keywords); a dataset keeps its name in ``attrs``."""
         if self.dataset is not None:
             from orokit.data import open_dataset_dem
 
-            self.dem_options(z_units, cell_size)  # refuses values contradicting the manifest
+            self.dem_options(z_units, cell_size_m)  # refuses values contradicting the manifest
             return open_dataset_dem(self.dataset, chunks=kwargs.get("chunks"))
         from orokit.io.dem import read_dem
 
-        return read_dem(str(self.path), z_units=z_units, cell_size=cell_size, **kwargs)
+        return read_dem(str(self.path), z_units=z_units, cell_size_m=cell_size_m, **kwargs)
 
     def __str__(self) -> str:
         """The dataset name, or the path as given."""

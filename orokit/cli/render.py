@@ -19,33 +19,33 @@ from orokit.cli.options import (
 )
 
 
-def read_tree(path: Path, *, cell_size: float | None = None):
+def read_tree(path: Path, *, cell_size_m: float | None = None):
     """A Divide Tree from .gpkg, reference .txt, or a folder holding dividetree.gpkg."""
     from orokit.io.divide_tree_io import read_divide_tree
 
-    return read_divide_tree(path, cell_size=cell_size)
+    return read_divide_tree(path, cell_size_m=cell_size_m)
 
 
-def like_dem(like: str | Path | InputSource, *, cell_size: float | None = None, z_units: str | None = "m",
+def like_dem(like: str | Path | InputSource, *, cell_size_m: float | None = None, z_units: str | None = "m",
              hint: str = "--like"):
     """The DEM named by ``--like``: a raster file or a manifest dataset name (metres).
 
     A file is read with ``z_units`` (``"m"`` when only its grid matters; ``None`` to use
-    the units it declares) and ``cell_size`` for rasters without georeferencing; a
+    the units it declares) and ``cell_size_m`` for rasters without georeferencing; a
     dataset comes with the manifest's units and cell size (:func:`orokit.cli.options.resolve_input`).
     """
     src = like if isinstance(like, InputSource) else resolve_input(like, hint=hint)
-    dem = src.read_dem() if src.dataset else src.read_dem(z_units=z_units, cell_size=cell_size)
+    dem = src.read_dem() if src.dataset else src.read_dem(z_units=z_units, cell_size_m=cell_size_m)
     if dem.rio.crs is not None and dem.rio.crs.is_geographic:
         raise click.BadParameter(f"{like} is in a geographic CRS; give --size and --resolution in metres",
                                  param_hint=hint)
     return dem
 
 
-def like_grid(like: str | Path | InputSource, *, cell_size: float | None = None
+def like_grid(like: str | Path | InputSource, *, cell_size_m: float | None = None
               ) -> tuple[tuple[float, float, float, float], float]:
     """Extent ``(xmin, ymin, xmax, ymax)`` and cell size (m) of a ``--like`` raster or dataset."""
-    dem = like_dem(like, cell_size=cell_size)
+    dem = like_dem(like, cell_size_m=cell_size_m)
     t = dem.rio.transform()
     ny, nx = dem.shape
     xs = (t.c, t.c + t.a * nx)
@@ -93,7 +93,7 @@ def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None
               help="Also write the TIN as a PLY mesh.")
 @overwrite_option("existing outputs")
 @generator_options
-def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, lam, cell_size, preview,
+def render(tree, out, resolution, erosion, seed, extent, like, min_prominence_m, lam, cell_size_m, preview,
            tin_path, overwrite, generator, params, exemplar) -> None:
     """Render the Divide Tree TREE (.gpkg, .txt or a synthesize folder) to an elevation raster.
 
@@ -111,7 +111,7 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
     if like is not None:
         if extent is not None:
             raise click.UsageError("give --extent or --like, not both")
-        extent, like_res = like_grid(like, cell_size=cell_size)
+        extent, like_res = like_grid(like, cell_size_m=cell_size_m)
     res = resolution if resolution is not None else (like_res if like is not None else 30.0)
     if generator != "argudo" or params:
         from orokit.cli.generator_options import check_generator_inputs, render_generator
@@ -119,9 +119,9 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
         if tin_path is not None:
             raise click.UsageError("--tin needs --generator argudo (other generators build no TIN)")
         if generator == "argudo":
-            params = (f"lam={lam}", f"min_prominence={min_prominence}", f"erosion={erosion}") + tuple(params)
+            params = (f"lam={lam}", f"min_prominence_m={min_prominence_m}", f"erosion={erosion}") + tuple(params)
         parsed = check_generator_inputs(generator, params, exemplar)
-        t = read_tree(tree, cell_size=cell_size)
+        t = read_tree(tree, cell_size_m=cell_size_m)
         t0 = time.perf_counter()
         dem = render_generator(t, generator=generator, params=parsed, resolution_m=res, extent=extent, seed=seed,
                                tree_path=tree, exemplar=exemplar)
@@ -129,8 +129,8 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence, l
         click.echo(f"{dem.shape[1]} x {dem.shape[0]} cells at {res:g} m from {t.n_peaks} peaks with {generator} "
                    f"in {time.perf_counter() - t0:.1f} s (seed {dem.attrs['seed']}) -> {out}")
         return
-    params = RenderParams(lam=lam, min_prominence=min_prominence)
-    t = read_tree(tree, cell_size=cell_size)
+    params = RenderParams(lam=lam, min_prominence_m=min_prominence_m)
+    t = read_tree(tree, cell_size_m=cell_size_m)
     t0 = time.perf_counter()
     dem, skel = render_elevation(t, resolution_m=res, extent=extent, erosion=erosion, params=params,
                                  return_skeleton=True, rng=seed)

@@ -45,8 +45,8 @@ from orokit.cli.options import (
 @click.option("--n-jobs", type=int, default=2, show_default=True, help="Parallel fits.")
 @overwrite_option("an existing report and model")
 @progress_option()
-def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominence, min_peaks, model_path, z_units,
-           cell_size, feature_set, classifier, separation, max_disks, max_train, seed, n_jobs, overwrite, progress):
+def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominence_m, min_peaks, model_path, z_units,
+           cell_size_m, feature_set, classifier, separation, max_disks, max_train, seed, n_jobs, overwrite, progress):
     """Classification report on INPUTs (DEMs, analysis folders or peak lists; one region each).
 
     Accuracies in the tables are percentages; radii in km.
@@ -68,9 +68,9 @@ def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominen
         raise click.UsageError(f"{model_path} exists; pass --overwrite to replace it")
     radii = list(radii) or [10_000.0, 5_000.0, 15_000.0]
     res = build_classification_report(list(inputs), output, radii_m=radii, runs=runs, feature_runs=feature_runs,
-                                      min_prominence_m=min_prominence, min_peaks=min_peaks, model_path=model_path,
+                                      min_prominence_m=min_prominence_m, min_peaks=min_peaks, model_path=model_path,
                                       n_jobs=n_jobs, progress=progress, seed=seed, z_units=z_units,
-                                      cell_size=cell_size, feature_set=feature_set, classifier=classifier,
+                                      cell_size_m=cell_size_m, feature_set=feature_set, classifier=classifier,
                                       separation=separation, max_disks=max_disks, max_train=max_train)
     for r, e in sorted(res["evaluations"].items()):
         sp = e["spatial"].mean_accuracy

@@ -27,9 +27,9 @@ MARKER = "hillshade.png"
 STALE_FILES = ("validation.json",)
 
 
-def like_domain(like: InputSource, *, cell_size: float | None = None) -> tuple[float, float, float]:
+def like_domain(like: InputSource, *, cell_size_m: float | None = None) -> tuple[float, float, float]:
     """Width, height and cell size (metres) of a DEM file or of a manifest dataset."""
-    x0, y0, w, h, res, _ = like_box(like, cell_size=cell_size)
+    x0, y0, w, h, res, _ = like_box(like, cell_size_m=cell_size_m)
     return w, h, res
 
 
@@ -42,10 +42,10 @@ def texture_params(ttype) -> dict:
             "texture_largest_m": float(t.get("largest_m", 1000.0))}
 
 
-def like_box(like: str, *, cell_size: float | None = None):
+def like_box(like: str, *, cell_size_m: float | None = None):
     """South-west corner, width, height, cell size (metres) and CRS (None: local grid) of a
     ``--like`` DEM, so a twin lands on the DEM's own grid."""
-    dem = like_dem(like, cell_size=cell_size)
+    dem = like_dem(like, cell_size_m=cell_size_m)
     t = dem.rio.transform()
     ny, nx = dem.shape
     xs, ys = (t.c, t.c + t.a * nx), (t.f, t.f + t.e * ny)
@@ -53,9 +53,9 @@ def like_box(like: str, *, cell_size: float | None = None):
     return min(xs), min(ys), nx * abs(float(t.a)), ny * abs(float(t.e)), abs(float(t.a)), crs
 
 
-def _like_dem(like: str | InputSource, *, cell_size: float | None = None):
+def _like_dem(like: str | InputSource, *, cell_size_m: float | None = None):
     """The DEM named by --like (a file or a manifest dataset), in metres (see :func:`like_dem`)."""
-    return like_dem(like, cell_size=cell_size)
+    return like_dem(like, cell_size_m=cell_size_m)
 
 
 @click.command(name="synthesize")
@@ -87,7 +87,7 @@ def _like_dem(like: str | InputSource, *, cell_size: float | None = None):
 @overwrite_option("existing outputs in OUTPUT")
 @progress_option()
 @generator_options
-def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_elevation, erosion, seed, crs, center,
+def synthesize(type_file, size, resolution, like, cell_size_m, n_peaks, control_elevation, erosion, seed, crs, center,
                write_tin,
                outdir, overwrite, progress, generator, params, exemplar) -> None:
     """Synthesize a Divide Tree following a terrain type and render it to a raster.
@@ -136,7 +136,7 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
         local = False
     like_origin = None
     if like is not None:
-        x0, y0, w, h, like_res, like_crs = like_box(like, cell_size=cell_size)
+        x0, y0, w, h, like_res, like_crs = like_box(like, cell_size_m=cell_size_m)
         res = resolution if resolution is not None else like_res
         if crs is None and center_ll is None and not local:
             like_origin = (x0, y0, like_crs)  # the twin lands on the DEM's grid, in its CRS
@@ -172,7 +172,7 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
     if control_elevation == "like":
         if like is None:
             raise click.UsageError("--control-elevation like needs --like")
-        c_h = np.asarray(like_dem(like, cell_size=cell_size).values, dtype=float)  # row 0 north, stretched
+        c_h = np.asarray(like_dem(like, cell_size_m=cell_size_m).values, dtype=float)  # row 0 north, stretched
     elif control_elevation is not None and not Path(control_elevation).exists():
         raise click.BadParameter(f"{control_elevation} does not exist", param_hint="--control-elevation")
     if like_origin is not None:
@@ -188,7 +188,7 @@ def synthesize(type_file, size, resolution, like, cell_size, n_peaks, control_el
         bar.update(1)
     if parsed is None:
         dem, skel = render_elevation(tree, resolution_m=res, extent=tree_extent(tree), erosion=erosion,
-                                     params=RenderParams(min_prominence=float(tree.attrs.get("min_prominence", 30.0)),
+                                     params=RenderParams(min_prominence_m=float(tree.attrs.get("min_prominence_m", 30.0)),
                                                          **texture_params(ttype)),
                                      return_skeleton=True, rng=seed)
     else:

@@ -37,8 +37,8 @@ from orokit.cli.options import (
               help="Area of a Divide Tree input in km2 (default: extent of its peaks, saddles and runoffs).")
 @overwrite_option("an existing OUTPUT")
 @progress_option()
-def type_cmd(src: InputSource, output: Path, name: str | None, min_prominence: float | None, z_units: str | None,
-             cell_size: float | None, isolation_basis: str, rho: float | None, scale_prominence: float | None,
+def type_cmd(src: InputSource, output: Path, name: str | None, min_prominence_m: float | None, z_units: str | None,
+             cell_size_m: float | None, isolation_basis: str, rho: float | None, scale_prominence: float | None,
              scale_elevation: float | None, shift_elevation: float | None, density: float | None,
              area_km2: float | None, overwrite: bool, progress: bool) -> None:
     """Build the terrain type of SOURCE and write it as versioned JSON.
@@ -56,7 +56,7 @@ def type_cmd(src: InputSource, output: Path, name: str | None, min_prominence: f
     refuse_existing(output, overwrite=overwrite)
     source = src.path
     if source.is_dir():
-        tt = TerrainType.from_analysis(source, min_prominence_m=min_prominence, name=name,
+        tt = TerrainType.from_analysis(source, min_prominence_m=min_prominence_m, name=name,
                                        isolation_basis=isolation_basis, rho=rho)
         dem = _analysed_dem(source)
         if dem is not None:
@@ -64,17 +64,17 @@ def type_cmd(src: InputSource, output: Path, name: str | None, min_prominence: f
     elif source.suffix.lower() in (".txt", ".gpkg"):
         from orokit.io.divide_tree_io import read_divide_tree
 
-        tree = read_divide_tree(source, cell_size=cell_size, z_units=z_units or "ft")
+        tree = read_divide_tree(source, cell_size_m=cell_size_m, z_units=z_units or "ft")
         area = area_km2 if area_km2 is not None else _tree_area_km2(tree)
-        eps = 30.0 if min_prominence is None else min_prominence
+        eps = 30.0 if min_prominence_m is None else min_prominence_m
         tt = TerrainType.from_divide_tree(tree, area_km2=area, min_prominence_m=eps,
                                           name=name or source.stem, rho=rho,
                                           provenance={"source": str(source), "area_from": "tree extent"})
     else:
         from orokit.analysis import analyze
 
-        da = src.read_dem(z_units=z_units, cell_size=cell_size)
-        result = analyze(da, min_prominence=30.0 if min_prominence is None else min_prominence, progress=progress)
+        da = src.read_dem(z_units=z_units, cell_size_m=cell_size_m)
+        result = analyze(da, min_prominence_m=30.0 if min_prominence_m is None else min_prominence_m, progress=progress)
         tt = TerrainType.from_analysis(result, name=name or src.dataset or source.stem, isolation_basis=isolation_basis, rho=rho)
         tt = _with_texture(tt, da)
     if scale_prominence is not None:
@@ -99,7 +99,7 @@ def _tree_area_km2(tree) -> float:
     if isinstance(run, pd.DataFrame) and {"x", "y"} <= set(run.columns):
         parts.append(run[["x", "y"]])
     xy = pd.concat(parts)
-    cell = float((tree.attrs or {}).get("cell_size") or 0.0)
+    cell = float((tree.attrs or {}).get("cell_size_m") or 0.0)
     if tree.crs is not None and tree.crs.is_geographic:  # lon/lat box: its area on the ellipsoid
         from affine import Affine
 

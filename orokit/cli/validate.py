@@ -25,7 +25,8 @@ def append_row(table: Path, row: dict) -> None:
     df = pd.DataFrame([row])
     with output_lock(table, wait_s=60.0):  # concurrent runs append one after the other
         if table.exists():
-            df = pd.concat([pd.read_csv(table), df], ignore_index=True)
+            old = pd.read_csv(table).rename(columns={"min_prominence": "min_prominence_m"})  # logs of older versions
+            df = pd.concat([old, df], ignore_index=True)
         table.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(table) as tmp:
             df.to_csv(tmp, index=False)
@@ -55,7 +56,7 @@ def append_row(table: Path, row: dict) -> None:
                    "OUT/synthesis.json, if any].")
 @click.option("--real-cell-size", type=LENGTH, default=None,
               help="Cell size of a --real file without georeference (a length: 92.6m; a plain number is metres).")
-def validate(out, model_path, tree_path, type_file, label, min_prominence, z_units, json_path, append_to, overwrite,
+def validate(out, model_path, tree_path, type_file, label, min_prominence_m, z_units, json_path, append_to, overwrite,
              seed, real, real_cell_size) -> None:
     """Re-analyse OUT (a synthesize folder or a raster), compare it with its Divide Tree, classify it.
 
@@ -105,7 +106,7 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, z_uni
         from orokit.classify.model import load_model
 
         model = load_model(model_path)
-    rt = roundtrip(dem, tree, min_prominence=min_prominence, terrain_type=ttype, model=model,
+    rt = roundtrip(dem, tree, min_prominence_m=min_prominence_m, terrain_type=ttype, model=model,
                    expected_label=label, rng=seed)
     s = rt.summary()
     landform = None
@@ -113,7 +114,7 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, z_uni
         from orokit.cli.render import like_dem
         from orokit.validate.landform import compare_landforms
 
-        landform = compare_landforms(like_dem(real, cell_size=real_cell_size, z_units=None, hint="--real"), dem)
+        landform = compare_landforms(like_dem(real, cell_size_m=real_cell_size, z_units=None, hint="--real"), dem)
     if json_path is not None:
         doc = json.loads(summary_json(rt))
         if landform is not None:
@@ -123,7 +124,7 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence, z_uni
         row = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "raster": str(raster),
                "tree": str(tree_path), "model": str(model_path) if model_path else "", **s}
         append_row(append_to, row)
-    msg = (f"recovered {100 * s['recovered_share']:.1f} % of {s['tree_peaks']} tree peaks >= {min_prominence:g} m, "
+    msg = (f"recovered {100 * s['recovered_share']:.1f} % of {s['tree_peaks']} tree peaks >= {min_prominence_m:g} m, "
            f"{s['extra_peaks']} extra ({100 * s['extra_share']:.1f} %)")
     if "max_bin_error" in s:
         msg += f"; max histogram bin error {s['max_bin_error']:.3f}"

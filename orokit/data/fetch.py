@@ -301,7 +301,7 @@ def open_dataset_dem(name: str, chunks: object = None, *, manifest: Manifest | N
     path = fetch_file(ds.primary)
     kwargs: dict[str, object] = {"z_units": ds.z_units, "chunks": chunks}
     if ds.local_grid:
-        kwargs["cell_size"] = ds.cell_size_m
+        kwargs["cell_size_m"] = ds.cell_size_m
     dem = read_dem(path, **kwargs)  # type: ignore[arg-type]
     dem.attrs.update({"dataset": ds.name, "region": ds.region or "", "title": ds.title})
     return dem

@@ -24,21 +24,21 @@ __all__ = ["ArgudoParams", "render"]
 class ArgudoParams:
     """Parameters of the Argudo backend: the renderer's defaults plus ``erosion``.
 
-    lam : meshing distance lambda (m); min_prominence : eps (m), noise stays below it;
+    lam : meshing distance lambda (m); min_prominence_m : eps (m), noise stays below it;
     erosion : run the multi-scale constrained erosion (fastscapelib); the other
     parameters of :class:`orokit.raster.render.RenderParams` keep their defaults.
     """
 
     lam: float = 200.0
-    min_prominence: float = 30.0
+    min_prominence_m: float = 30.0
     noise_ratio: float = 0.3
     erosion: bool = True
 
     def __post_init__(self) -> None:
         if not (self.lam > 0 and np.isfinite(self.lam)):
             raise InputError(f"lam must be a positive number of metres, got {self.lam!r}")
-        if not (self.min_prominence >= 0 and np.isfinite(self.min_prominence)):
-            raise InputError(f"min_prominence must be >= 0 metres, got {self.min_prominence!r}")
+        if not (self.min_prominence_m >= 0 and np.isfinite(self.min_prominence_m)):
+            raise InputError(f"min_prominence_m must be >= 0 metres, got {self.min_prominence_m!r}")
         if not (0.0 <= self.noise_ratio < 0.5):
             raise InputError(f"noise_ratio must be in [0, 0.5) (noise below eps / 2), got {self.noise_ratio!r}")
 

@@ -113,7 +113,7 @@ def as_dataarray(z: np.ndarray, grid: Grid, crs: Any, attrs: dict[str, Any] | No
     if crs is not None:
         da = da.rio.write_crs(crs)
     da = da.rio.write_transform(Affine(grid.res, 0.0, grid.x0, 0.0, -grid.res, grid.y0))
-    da.attrs.update({"units": "m", "local_grid": crs is None, "cell_size_m": grid.res})
+    da.attrs.update({"units": "m", "local_grid": crs is None, "cell_size_m": (grid.res, grid.res)})
     da.attrs.update(attrs or {})
     return da
 

@@ -153,7 +153,7 @@ def exemplar_profile(exemplar: xr.DataArray, *, min_prominence_m: float = 30.0) 
     import orokit
     from scipy.spatial import cKDTree
 
-    res = orokit.analyze(exemplar, min_prominence=min_prominence_m, isolation=False)
+    res = orokit.analyze(exemplar, min_prominence_m=min_prominence_m, isolation=False)
     pk = res.peaks
     if len(pk) == 0:
         raise InputError(f"the exemplar DEM has no peak with prominence >= {min_prominence_m:g} m; "

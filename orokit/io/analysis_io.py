@@ -16,7 +16,7 @@ import pandas as pd
 from orokit._typing import PathLike
 from orokit.errors import InputError
 from orokit.io.atomic import atomic_path, staged_folder, write_text_atomic
-from orokit.topology.tables import AnalysisResult, validate_peak_table, validate_saddle_table
+from orokit.topology.tables import AnalysisResult, upgrade_attrs, validate_peak_table, validate_saddle_table
 
 logger = logging.getLogger(__name__)
 
@@ -65,7 +65,7 @@ def _write(result: AnalysisResult, out: Path) -> Path:
         lambda: _write_csv(peaks, out / "peaks.csv"),
         lambda: _write_parquet(peaks, out / "peaks.parquet"),
         lambda: _write_parquet(result.saddles, out / "saddles.parquet"),
-        lambda: write_divide_tree_gpkg(result.divide_tree, out / "dividetree.gpkg", peaks=peaks, layers=layers),
+        lambda: write_divide_tree_gpkg(result.tree, out / "dividetree.gpkg", peaks=peaks, layers=layers),
     ]
     if result.depressions is not None:
         tasks.append(lambda: _write_parquet(result.depressions, out / "depressions.parquet"))
@@ -103,7 +103,7 @@ def read_analysis(outdir: PathLike) -> AnalysisResult:
     meta_path = out / "analysis.json"
     if not meta_path.exists():
         raise InputError(f"{out} is not a complete orokit analysis folder (no analysis.json); rerun `orokit analyze`")
-    meta = json.loads(meta_path.read_text())
+    meta = upgrade_attrs(json.loads(meta_path.read_text()))  # files of older orokit versions too
     peaks = gpd.read_parquet(out / "peaks.parquet")
     validate_peak_table(peaks, source=str(out / "peaks.parquet"))
     saddles = gpd.read_parquet(out / "saddles.parquet")

@@ -30,7 +30,7 @@ from rasterio.windows import Window
 
 from orokit._typing import PathLike
 from orokit.errors import CRSError, InputError, OrokitWarning, UnitsError
-from orokit.geodesy import parse_crs
+from orokit.geodesy import cell_size_key, parse_crs
 from orokit.io._units import TO_METRES, is_known_units, normalize_units
 
 logger = logging.getLogger(__name__)
@@ -207,18 +207,18 @@ def _native_sentinel(nodata: float, dtype: np.dtype) -> Any:
     return nodata
 
 
-def _normalize_cell_size(cell_size: Any) -> tuple[float, float]:
+def _normalize_cell_size(cell_size_m: Any) -> tuple[float, float]:
     try:
-        if np.ndim(cell_size) == 0:
-            dx = dy = float(cell_size)
+        if np.ndim(cell_size_m) == 0:
+            dx = dy = float(cell_size_m)
         else:
-            dx, dy = (float(v) for v in cell_size)
+            dx, dy = (float(v) for v in cell_size_m)
     except (TypeError, ValueError) as exc:
         raise InputError(
-            f"cell_size must be a positive number of metres or a pair (dx, dy), got {cell_size!r}."
+            f"cell_size_m must be a positive number of metres or a pair (dx, dy), got {cell_size_m!r}."
         ) from exc
     if not (math.isfinite(dx) and math.isfinite(dy) and dx > 0 and dy > 0):
-        raise InputError(f"cell_size must be positive and finite (metres), got {cell_size!r}.")
+        raise InputError(f"cell_size_m must be positive and finite (metres), got {cell_size_m!r}.")
     return dx, dy
 
 
@@ -242,7 +242,7 @@ def read_dem(
     source: PathLike,
     *,
     z_units: str | None = None,
-    cell_size: CellSizeLike = None,
+    cell_size_m: CellSizeLike = None,
     band: int | None = None,
     chunks: ChunksLike = None,
     nodata: float | None = None,
@@ -262,7 +262,7 @@ def read_dem(
         ``"us-ft"``. Default: the band's unit metadata if any, else metres for a
         raster with a CRS. Required for rasters without CRS that declare no units
         (the PNG DEMs).
-    cell_size
+    cell_size_m
         Cell size in metres (a number, or ``(dx, dy)``) for a raster without
         georeference: it then gets a local metric grid with origin (0, 0) at the
         north-west corner and y decreasing downwards. Refused for geographic CRS and
@@ -288,19 +288,19 @@ def read_dem(
         grid). ``attrs``: ``units`` ("m"), ``source``, ``z_units_in`` (units of the
         file), ``z_units_assumed`` (True when metres were assumed), ``local_grid``
         (True when the raster had no CRS and gets a local metric grid),
-        ``cell_size`` (x cell size in CRS units: metres, or degrees for geographic
-        CRS), ``res`` ((dx, dy) in CRS units), ``band``, ``nodata_in`` (the raw
+        ``cell_size_m`` ((dx, dy) in metres) or, on a geographic CRS, ``cell_size_deg``
+        ((dx, dy) in degrees), ``band``, ``nodata_in`` (the raw
         sentinel or None).
 
     Raises
     ------
     InputError
         Missing, unreadable, truncated or corrupt file; empty or all-nodata raster;
-        several bands without ``band``; bad ``cell_size``/``chunks``; rotated grids.
+        several bands without ``band``; bad ``cell_size_m``/``chunks``; rotated grids.
     UnitsError
         Unknown units string, or no units known for an ungeoreferenced raster.
     CRSError
-        No georeference and no ``cell_size``; ``cell_size`` with a geographic CRS or
+        No georeference and no ``cell_size_m``; ``cell_size_m`` with a geographic CRS or
         conflicting with the file; ``crs`` conflicting with the file's CRS.
 
     Notes
@@ -421,20 +421,20 @@ def read_dem(
     if file_transform.b != 0 or file_transform.d != 0:
         raise InputError(f"{path} has a rotated grid (transform {tuple(file_transform)[:6]}); warp it first (gdalwarp).")
 
-    if cell_size is not None:
-        dx, dy = _normalize_cell_size(cell_size)
+    if cell_size_m is not None:
+        dx, dy = _normalize_cell_size(cell_size_m)
         if eff_crs is not None and eff_crs.is_geographic:
             raise CRSError(
-                f"cell_size={cell_size!r} (metres) conflicts with the geographic CRS {eff_crs.to_string()!r} of "
-                f"{path}: cells of a geographic grid are not square in metres. Drop cell_size; distances are "
+                f"cell_size_m={cell_size_m!r} (metres) conflicts with the geographic CRS {eff_crs.to_string()!r} of "
+                f"{path}: cells of a geographic grid are not square in metres. Drop cell_size_m; distances are "
                 "computed geodesically (orokit.geodesy)."
             )
         if has_transform:
             fdx, fdy = abs(file_transform.a), abs(file_transform.e)
             if not (math.isclose(fdx, dx, rel_tol=1e-6) and math.isclose(fdy, dy, rel_tol=1e-6)):
                 raise CRSError(
-                    f"cell_size={cell_size!r} conflicts with the cells of {path} ({fdx:g} x {fdy:g} CRS units); "
-                    "drop cell_size, the file's own georeference is used."
+                    f"cell_size_m={cell_size_m!r} conflicts with the cells of {path} ({fdx:g} x {fdy:g} CRS units); "
+                    "drop cell_size_m, the file's own georeference is used."
                 )
             transform = file_transform
         else:
@@ -446,7 +446,7 @@ def read_dem(
     else:
         raise CRSError(
             f"{path} has no georeference (no CRS, no transform), so its cell size is unknown; pass "
-            "cell_size=<metres> (CLI: --cell-size) to read it on a local metric grid."
+            "cell_size_m=<metres> (CLI: --cell-size) to read it on a local metric grid."
         )
     if eff_crs is not None and eff_crs.is_geographic and not has_transform:
         raise CRSError(f"cannot place the ungeoreferenced raster {path} in the geographic CRS {eff_crs.to_string()!r}.")
@@ -503,8 +503,7 @@ def read_dem(
         "z_units_in": zu,
         "z_units_assumed": z_assumed,
         "local_grid": eff_crs is None,
-        "cell_size": float(abs(t.a)),
-        "res": (float(abs(t.a)), float(abs(t.e))),
+        cell_size_key(eff_crs is not None and eff_crs.is_geographic): (float(abs(t.a)), float(abs(t.e))),
         "band": band,
         "nodata_in": nd,
         "long_name": "elevation",

@@ -14,6 +14,7 @@ from orokit._typing import PathLike
 from orokit.errors import InputError
 from orokit.io.atomic import atomic_path
 from orokit.topology.divide_tree import DivideTree
+from orokit.topology.tables import upgrade_attrs
 from orokit.topology.tree_checks import check_read_tree
 
 logger = logging.getLogger(__name__)
@@ -157,7 +158,7 @@ def read_divide_tree_gpkg(path: PathLike) -> DivideTree:
         meta = pyogrio.read_dataframe(path, layer="orokit_metadata")
         for k, v in zip(meta["key"], meta["value"]):
             if k == "orokit_attrs":
-                attrs.update(json.loads(v))
+                attrs.update(upgrade_attrs(json.loads(v), geographic=False))  # TXT trees: metres
             elif k == "orometry_columns":  # derived columns for GIS users, not part of the tree
                 peaks = peaks.drop(columns=[c for c in json.loads(v) if c in peaks.columns])
     for key in ("runoffs", "basin_saddles"):

@@ -24,10 +24,10 @@ __all__ = [
 ]
 
 
-def read_divide_tree(path: PathLike, *, cell_size: float | None = None, z_units: str = "ft") -> DivideTree:
+def read_divide_tree(path: PathLike, *, cell_size_m: float | None = None, z_units: str = "ft") -> DivideTree:
     """Read a Divide Tree from a ``.gpkg``, a reference ``.txt``, or a folder holding ``dividetree.gpkg``.
 
-    ``cell_size`` (metres) and ``z_units`` apply to the TXT format only (see
+    ``cell_size_m`` (metres) and ``z_units`` apply to the TXT format only (see
     :func:`~orokit.io.divide_tree_txt.read_divide_tree_txt`).
 
     Raises
@@ -42,7 +42,7 @@ def read_divide_tree(path: PathLike, *, cell_size: float | None = None, z_units:
             raise InputError(f"{path} is a folder without dividetree.gpkg; pass a .gpkg or .txt Divide Tree file")
     suffix = p.suffix.lower()
     if suffix == ".txt":
-        return read_divide_tree_txt(p, cell_size=cell_size, z_units=z_units)
+        return read_divide_tree_txt(p, cell_size_m=cell_size_m, z_units=z_units)
     if suffix == ".gpkg":
         return read_divide_tree_gpkg(p)
     raise InputError(f"{p}: unknown Divide Tree format {suffix or '(no suffix)'!r}; "

@@ -202,7 +202,7 @@ def _place(frame: pd.DataFrame, factor: float, cell: float, height: int | None) 
 def read_divide_tree_txt(
     path: PathLike,
     *,
-    cell_size: float | None = None,
+    cell_size_m: float | None = None,
     z_units: str = "ft",
     height: int | None = None,
 ) -> DivideTree:
@@ -212,7 +212,7 @@ def read_divide_tree_txt(
     ----------
     path
         The ``.txt`` file.
-    cell_size
+    cell_size_m
         Cell size in metres. ``None`` infers the cell size in arc-seconds from the
         ``a``/``x`` columns and uses :data:`METRES_PER_ARCSEC` metres per arc-second
         (92.61 m for the 3-arcsec reference crops).
@@ -231,7 +231,7 @@ def read_divide_tree_txt(
         Elevations in metres; raw file values kept in the columns ``txt_id``, ``a``,
         ``b``, ``px``, ``py``. ``attrs`` holds ``runoffs`` (DataFrame, with the peak
         ``txt_id`` each runoff belongs to in ``peak_txt_id``), ``basin_saddles``
-        (DataFrame), ``height``, ``cell_size`` (m), ``cell_size_arcsec``, ``z_units_in``
+        (DataFrame), ``height``, ``cell_size_m`` (m), ``cell_size_arcsec``, ``z_units_in``
         and ``source``. Runoffs are not peaks.
 
     Raises
@@ -256,16 +256,16 @@ def read_divide_tree_txt(
                 "a Divide Tree TXT file needs at least Peaks, PromSaddles and Edges"
             )
     arcsec = _infer_cell_arcsec(list(frames.values()))
-    if cell_size is None:
+    if cell_size_m is None:
         if arcsec is None:
             raise InputError(
-                f"{path}: cannot infer the cell size (every point has x = y = 0); pass cell_size= in metres"
+                f"{path}: cannot infer the cell size (every point has x = y = 0); pass cell_size_m= in metres"
             )
         cell = arcsec * METRES_PER_ARCSEC
     else:
-        cell = float(cell_size)
+        cell = float(cell_size_m)
         if not (math.isfinite(cell) and cell > 0):
-            raise InputError(f"cell_size must be a positive number of metres; got {cell_size!r}")
+            raise InputError(f"cell_size_m must be a positive number of metres; got {cell_size_m!r}")
     if height is not None:
         height = int(height)
         too_high = max((int(f["py"].max()) for f in frames.values() if len(f)), default=-1)
@@ -301,8 +301,8 @@ def read_divide_tree_txt(
         "source": str(path),
         "z_units_in": z_units,
         "units": "m",
-        "cell_size": cell,
-        "cell_size_arcsec": arcsec if cell_size is None else cell / METRES_PER_ARCSEC,
+        "cell_size_m": cell,
+        "cell_size_arcsec": arcsec if cell_size_m is None else cell / METRES_PER_ARCSEC,
         "height": height,
         "local_grid": True,
         "runoffs": runoffs,
@@ -330,7 +330,7 @@ def _raw_points(frame: pd.DataFrame, height: int | None, cell: float | None, arc
     else:
         if cell is None or height is None:
             raise InputError(
-                f"cannot write {what} to TXT: no px/py or row/col columns; pass height= and cell_size= so x/y "
+                f"cannot write {what} to TXT: no px/py or row/col columns; pass height= and cell_size_m= so x/y "
                 "(local grid, origin at the north-west corner) can be turned into cells"
             )
         px = np.floor(frame["x"].to_numpy(float) / cell).astype(np.int64)
@@ -364,7 +364,7 @@ def write_divide_tree_txt(
     *,
     z_units: str = "ft",
     height: int | None = None,
-    cell_size: float | None = None,
+    cell_size_m: float | None = None,
 ) -> Path:
     """Write ``tree`` in the reference TXT format (atomically).
 
@@ -376,22 +376,22 @@ def write_divide_tree_txt(
         Output file.
     z_units
         Units of the written elevations (``"ft"`` as the reference files).
-    height, cell_size
+    height, cell_size_m
         Raster height in cells and cell size in metres, needed to turn ``row``/``col``
         (or local-grid ``x``/``y``) into the file's pixel coordinates when the tree was
         not read from a TXT file. Default: ``tree.attrs["height"]`` /
-        ``tree.attrs["cell_size"]``.
+        ``tree.attrs["cell_size_m"]``.
 
     Notes
     -----
     Ids are renumbered 1..n in the tree's order. ``a``/``b`` are kept from a tree read
     from TXT, else computed as ``x * c / 3600`` with ``c`` = cell size in arc-seconds
-    (``cell_size / 30.87``). Runoffs and basin saddles from ``tree.attrs`` are written
+    (``cell_size_m / 30.87``). Runoffs and basin saddles from ``tree.attrs`` are written
     when present; runoffs of peaks no longer in the tree (after pruning) are dropped.
     """
     factor = factor_to_metres(z_units)
     height = height if height is not None else tree.attrs.get("height")
-    cell = cell_size if cell_size is not None else tree.attrs.get("cell_size")
+    cell = cell_size_m if cell_size_m is not None else tree.attrs.get("cell_size_m")
     arcsec = tree.attrs.get("cell_size_arcsec")
     if arcsec is None and cell is not None:
         arcsec = float(cell) / METRES_PER_ARCSEC

@@ -52,7 +52,7 @@ def _write(tree: DivideTree, out: Path, *, peaks: pd.DataFrame, txt_cell_m: floa
     local_saddles["x"] -= x0
     local_saddles["y"] -= top
     local = DivideTree(local_peaks, local_saddles, tree.edges[["peak_a", "peak_b", "saddle"]], None, {})
-    write_divide_tree_txt(local, out / "dividetree.txt", height=height, cell_size=txt_cell_m)
+    write_divide_tree_txt(local, out / "dividetree.txt", height=height, cell_size_m=txt_cell_m)
     with atomic_path(out / "peaks.csv") as tmp:
         pd.DataFrame(peaks.drop(columns="geometry")).to_csv(tmp, float_format="%.10g")
     meta = dict(tree.attrs)

@@ -16,7 +16,7 @@ class RenderParams:
     river_slope : minimum downstream slope of river beds (m/m).
     river_margin : river beds lie at least this far below the ridges they face.
     valley_coef : valley width ``w = valley_coef * A^0.4`` (A in m^2).
-    min_prominence : eps of the orometry to keep; noise amplitude is ``noise_ratio * eps``.
+    min_prominence_m : eps of the orometry to keep; noise amplitude is ``noise_ratio * eps``.
     noise_ratio : noise amplitude as a fraction of eps (< 0.5 so no new peak reaches eps).
     uplift_radius : R of the compensating uplift and noise mask around peaks and saddles.
     erosion_scales : grid spacings of the erosion passes.
@@ -47,7 +47,7 @@ class RenderParams:
     river_slope: float = 0.01
     river_margin: float = 5.0
     valley_coef: float = 0.15
-    min_prominence: float = 30.0
+    min_prominence_m: float = 30.0
     noise_ratio: float = 0.3
     uplift_radius: float = 1500.0
     erosion_scales: tuple[float, ...] = (100.0, 50.0, 30.0)

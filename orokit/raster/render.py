@@ -90,7 +90,7 @@ def _check_crs(tree) -> Any:
 
 
 def render_elevation(
-    divide_tree,
+    tree,
     *,
     resolution_m: float,
     extent: tuple[float, float, float, float] | None = None,
@@ -104,7 +104,7 @@ def render_elevation(
 
     Parameters
     ----------
-    divide_tree : DivideTree in a projected CRS or a local metric frame (x, y, elevation in metres).
+    tree : DivideTree in a projected CRS or a local metric frame (x, y, elevation in metres).
     resolution_m : cell size of the output in metres.
     extent : ``(xmin, ymin, xmax, ymax)`` in the tree's CRS; default :func:`tree_extent`.
     erosion : run the multi-scale constrained erosion.
@@ -143,12 +143,12 @@ def render_elevation(
     params = params or RenderParams()
     seed = resolve_seed(rng)
     rng = np.random.default_rng(seed)
-    crs = _check_crs(divide_tree)
-    if divide_tree.n_peaks == 0:
+    crs = _check_crs(tree)
+    if tree.n_peaks == 0:
         raise DivideTreeError("the Divide Tree has no peaks; nothing to render")
-    ext = tuple(float(v) for v in extent) if extent is not None else tree_extent(divide_tree)
+    ext = tuple(float(v) for v in extent) if extent is not None else tree_extent(tree)
     grid = make_grid(ext, resolution_m, max_cells=max_cells)  # errors before any allocation
-    pxy = divide_tree.peaks[["x", "y"]].to_numpy(float)
+    pxy = tree.peaks[["x", "y"]].to_numpy(float)
     inside = (pxy[:, 0] >= ext[0]) & (pxy[:, 0] <= ext[2]) & (pxy[:, 1] >= ext[1]) & (pxy[:, 1] <= ext[3])
     if not inside.any():
         raise InputError(
@@ -160,7 +160,7 @@ def render_elevation(
         warnings.warn(f"{int((~inside).sum())} of {inside.size} peaks lie outside the extent and are cut off",
                       OrokitWarning, stacklevel=2)
 
-    skel = build_skeleton(divide_tree, extent=ext, params=params, saddle_clearance_m=1.5 * grid.res, rng=rng)
+    skel = build_skeleton(tree, extent=ext, params=params, saddle_clearance_m=1.5 * grid.res, rng=rng)
     timings = dict(skel.timings)
 
     t0 = time.perf_counter()
@@ -193,7 +193,7 @@ def render_elevation(
                             beta=params.texture_beta, largest_m=params.texture_largest_m, rng=rng) * amp
         del fade, amp
     del dist, mask
-    amp = params.noise_ratio * params.min_prominence
+    amp = params.noise_ratio * params.min_prominence_m
     if amp > 0:
         zmin, zmax = float(z.min()), float(z.max())
         rough = (z - zmin) / max(zmax - zmin, 1e-6)
@@ -227,8 +227,8 @@ def render_elevation(
                                   "erosion": bool(erosion)}),
         "seed": seed,
         "local_grid": crs is None,
-        "cell_size": grid.res,
-        "n_tree_peaks": int(divide_tree.n_peaks),
+        "cell_size_m": (grid.res, grid.res),
+        "n_tree_peaks": int(tree.n_peaks),
         "timings": json.dumps({k: round(v, 3) for k, v in timings.items()}),
     })
     logger.info("rendered %d x %d at %g m in %.2f s", grid.nx, grid.ny, grid.res, sum(timings.values()))

@@ -156,7 +156,7 @@ def build_skeleton(
     lam = float(params.lam)
     ridges = ridge_segments(p, s, e)
     zmin = float(nodes[:, 2].min())
-    eps = float(params.min_prominence)
+    eps = float(params.min_prominence_m)
     base = zmin - max(eps, params.river_margin)
     if zmin >= 0 > base:
         base = 0.5 * zmin

@@ -29,7 +29,7 @@ def plot_divide_tree(ax, dem, result, *, title: str | None = None):
 
     plot_hillshade(ax, dem, title=title)
     scale = 1.0 if (dem.rio.crs is not None and dem.rio.crs.is_geographic) else 1000.0
-    ridges = result.divide_tree.ridges()
+    ridges = result.tree.ridges()
     segs = [np.asarray(g.coords) / scale for g in ridges.geometry]
     ax.add_collection(LineCollection(segs, colors="crimson", linewidths=0.6, alpha=0.8))
     s = result.saddles
@@ -67,7 +67,7 @@ def analysis_rows(folders: list[PathLike], *, figures_dir: PathLike | None = Non
         row: dict[str, Any] = {
             "dataset": name,
             "shape": "x".join(str(v) for v in res.attrs.get("shape", dem.shape)),
-            "eps_m": res.attrs.get("min_prominence"),
+            "eps_m": res.attrs.get("min_prominence_m"),
             "peaks": len(p),
             "exact_prominence": float(p["prominence_exact"].mean()) if len(p) else float("nan"),
             "exact_isolation": float(p["isolation_exact"].mean()) if len(p) else float("nan"),
@@ -76,7 +76,7 @@ def analysis_rows(folders: list[PathLike], *, figures_dir: PathLike | None = Non
         }
         if known and manifest[name].files_with_role("divide_tree"):
             ref = read_divide_tree_txt(dataset_path(name, role="divide_tree"), height=dem.shape[0])
-            all_peaks = orokit.analyze(dem, min_prominence=0.0, isolation=False).peaks
+            all_peaks = orokit.analyze(dem, min_prominence_m=0.0, isolation=False).peaks
             row.update(compare_with_reference(all_peaks, ref, dem.shape))
         if figures_dir is not None:
             fig, ax = plt.subplots(figsize=(6.4, 5.2), dpi=100)

@@ -286,7 +286,7 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
                                 min_peaks: int = 20, max_disks: int = 100, trees: int = 100, seed: int = 0,
                                 labels: Sequence[str] | None = None, model_path: PathLike | None = None,
                                 model_radius_m: float | None = None, n_jobs: int = 2, progress: bool = False,
-                                z_units: str | None = None, cell_size: float | None = None,
+                                z_units: str | None = None, cell_size_m: float | None = None,
                                 feature_set: str = "orometry", classifier: str = "et", separation: float = 0.5,
                                 max_train: int = 80) -> dict[str, Any]:
     """Features -> repeated training runs -> Table 2, figures and README for several radii.
@@ -322,7 +322,7 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
             for src, lab, s in zip(inputs, labels, seeds):
                 tables.append(features_for_input(src, radius_m=r, label=lab, min_prominence_m=min_prominence_m,
                                                  min_peaks=min_peaks, max_disks=max_disks, z_units=z_units,
-                                                 cell_size=cell_size, feature_set=fset, separation=separation,
+                                                 cell_size_m=cell_size_m, feature_set=fset, separation=separation,
                                                  rng=np.random.default_rng(s)))
         for w in caught:
             logger.info("%s", w.message)

@@ -2,7 +2,7 @@
 
 ``analysis.json`` records the grid transform (``transform``: affine a, b, c, d, e, f),
 the ``shape``, the CRS (WKT) and ``crs_geographic``. :func:`analysis_grid` reads them
-back (older folders without ``transform``: the local grid from ``cell_size``, else a
+back (older folders without ``transform``: the local grid from ``cell_size_m``, else a
 least-squares fit of the peaks' row/col to x/y, with a warning), and
 :func:`grid_area_km2` measures the grid on the ground: cells of a geographic grid get
 their exact area on the WGS84 ellipsoid, row by row.
@@ -19,6 +19,7 @@ from affine import Affine
 from numpy.typing import NDArray
 
 from orokit.errors import InputError
+from orokit.topology.tables import upgrade_attrs
 
 logger = logging.getLogger(__name__)
 
@@ -116,7 +117,7 @@ def analysis_grid(attrs: Mapping[str, Any], peaks: Any = None) -> tuple[Affine, 
         if len(t) < 6:
             raise InputError(f"analysis.json 'transform' must hold 6 numbers (a, b, c, d, e, f), got {t!r}")
         return Affine(*(float(v) for v in t[:6])), crs, shape
-    cs = attrs.get("cell_size")
+    cs = upgrade_attrs(attrs).get("cell_size_m")
     if attrs.get("local_grid") and cs:
         dx, dy = (float(cs[0]), float(cs[1])) if np.ndim(cs) else (float(cs), float(cs))
         return Affine(dx, 0.0, 0.0, 0.0, -dy, 0.0), None, shape

@@ -253,7 +253,7 @@ class TerrainType:
         *,
         area_km2: float,
         min_prominence_m: float = 30.0,
-        divide_tree: Any = None,
+        tree: Any = None,
         isolation_basis: str = "peaks",
         rho: float | None = None,
         name: str = "type",
@@ -269,10 +269,10 @@ class TerrainType:
             also ``isolation`` (metres), ``isolation_x``, ``isolation_y``.
         area_km2 : area the peaks were found in (for the density).
         min_prominence_m : only peaks with prominence >= this count.
-        divide_tree : optional :class:`DivideTree` of the same peaks, used to pick rho.
+        tree : optional :class:`DivideTree` of the same peaks, used to pick rho.
         isolation_basis : "peaks" (default, nearest higher peak among the counted peaks,
             comparable with synthesized trees) or "terrain" (the table's isolation).
-        rho : ridge exponent; estimated from ``divide_tree`` when None (default 1).
+        rho : ridge exponent; estimated from ``tree`` when None (default 1).
         crs : CRS of x/y. Geographic (lon/lat): distances are WGS84 geodesics and
             directions geodesic azimuths (through :mod:`orokit.geodesy`), the nearest
             higher peak is searched in a local azimuthal equidistant projection.
@@ -345,7 +345,7 @@ class TerrainType:
         for k in ("isolation_direction", "saddle_direction"):
             hists[k] = FeatureHistogram.from_values(values[k], _direction_edges())
         if rho is None:
-            rho = estimate_rho(divide_tree, min_prominence_m) if divide_tree is not None else 1.0
+            rho = estimate_rho(tree, min_prominence_m) if tree is not None else 1.0
         prov = {
             "area_km2": float(area_km2),
             "n_peaks": int(len(p)),
@@ -370,7 +370,7 @@ class TerrainType:
         frame = pd.concat([pruned.peaks[["x", "y", "elevation"]].reset_index(drop=True),
                            table[["prominence", "saddle_x", "saddle_y"]].reset_index(drop=True)], axis=1)
         return cls.from_peaks(frame, area_km2=area_km2, min_prominence_m=min_prominence_m,
-                              divide_tree=pruned, name=name, rho=rho, provenance=provenance, crs=pruned.crs)
+                              tree=pruned, name=name, rho=rho, provenance=provenance, crs=pruned.crs)
 
     @classmethod
     def from_analysis(cls, result: Any, *, min_prominence_m: float | None = None, name: str | None = None,
@@ -392,7 +392,7 @@ class TerrainType:
             src = str(result)
             result = read_analysis(result)
         attrs = dict(getattr(result, "attrs", {}) or {})
-        eps = float(attrs.get("min_prominence", 30.0) if min_prominence_m is None else min_prominence_m)
+        eps = float(attrs.get("min_prominence_m", 30.0) if min_prominence_m is None else min_prominence_m)
         peaks = pd.DataFrame(result.peaks.drop(columns="geometry", errors="ignore"))
         transform, grid_crs, shape = analysis_grid(attrs, peaks)
         crs = getattr(result, "crs", None)
@@ -400,7 +400,7 @@ class TerrainType:
         area = float(attrs["area_km2"]) if "area_km2" in attrs else grid_area_km2(transform, crs, shape)
         name = name or Path(str(attrs.get("source") or src or "type")).stem
         tt = cls.from_peaks(peaks, area_km2=area, min_prominence_m=eps,
-                            divide_tree=getattr(result, "divide_tree", None), isolation_basis=isolation_basis,
+                            tree=getattr(result, "tree", None), isolation_basis=isolation_basis,
                             rho=rho, name=name, provenance={"source": portable_path(attrs.get("source") or src)},
                             crs=crs)
         if transform is not None and shape is not None and crs is not None and not attrs.get("local_grid"):
@@ -629,8 +629,8 @@ def _check_range(feature: str, h: FeatureHistogram) -> None:
         raise SchemaError(f"{feature} histogram must lie in [0, 360] degrees")
 
 
-def estimate_rho(divide_tree: Any, min_prominence_m: float = 30.0, choices: tuple[float, ...] = (0.0, 1.0, 2.0)) -> float:
-    """Ridge exponent whose Delaunay MST best reproduces the ridges of ``divide_tree``.
+def estimate_rho(tree: Any, min_prominence_m: float = 30.0, choices: tuple[float, ...] = (0.0, 1.0, 2.0)) -> float:
+    """Ridge exponent whose Delaunay MST best reproduces the ridges of ``tree``.
 
     For each candidate rho the MST of the Delaunay triangulation of the peaks is
     built with weight ``|Pi - Pj| / min(h_i, h_j) ** rho``; the rho sharing the most
@@ -638,7 +638,7 @@ def estimate_rho(divide_tree: Any, min_prominence_m: float = 30.0, choices: tupl
     """
     from orokit.synthesis.ridges import delaunay_mst
 
-    tree = divide_tree.prune(min_prominence_m) if min_prominence_m > 0 else divide_tree
+    tree = tree.prune(min_prominence_m) if min_prominence_m > 0 else tree
     if tree.n_peaks < 4:
         return 1.0
     from orokit.synthesis.orometry import planar_xy

@@ -276,7 +276,7 @@ def synthesize_divide_tree(
         domain.crs,
         {
             "units": "m",
-            "min_prominence": float(eps),
+            "min_prominence_m": float(eps),
             "terrain_types": [t.name for t in types],
             "rho": [float(t.rho) for t in types],
             "domain": {"x0": domain.x0, "y0": domain.y0, "width": domain.width, "height": domain.height},

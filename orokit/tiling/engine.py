@@ -87,10 +87,10 @@ def _corrupt_chunk(path: str) -> bool:
         return True
 
 
-def _tile_task(block: np.ndarray, row0: int, col0: int, shape, min_prominence: float,
+def _tile_task(block: np.ndarray, row0: int, col0: int, shape, min_prominence_m: float,
                path: str | None, metric) -> tuple[ChunkSummary, dict | None]:
     block = np.asarray(block, dtype=np.float64)
-    summary = chunk_summary(block, row0, col0, shape, min_prominence)
+    summary = chunk_summary(block, row0, col0, shape, min_prominence_m)
     iso = None
     if metric is not None:
         iso = chunk_isolation(np.ascontiguousarray(block[1:-1, 1:-1]), row0, col0, shape,
@@ -112,20 +112,20 @@ def _merge_iso(parts: list) -> dict | None:
     return out
 
 
-def _checkpoint_dir(checkpoint, data, min_prominence: float) -> Path | None:
+def _checkpoint_dir(checkpoint, data, min_prominence_m: float) -> Path | None:
     if checkpoint is None:
         return None
     fingerprint = {
         "shape": list(data.shape),
         "chunks": [list(c) for c in data.chunks],
-        "min_prominence": float(min_prominence),
+        "min_prominence_m": float(min_prominence_m),
         "graph": data.name,  # dask name: a hash of the source and its processing
         "format": 1,
     }
     return open_checkpoint(checkpoint, fingerprint)
 
 
-def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", scheduler: Any = None,
+def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", scheduler: Any = None,
                    checkpoint=None, progress: bool = False, isolation_metric=None) -> TiledOrometry:
     """Exact orometry of a 2-D dask array (NaN = nodata), chunk by chunk.
 
@@ -147,7 +147,7 @@ def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", sch
     blocks = padded.to_delayed()
     rb = np.concatenate([[0], np.cumsum(data.chunks[0])]).astype(int)
     cb = np.concatenate([[0], np.cumsum(data.chunks[1])]).astype(int)
-    ckpt = _checkpoint_dir(checkpoint, data, min_prominence)
+    ckpt = _checkpoint_dir(checkpoint, data, min_prominence_m)
     tiles = {}
     isos = {}
     reused = 0
@@ -159,8 +159,8 @@ def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", sch
                 reused += 1
             else:
                 task = dask.delayed(_tile_task, nout=2)(
-                    blocks[i, j], int(rb[i]), int(cb[j]), (H, W), float(min_prominence), path, isolation_metric,
-                    dask_key_name=f"orokit-tile-{i}-{j}-{data.name}-{min_prominence}-{isolation_metric is not None}",
+                    blocks[i, j], int(rb[i]), int(cb[j]), (H, W), float(min_prominence_m), path, isolation_metric,
+                    dask_key_name=f"orokit-tile-{i}-{j}-{data.name}-{min_prominence_m}-{isolation_metric is not None}",
                 )
             tiles[i, j], isos[i, j] = task[0], task[1]
     if reused:
@@ -176,11 +176,11 @@ def tiled_orometry(data, *, min_prominence: float, outside: str = "unknown", sch
             m = (j0 + j1) // 2
             a, b = reduce(i0, i1, j0, m), reduce(i0, i1, m, j1)
         return dask.delayed(merge_summaries)(
-            a, b, float(min_prominence), dask_key_name=f"orokit-merge-{i0}-{i1}-{j0}-{j1}-{data.name}"
+            a, b, float(min_prominence_m), dask_key_name=f"orokit-merge-{i0}-{i1}-{j0}-{j1}-{data.name}"
         )
 
     root = reduce(0, len(rb) - 1, 0, len(cb) - 1)
-    final = dask.delayed(finalize_summary)(root, min_prominence=float(min_prominence), outside=outside)
+    final = dask.delayed(finalize_summary)(root, min_prominence_m=float(min_prominence_m), outside=outside)
     # per-chunk maximum and "has NaN" for the isolation search, from the same reads
     raw = data.to_delayed()
     stats = dask.delayed(np.array)(

@@ -78,7 +78,7 @@ def _side_mask(keys: np.ndarray, region, shape) -> np.ndarray:
     )
 
 
-def _reduce(s: ChunkSummary, min_prominence: float, needed: np.ndarray) -> ChunkSummary:
+def _reduce(s: ChunkSummary, min_prominence_m: float, needed: np.ndarray) -> ChunkSummary:
     """Maximum spanning tree of the summary graph, then contract unneeded nodes.
 
     Kept: ``needed`` nodes (side cells) and maxima that are roots or whose
@@ -93,7 +93,7 @@ def _reduce(s: ChunkSummary, min_prominence: float, needed: np.ndarray) -> Chunk
     root = key_edge < 0
     prom = np.full(n, np.inf)
     prom[~root] = s.z[~root] - ez[key_edge[~root]]
-    keep = needed | (s.ismax & (root | ((prom >= min_prominence) & (prom > 0))))
+    keep = needed | (s.ismax & (root | ((prom >= min_prominence_m) & (prom > 0))))
     ta, tb, tz, tk = ea[in_tree], eb[in_tree], ez[in_tree], ekey[in_tree]
     oa, ob, oe, nb, nm = _k.prune_edges(n, ta, tb, tz, keep, s.bmax, s.nmin)
     new_id = np.full(n, -1, np.int64)
@@ -106,7 +106,7 @@ def _reduce(s: ChunkSummary, min_prominence: float, needed: np.ndarray) -> Chunk
 
 
 def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
-                  min_prominence: float) -> ChunkSummary:
+                  min_prominence_m: float) -> ChunkSummary:
     """Summary of one chunk given with a one-cell halo (NaN outside the raster).
 
     Parameters
@@ -154,7 +154,7 @@ def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
     xz = np.concatenate([zf[ec], zf[extra]]).astype(np.float64)
     n_global_max = int(_count_global_maxima(zh, max_cell, w))
     s = ChunkSummary(region, (H, W), key, z, ismax, bmax, nm, xa, xb, xz, xk, n_global_max)
-    return _reduce(s, min_prominence, _side_mask(key, region, shape))
+    return _reduce(s, min_prominence_m, _side_mask(key, region, shape))
 
 
 def _count_global_maxima(zh, max_cell, w) -> int:
@@ -171,7 +171,7 @@ def _count_global_maxima(zh, max_cell, w) -> int:
     return int(ok.sum())
 
 
-def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence: float) -> ChunkSummary:
+def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence_m: float) -> ChunkSummary:
     """Exact merge of the summaries of two rectangles that together form a rectangle."""
     H, W = a.shape
     region = (min(a.region[0], b.region[0]), max(a.region[1], b.region[1]),
@@ -207,10 +207,10 @@ def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence: float) -> 
         np.concatenate([a.ez, b.ez, sz]), np.concatenate([a.ekey, b.ekey, sk]),
         a.n_maxima + b.n_maxima,
     )
-    return _reduce(s, min_prominence, _side_mask(s.key, region, s.shape))
+    return _reduce(s, min_prominence_m, _side_mask(s.key, region, s.shape))
 
 
-def finalize_summary(s: ChunkSummary, *, min_prominence: float, outside: str) -> Orometry:
+def finalize_summary(s: ChunkSummary, *, min_prominence_m: float, outside: str) -> Orometry:
     """Peaks and Divide Tree of the whole raster from its root summary."""
     if s.n_nodes == 0:
         from orokit.errors import InputError
@@ -218,6 +218,6 @@ def finalize_summary(s: ChunkSummary, *, min_prominence: float, outside: str) ->
         raise InputError("the DEM has no valid cells (all nodata)")
     return finalize_graph(
         node_key=s.key, node_z=s.z, node_bmax=s.bmax, node_nmin=s.nmin, node_ismax=s.ismax,
-        ea=s.ea, eb=s.eb, ez=s.ez, ekey=s.ekey, min_prominence=min_prominence, outside=outside,
+        ea=s.ea, eb=s.eb, ez=s.ez, ekey=s.ekey, min_prominence_m=min_prominence_m, outside=outside,
         shape=s.shape, n_maxima=s.n_maxima,
     )

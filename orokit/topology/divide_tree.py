@@ -201,8 +201,8 @@ class DivideTree:
         return pd.DataFrame({"line_parent": lp, "prominence_parent": pp}, index=self.peaks.index)
 
     # ----------------------------------------------------------------- pruning
-    def prune(self, min_prominence: float) -> "DivideTree":
-        """Keep the peaks with prominence >= ``min_prominence`` and rewire the ridges.
+    def prune(self, min_prominence_m: float) -> "DivideTree":
+        """Keep the peaks with prominence >= ``min_prominence_m`` and rewire the ridges.
 
         Removed peaks are absorbed into the neighbour across their highest saddle, so
         the bottleneck (highest) saddle between any two kept peaks is unchanged and
@@ -212,8 +212,8 @@ class DivideTree:
         renumbered in their previous order.
         """
         table = self.prominence_table()
-        keep = (table["prominence"].to_numpy() >= min_prominence)
-        if min_prominence <= 0:
+        keep = (table["prominence"].to_numpy() >= min_prominence_m)
+        if min_prominence_m <= 0:
             # zero-prominence maxima are not peaks (flat shelves, plateau duplicates)
             keep &= (table["prominence"].to_numpy() > 0) | (table["key_saddle"].to_numpy() < 0)
         return self.subset(keep)

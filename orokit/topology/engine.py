@@ -104,7 +104,7 @@ def basin_graph(z: np.ndarray, label: np.ndarray, n_max: int) -> tuple[np.ndarra
     return bmax, nmin, ea[sel], eb[sel], ec[sel]
 
 
-def orometry(z: np.ndarray, *, min_prominence: float, outside: str = "unknown") -> Orometry:
+def orometry(z: np.ndarray, *, min_prominence_m: float, outside: str = "unknown") -> Orometry:
     """Exact peaks, prominences and pruned Divide Tree of a 2-D array (NaN = nodata).
 
     Uses every numba thread (``NUMBA_NUM_THREADS``); results do not depend on it.
@@ -133,7 +133,7 @@ def orometry(z: np.ndarray, *, min_prominence: float, outside: str = "unknown") 
         eb=eb,
         ez=zf[ec].astype(np.float64),
         ekey=ec,
-        min_prominence=min_prominence,
+        min_prominence_m=min_prominence_m,
         outside=outside,
         shape=z.shape,
         n_maxima=n_max,
@@ -151,7 +151,7 @@ def finalize_graph(
     eb: np.ndarray,
     ez: np.ndarray,
     ekey: np.ndarray,
-    min_prominence: float,
+    min_prominence_m: float,
     outside: str,
     shape: tuple[int, int],
     n_maxima: int,
@@ -178,7 +178,7 @@ def finalize_graph(
     dmin = np.full(n, np.inf)
     np.minimum.at(dmin, dom, node_nmin)
     flat_root = is_root & (dmin[dom] >= node_z)
-    keep = np.where(is_root, (min_prominence <= 0) | (node_z >= min_prominence), prom >= min_prominence)
+    keep = np.where(is_root, (min_prominence_m <= 0) | (node_z >= min_prominence_m), prom >= min_prominence_m)
     keep &= is_root | (prom > 0)
     keep &= ~flat_root & node_ismax
     # a kept peak needs its parent: keep the root of every domain with a kept peak

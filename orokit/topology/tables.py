@@ -17,15 +17,39 @@ from typing import Any, Literal
 import pandas as pd
 
 from orokit.errors import SchemaError
+from orokit.geodesy import cell_size_key
 from orokit.topology.divide_tree import DivideTree
 
 __all__ = [
     "Column", "PEAK_SCHEMA", "PEAK_COLUMNS", "OROMETRY_COLUMNS", "SADDLE_SCHEMA", "SADDLE_COLUMNS", "NONE_ID",
-    "AnalysisResult", "validate_peak_table", "validate_saddle_table",
+    "AnalysisResult", "validate_peak_table", "validate_saddle_table", "upgrade_attrs",
 ]
 
 #: "none" of every integer column (raster cell, peak id)
 NONE_ID = -1
+
+
+def upgrade_attrs(attrs: Any, *, geographic: bool | None = None) -> dict[str, Any]:
+    """Metadata read from a file, with the keys of files written before orokit's naming rules.
+
+    ``min_prominence`` becomes ``min_prominence_m``; ``cell_size`` becomes ``cell_size_deg`` on a
+    geographic grid (``geographic``, else the attrs' own ``crs_geographic``), else ``cell_size_m``;
+    the former pair ``res`` is dropped when the cell size is known. A current key always wins.
+
+    >>> upgrade_attrs({"min_prominence": 30.0, "cell_size": [92.6, 92.6]})
+    {'min_prominence_m': 30.0, 'cell_size_m': [92.6, 92.6]}
+    """
+    out = dict(attrs or {})
+    if "min_prominence" in out:
+        value = out.pop("min_prominence")
+        out.setdefault("min_prominence_m", value)
+    if "cell_size" in out:
+        value = out.pop("cell_size")
+        geo = bool(out.get("crs_geographic", False)) if geographic is None else geographic
+        out.setdefault(cell_size_key(geo), value)
+    if "res" in out and ("cell_size_m" in out or "cell_size_deg" in out):
+        out.pop("res")
+    return out
 
 
 @dataclass(frozen=True)
@@ -152,7 +176,7 @@ class AnalysisResult:
     ----------
     peaks : GeoDataFrame indexed by ``peak_id`` with :data:`PEAK_COLUMNS` (:data:`PEAK_SCHEMA`).
     saddles : GeoDataFrame indexed by ``saddle_id`` with :data:`SADDLE_COLUMNS`.
-    divide_tree : the Divide Tree pruned at the threshold (same ids).
+    tree : the Divide Tree pruned at the threshold (same ids).
     crs : CRS of x/y (None for a local metric grid without CRS).
     attrs : metadata (threshold, outside convention, units, source, dataset, shape,
         ``transform`` (affine a, b, c, d, e, f of the grid), ``crs_geographic``, timings).
@@ -162,14 +186,14 @@ class AnalysisResult:
 
     peaks: Any
     saddles: Any
-    divide_tree: DivideTree
+    tree: DivideTree
     crs: Any = None
     attrs: dict = field(default_factory=dict)
     depressions: Any = None
 
     def __repr__(self) -> str:  # pragma: no cover - cosmetic
         return (
-            f"AnalysisResult({len(self.peaks)} peaks >= {self.attrs.get('min_prominence')} m, "
+            f"AnalysisResult({len(self.peaks)} peaks >= {self.attrs.get('min_prominence_m')} m, "
             f"{len(self.saddles)} saddles, crs={self.crs})"
         )
 

@@ -28,18 +28,18 @@ def near_share(points_rc: np.ndarray, targets_rc: np.ndarray, shape: tuple[int, 
 
 
 def compare_with_reference(peaks_all, reference_tree, shape: tuple[int, int], *,
-                           min_prominence: float = 100 * 0.3048, elevation_error: float = 2 * 0.3048) -> dict:
+                           min_prominence_m: float = 100 * 0.3048, elevation_error: float = 2 * 0.3048) -> dict:
     """Shares between a peaks table computed at eps = 0 and a reference tree.
 
     Returns ``ref_in_ours`` (reference peaks at or next to one of ours),
-    ``ours_in_ref`` (our exact peaks with prominence >= ``min_prominence`` +
+    ``ours_in_ref`` (our exact peaks with prominence >= ``min_prominence_m`` +
     ``elevation_error`` at or next to a reference peak) and the counts.
     """
     ref_rc = reference_tree.peaks[["row", "col"]].to_numpy()
     ours = peaks_all[["row", "col"]].to_numpy()
     prom = peaks_all["prominence"].to_numpy(float)
     exact = peaks_all["prominence_exact"].to_numpy(bool)
-    strong = ours[(prom >= min_prominence + elevation_error) & exact]
+    strong = ours[(prom >= min_prominence_m + elevation_error) & exact]
     return {
         "reference_peaks": int(len(ref_rc)),
         "our_peaks_eps0": int(len(ours)),

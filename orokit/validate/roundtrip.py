@@ -65,10 +65,10 @@ class PeakComparison:
 
 
 def compare_peaks(
-    divide_tree,
+    tree,
     raster_peaks: pd.DataFrame,
     *,
-    min_prominence: float = 30.0,
+    min_prominence_m: float = 30.0,
     distance_tol_m: float = 200.0,
     prominence_tol_m: float = 15.0,
     prominence_tol_rel: float = 0.1,
@@ -82,9 +82,9 @@ def compare_peaks(
     """
     if distance_tol_m <= 0 or not math.isfinite(distance_tol_m):
         raise InputError(f"distance_tol_m must be a positive number of metres, got {distance_tol_m!r}")
-    prom = divide_tree.prominence_table()["prominence"].to_numpy(float)
-    tp = divide_tree.peaks[["x", "y"]].to_numpy(float)
-    keep = prom >= min_prominence
+    prom = tree.prominence_table()["prominence"].to_numpy(float)
+    tp = tree.peaks[["x", "y"]].to_numpy(float)
+    keep = prom >= min_prominence_m
     rp = raster_peaks[["x", "y"]].to_numpy(float)
     rprom = raster_peaks["prominence"].to_numpy(float)
     rows = pd.DataFrame({"x": tp[keep, 0], "y": tp[keep, 1], "prominence": prom[keep]},
@@ -101,7 +101,7 @@ def compare_peaks(
         rows["raster_prominence"] = np.nan
     tol = np.maximum(prominence_tol_m, prominence_tol_rel * rows["prominence"].to_numpy())
     rows["recovered"] = (rows["matched"] >= 0) & (np.abs(rows["raster_prominence"] - rows["prominence"]) <= tol)
-    big = rprom >= min_prominence
+    big = rprom >= min_prominence_m
     if len(tp) and big.any():
         d_any, _ = cKDTree(tp).query(rp[big])
         extra = raster_peaks[big][d_any > distance_tol_m]
@@ -142,9 +142,9 @@ class RoundTrip:
 
 def roundtrip(
     dem,
-    divide_tree,
+    tree,
     *,
-    min_prominence: float = 30.0,
+    min_prominence_m: float = 30.0,
     terrain_type: Any = None,
     model: Any = None,
     expected_label: str | None = None,
@@ -152,13 +152,13 @@ def roundtrip(
     analysis: Any = None,
     rng: Any = 0,
 ) -> RoundTrip:
-    """Re-analyse ``dem`` (same engine, same eps) and compare it with ``divide_tree``.
+    """Re-analyse ``dem`` (same engine, same eps) and compare it with ``tree``.
 
     Parameters
     ----------
     dem : rendered raster (DataArray in metres, e.g. from ``render_elevation``).
-    divide_tree : the tree it was rendered from.
-    min_prominence : eps used for the analysis and the comparison.
+    tree : the tree it was rendered from.
+    min_prominence_m : eps used for the analysis and the comparison.
     terrain_type : optional :class:`~orokit.synthesis.terrain_type.TerrainType`; the
         raster's Divide Tree is compared with its histograms (max bin error, EMD).
     model : optional trained region model (``orokit.classify.model.load_model``); the
@@ -172,15 +172,15 @@ def roundtrip(
     import orokit
 
     if analysis is None:
-        analysis = orokit.analyze(dem, min_prominence=min_prominence, isolation=model is not None)
-    res = abs(float(dem.rio.transform().a)) if hasattr(dem, "rio") else float(dem.attrs.get("cell_size", 30.0))
+        analysis = orokit.analyze(dem, min_prominence_m=min_prominence_m, isolation=model is not None)
+    res = abs(float(dem.rio.transform().a))
     tol = distance_tol_m if distance_tol_m is not None else max(2.0 * res, 100.0)
-    comp = compare_peaks(divide_tree, analysis.peaks, min_prominence=min_prominence, distance_tol_m=tol)
+    comp = compare_peaks(tree, analysis.peaks, min_prominence_m=min_prominence_m, distance_tol_m=tol)
     hist = None
     if terrain_type is not None:
         from orokit.synthesis.fidelity import compare_to_type
 
-        hist = compare_to_type(analysis.divide_tree, terrain_type)
+        hist = compare_to_type(analysis.tree, terrain_type)
         if expected_label is None:
             expected_label = getattr(terrain_type, "name", None)
     pred = None
@@ -189,20 +189,20 @@ def roundtrip(
         from orokit.classify.predict import predict_regions
 
         feats = features_from_dem(dem, radius_m=model.radius_m, analysis=analysis, feature_set=model.feature_set,
-                                  **model_feature_options(model.metadata, min_prominence=min_prominence), rng=rng)
+                                  **model_feature_options(model.metadata, min_prominence_m=min_prominence_m), rng=rng)
         pred = predict_regions(model, feats, threshold=0.0)  # the best region, never "unknown"
-    attrs = {"min_prominence": float(min_prominence), "raster_peaks": int(len(analysis.peaks)),
+    attrs = {"min_prominence_m": float(min_prominence_m), "raster_peaks": int(len(analysis.peaks)),
              "cell_size_m": res, "shape": f"{dem.shape[1]}x{dem.shape[0]}"}
     logger.info("round trip: %.1f %% of %d tree peaks recovered, %d extra",
                 100 * comp.recovered_share, comp.n_tree, len(comp.extra))
     return RoundTrip(comp, hist, pred, expected_label, attrs)
 
 
-def model_feature_options(metadata: dict[str, Any], *, min_prominence: float = 30.0) -> dict[str, Any]:
+def model_feature_options(metadata: dict[str, Any], *, min_prominence_m: float = 30.0) -> dict[str, Any]:
     """Feature options a model was trained with (eps, minimum peaks per disk, relative
     elevation), so the raster's disks are described the same way.
 
-    Only missing (``None``) entries take the defaults (``min_prominence``, 20 peaks,
+    Only missing (``None``) entries take the defaults (``min_prominence_m``, 20 peaks,
     ``"minmax"``): an explicit 0 is kept.
 
     Examples
@@ -213,7 +213,7 @@ def model_feature_options(metadata: dict[str, Any], *, min_prominence: float = 3
     eps = metadata.get("min_prominence_m")
     min_peaks = metadata.get("min_peaks")
     rel = metadata.get("relative_elevation")
-    return {"min_prominence_m": float(eps if eps is not None else min_prominence),
+    return {"min_prominence_m": float(eps if eps is not None else min_prominence_m),
             "min_peaks": int(min_peaks if min_peaks is not None else 20),
             "relative_elevation": rel if rel is not None else "minmax"}
 

@@ -45,7 +45,7 @@ def _orokit_ft(peaks) -> pd.DataFrame:
 @pytest.mark.parametrize("eps_ft", [0.5, vk.EPS_FT])
 def test_kirmse_parser_agrees_with_orokit_and_reference_tree(real_data, kirmse_bin, tmp_path, eps_ft):
     png = real_data("dems/highlands.png")
-    dem_ft = read_dem(png, z_units="ft", cell_size=92.61)
+    dem_ft = read_dem(png, z_units="ft", cell_size_m=92.61)
     z_ft = np.rint(np.asarray(dem_ft.values, np.float64) / FT)
     # a void, so the parser meets nodata and the half turn a non-trivial raster
     z_ft[300:310, 100:400] = np.nan
@@ -62,7 +62,7 @@ def test_kirmse_parser_agrees_with_orokit_and_reference_tree(real_data, kirmse_b
 
     dem = read_dem(vk.write_geotiff_m(z_ft, tmp_path / "dem.tif"))
     assert dem.attrs["units"] == "m" and dem.shape == z_ft.shape
-    ours = orokit.analyze(dem, min_prominence=eps_ft * FT, isolation=False).peaks
+    ours = orokit.analyze(dem, min_prominence_m=eps_ft * FT, isolation=False).peaks
     cmp = vk.compare_peaks(kirmse, _orokit_ft(ours), z_ft)
     assert cmp["identical"], cmp
     assert cmp["same_elevation_prominence_pairs"]

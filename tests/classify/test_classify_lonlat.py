@@ -160,7 +160,7 @@ def _geographic_analysis(make_dem, tmp_path, *, dataset: str = ""):
     if dataset:
         dem.attrs["dataset"] = dataset
     out = tmp_path / "ana"
-    write_analysis(orokit.analyze(dem, min_prominence=30.0), out)
+    write_analysis(orokit.analyze(dem, min_prominence_m=30.0), out)
     return dem, out
 
 

@@ -46,7 +46,7 @@ def _centre_features(make_dem, z: np.ndarray, fs: FeatureSet) -> pd.Series:
     import orokit
 
     dem = make_dem(z.astype(np.float64), res=RES)
-    res = orokit.analyze(dem, min_prominence=0.0)
+    res = orokit.analyze(dem, min_prominence_m=0.0)
     peaks = peak_geometry(res.peaks, crs=dem.rio.crs)
     t = dem.rio.transform()
     cx, cy = t * (N // 2 + 0.5, N // 2 + 0.5)  # centre of the middle cell, the fixed point of rot90 / flips

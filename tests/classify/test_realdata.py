@@ -25,7 +25,7 @@ def test_real_dems_classify_well_above_chance(real_data):
         for k, name in enumerate(DEMS):
             real_data(name)  # fails in CI / skips elsewhere when the data cannot be obtained
             dem = open_dataset_dem(name)  # units and cell size from the manifest
-            res = orokit.analyze(dem, min_prominence=30.0)
+            res = orokit.analyze(dem, min_prominence_m=30.0)
             tables.append(features_from_dem(dem, analysis=res, radius_m=10_000.0, label=name, rng=k))
     feats = concat_features(tables)
     counts = feats["label"].value_counts()

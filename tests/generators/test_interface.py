@@ -155,7 +155,7 @@ def test_roundtrip_runs_on_a_belhadj_raster():
 
     tree = small_tree()
     dem = render_terrain(tree, generator="belhadj", resolution_m=50.0, seed=0)
-    s = roundtrip(dem, tree, min_prominence=30.0).summary()
+    s = roundtrip(dem, tree, min_prominence_m=30.0).summary()
     assert s["tree_peaks"] == 5
     assert 0.0 <= s["recovered_share"] <= 1.0
     # the highest tree peak is the raster's maximum cell only if MD did not rise above it; the

@@ -34,7 +34,7 @@ def test_ascii_grid_with_wide_rows_is_refused(tmp_path):
     rows = [[1, 2, 3, 4], [5, 6, 7, 8, 9], [9, 8, 7, 6]]
     p = _asc(tmp_path / "wide.asc", rows, ncols=4, nrows=3)
     with pytest.raises(InputError, match=r"wide.asc: data row 2 holds 5 values but the header says ncols 4"):
-        read_dem(p, z_units="m", cell_size=30)
+        read_dem(p, z_units="m", cell_size_m=30)
     res = CliRunner().invoke(cli, ["analyze", str(p), "-o", str(tmp_path / "o"), "--z-units", "m"])
     assert res.exit_code == 1 and "ncols 4" in res.output and "Traceback" not in res.output
     assert not (tmp_path / "o").exists()

@@ -22,7 +22,7 @@ def result():
     z = rng.normal(0, 1, (40, 50)).cumsum(0).cumsum(1).astype(np.float32) + 500.0
     dem = xr.DataArray(z, dims=("y", "x"),
                        coords={"y": 30.0 * np.arange(40)[::-1] + 15, "x": 30.0 * np.arange(50) + 15})
-    return orokit.analyze(dem.rio.write_crs("EPSG:32633"), min_prominence=2.0)
+    return orokit.analyze(dem.rio.write_crs("EPSG:32633"), min_prominence_m=2.0)
 
 
 def _same_tree(a, b):
@@ -49,19 +49,19 @@ def test_analysis_gpkg_peaks_layer_carries_the_orometry(result, tmp_path):
     # the reader returns the tree without the derived columns
     back = read_divide_tree(tmp_path / "a")
     assert not set(OROMETRY_COLUMNS) & set(back.peaks.columns)
-    _same_tree(back, result.divide_tree)
+    _same_tree(back, result.tree)
 
 
 def test_gpkg_peaks_table_must_match_the_tree(result, tmp_path):
     with pytest.raises(InputError, match="rows but the tree"):
-        write_divide_tree_gpkg(result.divide_tree, tmp_path / "t.gpkg", peaks=result.peaks.iloc[:-1])
+        write_divide_tree_gpkg(result.tree, tmp_path / "t.gpkg", peaks=result.peaks.iloc[:-1])
     with pytest.raises(SchemaError):
-        write_divide_tree_gpkg(result.divide_tree, tmp_path / "t.gpkg", peaks=result.peaks.drop(columns="island_parent"))
+        write_divide_tree_gpkg(result.tree, tmp_path / "t.gpkg", peaks=result.peaks.drop(columns="island_parent"))
     assert not (tmp_path / "t.gpkg").exists()
 
 
 def test_user_column_named_like_an_orometry_column_survives(result, tmp_path):
-    tree = result.divide_tree
+    tree = result.tree
     peaks = tree.peaks.assign(prominence=np.arange(tree.n_peaks, dtype=float))
     tagged = type(tree)(peaks, tree.saddles, tree.edges, tree.crs, dict(tree.attrs))
     write_divide_tree_gpkg(tagged, tmp_path / "t.gpkg")
@@ -69,9 +69,9 @@ def test_user_column_named_like_an_orometry_column_survives(result, tmp_path):
 
 
 def test_read_divide_tree_dispatch(result, tmp_path):
-    tree = result.divide_tree
-    write_divide_tree_txt(tree, tmp_path / "t.txt", z_units="m", height=40, cell_size=30.0)
-    back = read_divide_tree(tmp_path / "t.txt", cell_size=30.0, z_units="m")
+    tree = result.tree
+    write_divide_tree_txt(tree, tmp_path / "t.txt", z_units="m", height=40, cell_size_m=30.0)
+    back = read_divide_tree(tmp_path / "t.txt", cell_size_m=30.0, z_units="m")
     assert back.n_peaks == tree.n_peaks
     assert np.allclose(back.peaks["elevation"], tree.peaks["elevation"], atol=1e-6)
     with pytest.raises(InputError, match="unknown Divide Tree format '.csv'"):
@@ -85,7 +85,7 @@ def test_synthesis_files_carry_the_same_columns(result, tmp_path):
     from orokit.io.synthesis_io import write_synthesis
     from orokit.synthesis.tree import peaks_table
 
-    tree = result.divide_tree
+    tree = result.tree
     bare = type(tree)(tree.peaks[["x", "y", "elevation"]], tree.saddles[["x", "y", "elevation"]], tree.edges,
                       tree.crs, {})
     table = peaks_table(bare)

@@ -141,7 +141,7 @@ def test_library_write_takes_the_lock(tmp_path, make_dem):
     import orokit
     from orokit.analysis import write_analysis
 
-    r = orokit.analyze(make_dem(np.arange(30.0).reshape(5, 6) % 7), min_prominence=0)
+    r = orokit.analyze(make_dem(np.arange(30.0).reshape(5, 6) % 7), min_prominence_m=0)
     out = tmp_path / "out"
     fd = os.open(lock_path_for(out), os.O_RDWR | os.O_CREAT)
     try:

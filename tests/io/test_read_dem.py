@@ -56,7 +56,7 @@ def test_geotiff_projected_int16_nodata(tmp_path):
     np.testing.assert_allclose(dem.y.values, 4000000 - 15 - 30 * np.arange(2))
     a = dem.attrs
     assert a["units"] == "m" and a["local_grid"] is False and a["z_units_in"] == "m" and a["z_units_assumed"]
-    assert a["cell_size"] == 30.0 and a["source"] == str(p) and a["nodata_in"] == -32768
+    assert a["cell_size_m"] == (30.0, 30.0) and a["source"] == str(p) and a["nodata_in"] == -32768
 
 
 def test_geotiff_geographic(tmp_path):
@@ -64,10 +64,10 @@ def test_geotiff_geographic(tmp_path):
     p = write_tif(tmp_path / "g.tif", np.arange(12, dtype=np.int16).reshape(3, 4) + 150, crs="EPSG:4326", transform=t)
     dem = read_dem(p)
     assert dem.rio.crs.is_geographic and dem.attrs["local_grid"] is False
-    assert dem.attrs["res"] == pytest.approx((1 / 1200, 1 / 1200))
+    assert dem.attrs["cell_size_deg"] == pytest.approx((1 / 1200, 1 / 1200)) and "cell_size_m" not in dem.attrs
     np.testing.assert_allclose(dem.x.values[0], -97.5 + 0.5 / 1200)
     with pytest.raises(CRSError, match="geographic"):
-        read_dem(p, cell_size=30.0)
+        read_dem(p, cell_size_m=30.0)
 
 
 def test_float32_sentinel_nodata_compared_in_native_dtype(tmp_path):
@@ -133,9 +133,9 @@ def test_crs_conflict_and_assignment(tmp_path):
 
 def test_cell_size_conflicts_with_file(tmp_path):
     p = write_tif(tmp_path / "c.tif", np.ones((2, 2), np.int16))
-    assert read_dem(p, cell_size=30.0).attrs["cell_size"] == 30.0
+    assert read_dem(p, cell_size_m=30.0).attrs["cell_size_m"] == (30.0, 30.0)
     with pytest.raises(CRSError, match="conflicts"):
-        read_dem(p, cell_size=25.0)
+        read_dem(p, cell_size_m=25.0)
 
 
 # --------------------------------------------------------------------------- SRTM .hgt
@@ -231,11 +231,11 @@ def test_png16_feet_local_grid(tmp_path):
     raw = np.array([[0, 1000, 65535], [29029, 7, 12]], dtype=np.uint16)
     p = write_png16(tmp_path / "d.png", raw)
     with pytest.raises(UnitsError, match="z_units"):
-        read_dem(p, cell_size=92.61)
+        read_dem(p, cell_size_m=92.61)
     with pytest.raises(CRSError, match="cell_size"):
         read_dem(p, z_units="ft")
     with pytest.warns(OrokitWarning, match=r"1 cells hold void markers .*65535"):
-        dem = read_dem(p, z_units="ft", cell_size=92.61)
+        dem = read_dem(p, z_units="ft", cell_size_m=92.61)
     # exact x 0.3048 from the integer values, no uint16 overflow; 65535 ft (19,975 m) is a void marker
     np.testing.assert_allclose(dem.values, np.where(raw == 65535, np.nan, raw.astype(np.float64) * 0.3048), rtol=1e-7)
     assert np.isnan(dem.values[0, 2]) and dem.values[1, 0] == pytest.approx(29029 * 0.3048)
@@ -245,16 +245,16 @@ def test_png16_feet_local_grid(tmp_path):
     np.testing.assert_allclose(dem.x.values, [46.305, 138.915, 231.525])
     np.testing.assert_allclose(dem.y.values, [-46.305, -138.915])  # y decreases downward
     with pytest.raises(CRSError, match="geographic"):
-        read_dem(p, z_units="ft", cell_size=92.61, crs="EPSG:4326")
+        read_dem(p, z_units="ft", cell_size_m=92.61, crs="EPSG:4326")
 
 
 def test_png16_nonsquare_cell_size(tmp_path):
     p = write_png16(tmp_path / "d.png", np.ones((2, 3)))
-    dem = read_dem(p, z_units="m", cell_size=(78.0, 92.6))
-    assert dem.attrs["res"] == (78.0, 92.6)
+    dem = read_dem(p, z_units="m", cell_size_m=(78.0, 92.6))
+    assert dem.attrs["cell_size_m"] == (78.0, 92.6)
     for bad in (0, -3, float("nan"), "abc", (1, 2, 3)):
         with pytest.raises(InputError, match="cell_size"):
-            read_dem(p, z_units="m", cell_size=bad)
+            read_dem(p, z_units="m", cell_size_m=bad)
 
 
 # --------------------------------------------------------------------------- chunks

@@ -38,7 +38,7 @@ def test_real_dem_reads(real_data, name):
     lo, hi = RANGES.get(name, (-50.0, 8900.0))
     assert lo <= np.nanmin(z) and np.nanmax(z) <= hi, (np.nanmin(z), np.nanmax(z))
     if ds.local_grid:
-        assert dem.rio.crs is None and dem.attrs["cell_size"] == ds.cell_size_m
+        assert dem.rio.crs is None and dem.attrs["cell_size_m"] == (ds.cell_size_m, ds.cell_size_m)
         assert dem.x.values[-1] == pytest.approx((ds.shape[1] - 0.5) * ds.cell_size_m)
     else:
         assert dem.rio.crs.to_string() == ds.crs

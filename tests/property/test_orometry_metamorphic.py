@@ -23,7 +23,7 @@ SYMMETRIES = {
 
 
 def _peaks(z, eps=0.0, **kw):
-    return orokit.analyze(make_dem(np.ascontiguousarray(z)), min_prominence=eps, isolation=False, **kw).peaks
+    return orokit.analyze(make_dem(np.ascontiguousarray(z)), min_prominence_m=eps, isolation=False, **kw).peaks
 
 
 def _prom_multiset(peaks):
@@ -116,8 +116,8 @@ def test_pruning_keeps_survivors(z, eps):
 
 
 def _check_tree(z, eps):
-    res = orokit.analyze(make_dem(z), min_prominence=eps, isolation=False)
-    peaks, tree = res.peaks, res.divide_tree
+    res = orokit.analyze(make_dem(z), min_prominence_m=eps, isolation=False)
+    peaks, tree = res.peaks, res.tree
     tree.validate()  # ids, acyclic, saddles below both ends
     assert tree.n_peaks == len(peaks)
     np.testing.assert_array_equal(tree.peaks["elevation"].to_numpy(float), peaks["elevation"].to_numpy(float))
@@ -153,7 +153,7 @@ def test_written_tree_reads_back(tmp_path, eps):
     from orokit.io.divide_tree_io import read_divide_tree_gpkg, write_divide_tree_gpkg
 
     z = np.array([[1, 5, 1, 1, 7], [1, 2, 1, 3, 1], [4, 1, 1, 1, 6]], np.float32)
-    tree = orokit.analyze(make_dem(z), min_prominence=eps).divide_tree
+    tree = orokit.analyze(make_dem(z), min_prominence_m=eps).tree
     back = read_divide_tree_gpkg(write_divide_tree_gpkg(tree, tmp_path / "t.gpkg"))
     assert back.equals(tree)
     assert back.crs is not None and back.crs.to_epsg() == 32633

@@ -48,7 +48,7 @@ def _small_tree_bytes(tmp_path_factory) -> bytes:
         [[3.5 * 92.61, -1.5 * 92.61, 800.0], [7.5 * 92.61, -4.5 * 92.61, 850.0], [2.5 * 92.61, -5.5 * 92.61, 600.0]],
         [[0, 1, 0], [1, 2, 1], [0, 3, 2]], crs=None)
     p = tmp_path_factory.mktemp("fuzz") / "tree.txt"
-    write_divide_tree_txt(tree, p, height=10, cell_size=92.61)
+    write_divide_tree_txt(tree, p, height=10, cell_size_m=92.61)
     return p.read_bytes()
 
 

@@ -42,7 +42,7 @@ def test_cap_basins_closes_a_bypass_above_the_saddle():
     z[5, 2:9] = [100, 83, 66, 50, 63, 76, 90]  # the ridge A - saddle - B (row 5)
     z[3, 2:9] = 70.0  # a shelf higher than the saddle joining both flanks
     z[4, 2], z[4, 8] = 85.0, 80.0
-    before = orokit.analyze(as_dem(z), min_prominence=0.0, isolation=False).peaks
+    before = orokit.analyze(as_dem(z), min_prominence_m=0.0, isolation=False).peaks
     assert before.loc[(before["row"] == 5) & (before["col"] == 8), "prominence"].item() == pytest.approx(20.0)
     grid = Grid(0.0, 1000.0, 1.0, 9, 11)
     centre = lambda r, c: [c + 0.5, 1000.0 - r - 0.5]  # noqa: E731
@@ -54,7 +54,7 @@ def test_cap_basins_closes_a_bypass_above_the_saddle():
     floor[5, 2] = floor[5, 8] = floor[5, 5] = np.inf
     stats = cap_basins(z, grid, skel, floor=floor, drop_m=0.5)
     assert stats["left"] == 0 and stats["capped"] > 0
-    after = orokit.analyze(as_dem(z), min_prominence=0.0, isolation=False).peaks
+    after = orokit.analyze(as_dem(z), min_prominence_m=0.0, isolation=False).peaks
     b = after[(after["row"] == 5) & (after["col"] == 8)]
     assert b["prominence"].item() == pytest.approx(40.0)  # 90 - 50: the tree's saddle is the key saddle again
     assert (z[5, [2, 5, 8]] == [100, 50, 90]).all()  # peaks and saddle untouched
@@ -79,7 +79,7 @@ def test_saddle_in_the_cell_of_its_peak_keeps_the_peak():
     tree = DivideTree.from_arrays([[2000.0, 2000.0, 900.0], [4060.0, 2050.0, 700.0]],
                                   [[4010.0, 2020.0, 600.0]], [[0, 1, 0]], attrs={"extent": [0, 0, 6000, 4000]})
     dem = render_elevation(tree, resolution_m=100.0, erosion=False, rng=0)
-    res = orokit.analyze(dem, min_prominence=30.0, isolation=False)
-    comp = compare_peaks(tree, res.peaks, min_prominence=30.0, distance_tol_m=200.0)
+    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=200.0)
     assert comp.recovered_share == 1.0
     assert comp.peaks["raster_prominence"].to_numpy() == pytest.approx([900.0, 100.0], abs=5.0)

@@ -17,8 +17,8 @@ def everest(real_data):
     from orokit.io.dem import read_dem
 
     ds = load_manifest()["himalaya-everest"]
-    dem = read_dem(real_data("himalaya-everest"), z_units=ds.z_units, cell_size=ds.cell_size_m)
-    tree = orokit.analyze(dem, min_prominence=30.0, isolation=False).divide_tree
+    dem = read_dem(real_data("himalaya-everest"), z_units=ds.z_units, cell_size_m=ds.cell_size_m)
+    tree = orokit.analyze(dem, min_prominence_m=30.0, isolation=False).tree
     return dem, tree
 
 
@@ -69,5 +69,5 @@ def test_render_of_a_real_tree_has_real_slopes_and_relief(everest):
     table = compare_landforms(dem, out)
     for stat in ("slope_deg", "relief_1km", "hypsometry", "flat_share"):
         assert table.loc[stat, "ok"], table
-    s = roundtrip(out, tree, min_prominence=30.0).summary()
+    s = roundtrip(out, tree, min_prominence_m=30.0).summary()
     assert s["recovered_share"] >= 0.95 and s["extra_share"] <= 0.05

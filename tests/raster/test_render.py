@@ -87,8 +87,8 @@ def test_raster_honours_peaks_and_saddles(rendered):
 
 def test_round_trip_recovers_every_peak(rendered):
     tree, dem, _ = rendered
-    res = orokit.analyze(dem, min_prominence=30.0, isolation=False)
-    comp = compare_peaks(tree, res.peaks, min_prominence=30.0, distance_tol_m=100.0)
+    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
     assert comp.recovered_share == 1.0
     assert len(comp.extra) == 0
     got = comp.peaks["raster_prominence"].to_numpy()
@@ -102,8 +102,8 @@ def test_resolution_independence():
     proms = []
     for res in (100.0, 40.0):
         dem = render_elevation(tree, resolution_m=res, erosion=False, params=FAST, rng=3)
-        r = orokit.analyze(dem, min_prominence=30.0, isolation=False)
-        comp = compare_peaks(tree, r.peaks, min_prominence=30.0, distance_tol_m=2 * res)
+        r = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
+        comp = compare_peaks(tree, r.peaks, min_prominence_m=30.0, distance_tol_m=2 * res)
         assert comp.recovered_share == 1.0
         proms.append(comp.peaks["raster_prominence"].to_numpy())
     # consistent within eps / 3 (10 m): discretisation beside saddles grows with the cell
@@ -139,8 +139,8 @@ def test_single_peak_and_collinear_trees_render():
                                   [[1500.0, 1000.0, 400.0], [2500.0, 1000.0, 420.0]], [[0, 1, 0], [1, 2, 1]],
                                   attrs={"extent": [0, 0, 4000, 2000]})
     dem = render_elevation(line, resolution_m=50.0, erosion=False, params=FAST, rng=0)
-    r = orokit.analyze(dem, min_prominence=20.0, isolation=False)
-    assert compare_peaks(line, r.peaks, min_prominence=20.0, distance_tol_m=100.0).recovered_share == 1.0
+    r = orokit.analyze(dem, min_prominence_m=20.0, isolation=False)
+    assert compare_peaks(line, r.peaks, min_prominence_m=20.0, distance_tol_m=100.0).recovered_share == 1.0
 
 
 @pytest.mark.parametrize("res", [0.0, -30.0, float("nan"), float("inf")])
@@ -221,8 +221,8 @@ def test_texture_adds_short_wavelength_relief_and_keeps_the_orometry():
     r1, _ = texture_spectrum(rough.values, 50.0)
     assert r1 > r0 + 5.0
     assert json.loads(rough.attrs["parameters"])["texture_rms_m"] == 40.0
-    res = orokit.analyze(rough, min_prominence=30.0, isolation=False)
-    comp = compare_peaks(tree, res.peaks, min_prominence=30.0, distance_tol_m=100.0)
+    res = orokit.analyze(rough, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
     assert comp.recovered_share == 1.0 and len(comp.extra) == 0
     np.testing.assert_allclose(comp.peaks["raster_prominence"].to_numpy(), [1500.0, 200.0, 200.0, 150.0, 100.0],
                                atol=6.0)

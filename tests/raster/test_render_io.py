@@ -32,7 +32,7 @@ def test_cog_without_crs_reads_back_as_metres_on_its_grid(tmp_path):
     dem = render_elevation(tree, resolution_m=50.0, erosion=False, params=FAST, rng=1)
     path = tmp_path / "dem.tif"
     write_cog(dem, path)
-    back = read_dem(str(path))  # no z_units, no cell_size
+    back = read_dem(str(path))  # no z_units, no cell_size_m
     assert back.attrs["z_units_in"] == "m" and not back.attrs["z_units_assumed"]
     assert back.attrs["local_grid"] and back.rio.crs is None
     assert back.rio.transform() == dem.rio.transform()
@@ -40,8 +40,8 @@ def test_cog_without_crs_reads_back_as_metres_on_its_grid(tmp_path):
     with rasterio.open(path) as src:
         assert src.units == ("m",)
     # the round trip through the file: peaks at the tree's coordinates with its prominences
-    res = orokit.analyze(back, min_prominence=30.0, isolation=False)
-    comp = compare_peaks(tree, res.peaks, min_prominence=30.0, distance_tol_m=100.0)
+    res = orokit.analyze(back, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
     assert comp.recovered_share == 1.0 and len(comp.extra) == 0
 
 

@@ -36,8 +36,11 @@ def test_analysis_grid_reads_the_recorded_transform_and_old_folders():
     t, crs, shape = analysis_grid({"shape": [4, 5], "transform": [0.001, 0, 10, 0, -0.001, 46], "crs": "EPSG:4326"})
     assert tuple(t)[:6] == (0.001, 0, 10, 0, -0.001, 46) and crs.is_geographic and shape == (4, 5)
     # folders written before the transform was recorded: a local grid from its cell size
-    t, crs, _ = analysis_grid({"shape": [4, 5], "local_grid": True, "cell_size": [92.61, 92.61]})
+    t, crs, _ = analysis_grid({"shape": [4, 5], "local_grid": True, "cell_size_m": [92.61, 92.61]})
     assert tuple(t)[:6] == (92.61, 0, 0, 0, -92.61, 0) and crs is None
+    # ... and before the key was named with its unit (``cell_size``)
+    t, crs, _ = analysis_grid({"shape": [4, 5], "local_grid": True, "cell_size": [92.61, 78.0]})
+    assert tuple(t)[:6] == (92.61, 0, 0, 0, -78.0, 0) and crs is None
     with pytest.raises(InputError, match="shape"):
         analysis_grid({"transform": [1, 0, 0, 0, -1, 0]})
     with pytest.raises(InputError, match="re-run"):

@@ -44,7 +44,7 @@ def test_synthesize_tree_writes_outputs_and_refuses_overwrite(tmp_path, type_fil
 
     g = read_divide_tree_gpkg(out / "dividetree.gpkg")
     assert g.n_peaks == len(peaks) and g.crs.to_epsg() == 32633
-    t = read_divide_tree_txt(out / "dividetree.txt", cell_size=30.0)
+    t = read_divide_tree_txt(out / "dividetree.txt", cell_size_m=30.0)
     assert t.n_peaks == len(peaks)
     # prominences survive the TXT round trip (feet, 1 ft rounding)
     assert np.allclose(np.sort(t.prominence()), np.sort(peaks["prominence"]), atol=1.0)
@@ -94,7 +94,7 @@ def test_type_from_analysis_folder_with_edit(tmp_path, make_dem):
     for _ in range(60):
         cy, cx, h, w = rng.uniform(0, 96), rng.uniform(0, 96), rng.uniform(50, 400), rng.uniform(2, 6)
         z += h * np.exp(-((yy - cy) ** 2 + (xx - cx) ** 2) / (2 * w**2))
-    write_analysis(analyze(make_dem(z + 100.0, res=50.0), min_prominence=30.0), tmp_path / "ana")
+    write_analysis(analyze(make_dem(z + 100.0, res=50.0), min_prominence_m=30.0), tmp_path / "ana")
     out = tmp_path / "t.json"
     res = CliRunner().invoke(cli, ["type", str(tmp_path / "ana"), "-o", str(out), "--scale-prominence", "2"])
     assert res.exit_code == 0, res.output

@@ -121,7 +121,7 @@ def test_peaks_table_matches_brute_force_oracle(tree):
     z = tree.peaks["elevation"].to_numpy(float)
     assert np.allclose(pt["dominance"].to_numpy(), prom / z)
     # every peak keeps the eps the synthesis enforced, judged by the oracle
-    assert (prom[keyed] >= tree.attrs["min_prominence"] - 1e-9).all()
+    assert (prom[keyed] >= tree.attrs["min_prominence_m"] - 1e-9).all()
     expected = ["row", "col", "x", "y", "lon", "lat", "elevation", "prominence", "saddle_row", "saddle_col",
                 "saddle_x", "saddle_y", "saddle_elevation", "island_parent", "island_parent_row", "island_parent_col",
                 "line_parent", "line_parent_row", "line_parent_col",

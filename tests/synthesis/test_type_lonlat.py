@@ -62,9 +62,9 @@ def _build_types(build_dem, tmp_path_factory):
     eg, ng = Transformer.from_crs("EPSG:4326", UTM, always_xy=True).transform(lon, lat)
     dem_g = build_dem(_terrain(eg, ng), res=(dx, dy), crs="EPSG:4326", origin=(west, north))
 
-    t_utm = TerrainType.from_analysis(orokit.analyze(dem_u, min_prominence=30.0))
+    t_utm = TerrainType.from_analysis(orokit.analyze(dem_u, min_prominence_m=30.0))
     folder = tmp_path_factory.mktemp("geo") / "analysis"
-    write_analysis(orokit.analyze(dem_g, min_prominence=30.0), folder)
+    write_analysis(orokit.analyze(dem_g, min_prominence_m=30.0), folder)
     t_geo = TerrainType.from_analysis(folder)  # through analysis.json: recorded transform and CRS
     return t_utm, t_geo
 

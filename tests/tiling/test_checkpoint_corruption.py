@@ -24,7 +24,7 @@ def test_corrupt_chunk_is_recomputed(make_dem, tmp_path, monkeypatch, damage):
     z = np.random.default_rng(5).normal(size=(50, 60)).cumsum(0).cumsum(1)
     dem = make_dem(z)
     ck = tmp_path / "ck"
-    a = orokit.analyze(dem, min_prominence=1.0, chunks=20, checkpoint=ck, scheduler="synchronous")
+    a = orokit.analyze(dem, min_prominence_m=1.0, chunks=20, checkpoint=ck, scheduler="synchronous")
     target = sorted(ck.glob("chunk_*.npz"))[1]
     raw = target.read_bytes()
     if damage == "truncate":
@@ -45,7 +45,7 @@ def test_corrupt_chunk_is_recomputed(make_dem, tmp_path, monkeypatch, damage):
     real = te.chunk_summary
     monkeypatch.setattr(te, "chunk_summary", lambda *args, **kw: calls.append(args[1:3]) or real(*args, **kw))
     with pytest.warns(OrokitWarning, match=f"{target.name}.*recomputing that chunk"):
-        b = orokit.analyze(dem, min_prominence=1.0, chunks=20, checkpoint=ck, scheduler="synchronous")
+        b = orokit.analyze(dem, min_prominence_m=1.0, chunks=20, checkpoint=ck, scheduler="synchronous")
     assert len(calls) == 1  # only the damaged chunk
     _tables_equal(a, b)
     read_chunk(target)  # rewritten, readable again

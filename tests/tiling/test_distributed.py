@@ -39,18 +39,18 @@ WALK_PARENTS = {f"{p}_parent{s}" for p in ("line", "prominence") for s in ("", "
 def _same(a, b):
     cols = [c for c in a.peaks.columns if c != "geometry" and c not in WALK_PARENTS]
     assert a.peaks[cols].equals(b.peaks[cols])
-    assert sorted(a.divide_tree.edges["saddle"]) == sorted(b.divide_tree.edges["saddle"])
+    assert sorted(a.tree.edges["saddle"]) == sorted(b.tree.edges["saddle"])
 
 
 def test_local_cluster_equals_in_memory(cluster, make_dem):
     _, client = cluster
     dem = make_dem(_terrain())
-    a = orokit.analyze(dem, min_prominence=20)
-    b = orokit.analyze(dem, min_prominence=20, chunks=(90, 110), scheduler=client)
+    a = orokit.analyze(dem, min_prominence_m=20)
+    b = orokit.analyze(dem, min_prominence_m=20, chunks=(90, 110), scheduler=client)
     assert len(a.peaks) > 20
     _same(a, b)
     # by scheduler address too (what `orokit analyze --scheduler tcp://...` does)
-    c = orokit.analyze(dem, min_prominence=20, chunks=128, scheduler=client.scheduler.address)
+    c = orokit.analyze(dem, min_prominence_m=20, chunks=128, scheduler=client.scheduler.address)
     _same(a, c)
 
 
@@ -58,11 +58,11 @@ def test_killed_worker_run_still_exact(cluster, make_dem):
     """A worker killed mid-run: its tasks are recomputed elsewhere and the result is identical."""
     cl, client = cluster
     dem = make_dem(_terrain((900, 900), seed=11))
-    a = orokit.analyze(dem, min_prominence=20)
+    a = orokit.analyze(dem, min_prominence_m=20)
     out = {}
 
     def run():
-        out["r"] = orokit.analyze(dem, min_prominence=20, chunks=90, scheduler=client)
+        out["r"] = orokit.analyze(dem, min_prominence_m=20, chunks=90, scheduler=client)
 
     t = threading.Thread(target=run)
     t.start()

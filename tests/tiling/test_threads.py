@@ -17,11 +17,11 @@ def _tables(result):
 
 @pytest.mark.realdata
 def test_chunks_with_1_2_4_threads_identical(real_data):
-    dem = read_dem(real_data("dems/karakoram.png"), z_units="ft", cell_size=92.61)
+    dem = read_dem(real_data("dems/karakoram.png"), z_units="ft", cell_size_m=92.61)
     runs = {}
     for n in (1, 2, 4):
         with dask.config.set(scheduler="threads", num_workers=n):
-            runs[n] = _tables(orokit.analyze(dem, min_prominence=30.0, chunks=100))
+            runs[n] = _tables(orokit.analyze(dem, min_prominence_m=30.0, chunks=100))
     ref_peaks, ref_saddles = runs[1]
     assert len(ref_peaks) > 100 and ref_peaks["isolation"].notna().sum() > 100
     for n in (2, 4):

@@ -29,10 +29,10 @@ def _assert_same_tables(a, b):
     sc = [c for c in a.saddles.columns if c != "geometry"]
     for c in sc:
         np.testing.assert_array_equal(a.saddles[c].to_numpy(), b.saddles[c].to_numpy(), err_msg=c)
-    assert a.divide_tree.n_peaks == b.divide_tree.n_peaks
+    assert a.tree.n_peaks == b.tree.n_peaks
     # ridge sets: equal saddle multisets; the tree is unique up to ridges sharing a saddle cell
-    assert sorted(a.divide_tree.edges["saddle"]) == sorted(b.divide_tree.edges["saddle"])
-    np.testing.assert_array_equal(a.divide_tree.prominence(), b.divide_tree.prominence())
+    assert sorted(a.tree.edges["saddle"]) == sorted(b.tree.edges["saddle"])
+    np.testing.assert_array_equal(a.tree.prominence(), b.tree.prominence())
 
 
 @st.composite
@@ -72,8 +72,8 @@ def test_chunk_summaries_merge_exactly(case, eps, outside):
     s = rows[0]
     for r in rows[1:]:
         s = merge_summaries(s, r, eps)
-    a = orometry(z, min_prominence=eps, outside=outside)
-    b = finalize_summary(s, min_prominence=eps, outside=outside)
+    a = orometry(z, min_prominence_m=eps, outside=outside)
+    b = finalize_summary(s, min_prominence_m=eps, outside=outside)
     for f in FIELDS:
         np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
     assert a.n_maxima == b.n_maxima
@@ -87,8 +87,8 @@ def test_dask_analyze_equals_in_memory(make_dem, case, eps):
     z, ch, cw = case
     assume(not np.isnan(z).all())
     dem = make_dem(z, res=(30.0, 20.0))
-    a = orokit.analyze(dem, min_prominence=eps)
-    b = orokit.analyze(dem.copy(data=da.from_array(z, chunks=(ch, cw))), min_prominence=eps, scheduler="synchronous")
+    a = orokit.analyze(dem, min_prominence_m=eps)
+    b = orokit.analyze(dem.copy(data=da.from_array(z, chunks=(ch, cw))), min_prominence_m=eps, scheduler="synchronous")
     _assert_same_tables(a, b)
 
 
@@ -101,8 +101,8 @@ def test_real_dem_in_many_chunks(real_data, eps):
 
     real_data("norway")
     dem = open_dataset_dem("norway")
-    a = orokit.analyze(dem, min_prominence=eps)
-    b = orokit.analyze(dem, min_prominence=eps, chunks=(97, 130))
+    a = orokit.analyze(dem, min_prominence_m=eps)
+    b = orokit.analyze(dem, min_prominence_m=eps, chunks=(97, 130))
     assert b.attrs["engine"] == "tiled" and a.attrs["engine"] == "in-memory"
     assert len(a.peaks) > 100
     _assert_same_tables(a, b)
@@ -113,8 +113,8 @@ def test_geographic_geotiff_with_nodata_chunked(real_data):
     from orokit.io.dem import read_dem
 
     dem = read_dem(real_data("pysheds-dem"))
-    a = orokit.analyze(dem, min_prominence=0)
-    b = orokit.analyze(dem, min_prominence=0, chunks=64)
+    a = orokit.analyze(dem, min_prominence_m=0)
+    b = orokit.analyze(dem, min_prominence_m=0, chunks=64)
     _assert_same_tables(a, b)
 
 
@@ -150,8 +150,8 @@ def test_mosaic_of_geotiff_tiles_and_vrt(real_data, tmp_path):
     assert lazy.chunks is not None
     eager = read_dem(tmp_path)  # a directory of tiles
     np.testing.assert_array_equal(np.isnan(eager.values), np.isnan(big))
-    a = orokit.analyze(eager, min_prominence=30)
-    b = orokit.analyze(lazy, min_prominence=30)
+    a = orokit.analyze(eager, min_prominence_m=30)
+    b = orokit.analyze(lazy, min_prominence_m=30)
     _assert_same_tables(a, b)
 
 
@@ -163,19 +163,19 @@ def test_checkpoint_resume_and_mismatch(make_dem, tmp_path, monkeypatch):
     z = rng.normal(size=(60, 70)).cumsum(0).cumsum(1)
     dem = make_dem(z)
     ck = tmp_path / "ck"
-    a = orokit.analyze(dem, min_prominence=1.0, chunks=20, checkpoint=ck, scheduler="synchronous")
+    a = orokit.analyze(dem, min_prominence_m=1.0, chunks=20, checkpoint=ck, scheduler="synchronous")
     files = sorted(ck.glob("chunk_*.npz"))
     assert len(files) == 12
     files[0].unlink()  # an interrupted run: one chunk missing
     calls = []
     real = te.chunk_summary
     monkeypatch.setattr(te, "chunk_summary", lambda *args, **kw: calls.append(args[1:3]) or real(*args, **kw))
-    b = orokit.analyze(dem, min_prominence=1.0, chunks=20, checkpoint=ck, scheduler="synchronous")
+    b = orokit.analyze(dem, min_prominence_m=1.0, chunks=20, checkpoint=ck, scheduler="synchronous")
     assert calls == [(0, 0)]  # only the missing chunk was recomputed
     _assert_same_tables(a, b)
     assert len(sorted(ck.glob("chunk_*.npz"))) == 12
     with pytest.raises(TilingError, match="another run"):
-        orokit.analyze(dem, min_prominence=2.0, chunks=20, checkpoint=ck)
+        orokit.analyze(dem, min_prominence_m=2.0, chunks=20, checkpoint=ck)
 
 
 def test_large_rasters_are_planned_chunked(tmp_path, monkeypatch):
@@ -195,10 +195,10 @@ def test_large_rasters_are_planned_chunked(tmp_path, monkeypatch):
     monkeypatch.setattr(an, "available_memory", lambda: 1_000_000)  # pretend 1 MB is free
     monkeypatch.setattr(an, "AUTO_CHUNK", 128)
     assert an.plan_chunks(p) == 128
-    chunked = orokit.analyze(str(p), min_prominence=5)
+    chunked = orokit.analyze(str(p), min_prominence_m=5)
     assert chunked.attrs["engine"] == "tiled"
     monkeypatch.undo()
-    in_memory = orokit.analyze(str(p), min_prominence=5)
+    in_memory = orokit.analyze(str(p), min_prominence_m=5)
     assert in_memory.attrs["engine"] == "in-memory"
     _assert_same_tables(in_memory, chunked)
 
@@ -210,7 +210,7 @@ def test_concurrent_writers_are_refused(make_dem, tmp_path):
     from orokit.errors import OutputError
     from orokit.io.atomic import lock_path_for
 
-    r = orokit.analyze(make_dem(np.arange(30.0).reshape(5, 6) % 7), min_prominence=0)
+    r = orokit.analyze(make_dem(np.arange(30.0).reshape(5, 6) % 7), min_prominence_m=0)
     out = tmp_path / "out"
     fd = os.open(lock_path_for(out), os.O_RDWR | os.O_CREAT)  # held as by another process
     try:

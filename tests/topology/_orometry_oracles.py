@@ -50,6 +50,9 @@ def make_dem(z, *, res=(10.0, 10.0), crs: str | None = "EPSG:32633", x0: float =
     """
     import rioxarray  # noqa: F401  (registers .rio)
     from affine import Affine
+    from pyproj import CRS
+
+    from orokit.geodesy import cell_size_key
 
     z = np.asarray(z)
     h, w = z.shape
@@ -64,7 +67,7 @@ def make_dem(z, *, res=(10.0, 10.0), crs: str | None = "EPSG:32633", x0: float =
         dims=("y", "x"),
         coords={"y": y, "x": x},
         name="elevation",
-        attrs={"units": "m", "local_grid": crs is None, "cell_size": float(dx), "res": (float(dx), float(dy))},
+        attrs={"units": "m", "local_grid": crs is None, cell_size_key(crs is not None and CRS.from_user_input(crs).is_geographic): (float(dx), float(dy))},
     )
     if crs is not None:
         da = da.rio.write_crs(crs)

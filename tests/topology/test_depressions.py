@@ -17,7 +17,7 @@ WALK = {"spills_into", "spills_into_row", "spills_into_col", "depth_parent", "de
 
 
 def _dep(z, eps=0.0, **kw):
-    return orokit.analyze(make_dem(np.ascontiguousarray(z)), min_prominence=eps, isolation=False,
+    return orokit.analyze(make_dem(np.ascontiguousarray(z)), min_prominence_m=eps, isolation=False,
                           depressions=True, **kw).depressions
 
 
@@ -52,7 +52,7 @@ def test_depths_are_sublevel_persistence(z, eps):
 @settings(max_examples=60, deadline=None)
 @given(z=grids(9))
 def test_depressions_of_minus_h_are_the_peaks_of_h(z):
-    peaks = orokit.analyze(make_dem(z), min_prominence=0.0, isolation=False).peaks
+    peaks = orokit.analyze(make_dem(z), min_prominence_m=0.0, isolation=False).peaks
     dep = _dep(-z)
     root = peaks["island_parent"].to_numpy() < 0
     renamed = peaks.drop(columns="geometry").rename(columns=RENAME)

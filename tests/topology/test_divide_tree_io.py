@@ -50,7 +50,7 @@ def test_read_small_txt(small_txt):
     # x = column from the west, y = row from the south: row = H - 1 - y
     assert p["row"].tolist() == [3, 9, 0] and p["col"].tolist() == [3, 6, 0]
     cell = 3 * 30.87  # a = x * 3 / 3600 -> 3 arc-seconds
-    assert tree.attrs["cell_size"] == pytest.approx(cell)
+    assert tree.attrs["cell_size_m"] == pytest.approx(cell)
     assert p["x"].tolist() == pytest.approx([(3 + 0.5) * cell, (6 + 0.5) * cell, 0.5 * cell])
     assert p["y"].tolist() == pytest.approx([-(3 + 0.5) * cell, -(9 + 0.5) * cell, -0.5 * cell])
     assert p["elevation"].tolist() == pytest.approx([304.8, 274.32, 365.76])
@@ -62,10 +62,10 @@ def test_read_small_txt(small_txt):
 
 
 def test_cell_size_and_units_override(small_txt):
-    tree = read_divide_tree_txt(small_txt, cell_size=10.0, z_units="m", height=10)
+    tree = read_divide_tree_txt(small_txt, cell_size_m=10.0, z_units="m", height=10)
     assert tree.peaks["x"].iloc[0] == pytest.approx(35.0)
     assert tree.peaks["elevation"].iloc[0] == 1000.0
-    no_h = read_divide_tree_txt(small_txt, cell_size=10.0)
+    no_h = read_divide_tree_txt(small_txt, cell_size_m=10.0)
     assert "row" not in no_h.peaks.columns
     assert no_h.peaks["y"].iloc[0] == pytest.approx(65.0)  # measured from the south edge
 
@@ -99,8 +99,8 @@ def test_write_tree_without_raw_columns(tmp_path):
     )
     with pytest.raises(InputError, match="height"):
         write_divide_tree_txt(tree, tmp_path / "t.txt")
-    write_divide_tree_txt(tree, tmp_path / "t.txt", height=3, cell_size=10.0, z_units="m")
-    back = read_divide_tree_txt(tmp_path / "t.txt", height=3, cell_size=10.0, z_units="m")
+    write_divide_tree_txt(tree, tmp_path / "t.txt", height=3, cell_size_m=10.0, z_units="m")
+    back = read_divide_tree_txt(tmp_path / "t.txt", height=3, cell_size_m=10.0, z_units="m")
     assert back.peaks[["row", "col"]].to_numpy().tolist() == [[0, 1], [2, 4]]
     assert back.peaks[["x", "y", "elevation"]].to_numpy() == pytest.approx(tree.peaks[["x", "y", "elevation"]].to_numpy())
 
@@ -110,7 +110,7 @@ def test_gpkg_round_trip(small_txt, tmp_path):
     path = write_divide_tree_gpkg(tree, tmp_path / "tree.gpkg")
     back = read_divide_tree_gpkg(path)
     assert back.equals(tree)
-    assert back.attrs["height"] == 10 and back.attrs["cell_size"] == pytest.approx(tree.attrs["cell_size"])
+    assert back.attrs["height"] == 10 and back.attrs["cell_size_m"] == pytest.approx(tree.attrs["cell_size_m"])
     assert len(back.attrs["runoffs"]) == 2
     import pyogrio
 
@@ -123,11 +123,20 @@ def test_gpkg_keeps_crs(tmp_path):
     from pyproj import CRS
 
     tree = DivideTree.from_arrays([[500000, 4e6, 10], [500100, 4e6, 12]], [[500050, 4e6, 5]], [[0, 1, 0]],
-                                  crs=CRS.from_epsg(32633), attrs={"min_prominence": 30.0})
+                                  crs=CRS.from_epsg(32633), attrs={"min_prominence_m": 30.0})
     back = read_divide_tree_gpkg(write_divide_tree_gpkg(tree, tmp_path / "t.gpkg"))
     assert back.crs.to_epsg() == 32633
-    assert back.attrs["min_prominence"] == 30.0
+    assert back.attrs["min_prominence_m"] == 30.0
     assert back.equals(tree)
+
+
+def test_gpkg_of_older_versions_reads_the_old_attr_keys(tmp_path):
+    """Files written before the naming rules (``min_prominence``, ``cell_size``) read under the new keys."""
+    tree = DivideTree.from_arrays([[0, 0, 10], [100, 0, 12]], [[50, 0, 5]], [[0, 1, 0]],
+                                  attrs={"min_prominence": 30.0, "cell_size": 92.61})
+    back = read_divide_tree_gpkg(write_divide_tree_gpkg(tree, tmp_path / "old.gpkg"))
+    assert back.attrs["min_prominence_m"] == 30.0 and back.attrs["cell_size_m"] == 92.61
+    assert "min_prominence" not in back.attrs and "cell_size" not in back.attrs
 
 
 def test_gpkg_missing_layers(tmp_path):

@@ -17,25 +17,25 @@ from orokit.errors import InputError
 @pytest.mark.parametrize("shape", [(1, 1), (5, 7)])
 def test_flat_raster_has_no_peak(shape):
     z = np.full(shape, 7.0, np.float32)
-    result = orokit.analyze(make_dem(z), min_prominence=0)
+    result = orokit.analyze(make_dem(z), min_prominence_m=0)
     assert len(result.peaks) == 0 and len(result.saddles) == 0
-    assert result.divide_tree.n_peaks == 0
+    assert result.tree.n_peaks == 0
 
 
 def test_isolated_cell_is_a_flat_domain():
     # the single cell 5 is cut off by NaN: a flat domain, no peak; the other domain keeps its root
     z = np.array([[5, np.nan, 1, 2]], np.float32)
-    peaks = orokit.analyze(make_dem(z), min_prominence=0).peaks
+    peaks = orokit.analyze(make_dem(z), min_prominence_m=0).peaks
     assert sorted(zip(peaks["col"], peaks["prominence"])) == [(3, 2.0)]
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (4, 6)])
 def test_flat_raster_does_not_crash(shape):
     z = np.full(shape, 7.0, np.float32)
-    res = orokit.analyze(make_dem(z), min_prominence=0)
+    res = orokit.analyze(make_dem(z), min_prominence_m=0)
     assert len(res.peaks) <= 1
     assert set(orokit.analysis.PEAK_COLUMNS) <= set(res.peaks.columns)
-    res.divide_tree.validate()
+    res.tree.validate()
 
 
 def test_all_nan_is_a_clear_error():
@@ -49,13 +49,13 @@ def test_one_by_n_and_n_by_one(row):
     z = np.array([row], np.float32)
     expected = sorted((p.col, p.prominence) for p in brute_prominence(z.astype(np.float64)))
     for arr, key in ((z, "col"), (z.T.copy(), "row")):
-        peaks = orokit.analyze(make_dem(arr), min_prominence=0).peaks
+        peaks = orokit.analyze(make_dem(arr), min_prominence_m=0).peaks
         assert sorted(zip(peaks[key].astype(int), peaks["prominence"])) == expected
 
 
 def test_int16_extremes_do_not_overflow():
     z = np.array([[32767, -32768, 32766], [-32768, -32768, -32768]], np.int16)
-    peaks = orokit.analyze(make_dem(z), min_prominence=0).peaks.set_index(["row", "col"])
+    peaks = orokit.analyze(make_dem(z), min_prominence_m=0).peaks.set_index(["row", "col"])
     assert peaks.loc[(0, 2), "prominence"] == 65534.0
     assert peaks.loc[(0, 2), "saddle_elevation"] == -32768.0
     assert peaks.loc[(0, 0), "prominence"] == 32767.0
@@ -63,7 +63,7 @@ def test_int16_extremes_do_not_overflow():
 
 def test_uint16_feet_like_input():
     z = np.array([[7750, 28994, 7750, 0, 100]], np.uint16)
-    peaks = orokit.analyze(make_dem(z), min_prominence=0).peaks.set_index("col")
+    peaks = orokit.analyze(make_dem(z), min_prominence_m=0).peaks.set_index("col")
     assert peaks.loc[1, "prominence"] == 28994.0
     assert peaks.loc[4, "prominence"] == 100.0
 
@@ -73,7 +73,7 @@ def test_huge_plateau_is_one_peak_and_fast():
     z[50:550, 60:560] = 10.0          # 250 000-cell summit plateau
     z[580, 590] = 3.0                  # a small separate summit
     t0 = time.perf_counter()
-    peaks = orokit.analyze(make_dem(z), min_prominence=0).peaks
+    peaks = orokit.analyze(make_dem(z), min_prominence_m=0).peaks
     elapsed = time.perf_counter() - t0
     assert sorted(zip(peaks["row"], peaks["col"], peaks["prominence"])) == [(50, 60, 10.0), (580, 590, 3.0)]
     assert elapsed < 20.0

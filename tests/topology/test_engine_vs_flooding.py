@@ -39,7 +39,7 @@ def _higher(a, b) -> bool:
 def check_against_flooding(z: np.ndarray, outside: str = "unknown") -> None:
     z = np.asarray(z, np.float32)
     h, w = z.shape
-    peaks = _analyze(z, min_prominence=0.0, outside=outside).peaks
+    peaks = _analyze(z, min_prominence_m=0.0, outside=outside).peaks
     oracle = _oracle(z.astype(np.float64))
     by_rc = {(p.row, p.col): p for p in oracle}
     got = list(zip(peaks["row"].astype(int), peaks["col"].astype(int)))
@@ -95,7 +95,7 @@ def test_outside_sea_only_changes_flags(z):
 @given(z=grids(9, nan=False), eps=st.sampled_from([0.5, 1.0, 3.0, 10.0, 100.0]))
 def test_threshold_keeps_exactly_the_prominent(z, eps):
     oracle = _oracle(z.astype(np.float64))
-    peaks = _analyze(z, min_prominence=eps).peaks
+    peaks = _analyze(z, min_prominence_m=eps).peaks
     expected = {(p.row, p.col) for p in oracle if p.prominence >= eps}
     roots = [p for p in oracle if p.is_root]
     if expected and roots:  # one domain (no NaN): its root is kept with any kept peak
@@ -105,7 +105,7 @@ def test_threshold_keeps_exactly_the_prominent(z, eps):
 
 
 def test_equal_height_peaks_first_in_raster_order_is_higher():
-    peaks = _analyze(EQUAL_PEAKS, min_prominence=0).peaks.set_index(["row", "col"])
+    peaks = _analyze(EQUAL_PEAKS, min_prominence_m=0).peaks.set_index(["row", "col"])
     assert peaks.loc[(0, 0), "island_parent"] == -1
     assert peaks.loc[(0, 0), "prominence"] == 5
     for rc in [(0, 2), (2, 0), (2, 2)]:
@@ -115,7 +115,7 @@ def test_equal_height_peaks_first_in_raster_order_is_higher():
 
 def test_plateau_reported_at_first_cell_in_raster_order():
     z = np.array([[1, 1, 1, 1, 1, 1], [1, 1, 4, 4, 1, 1], [1, 4, 4, 1, 1, 1], [1, 1, 1, 1, 1, 2]], np.float32)
-    peaks = _analyze(z, min_prominence=0).peaks
+    peaks = _analyze(z, min_prominence_m=0).peaks
     top = peaks[peaks["elevation"] == 4]
     assert list(zip(top["row"], top["col"])) == [(1, 2)]
     low = peaks[peaks["elevation"] == 2]
@@ -126,7 +126,7 @@ def test_plateau_reported_at_first_cell_in_raster_order():
 def test_nan_never_carries_a_path():
     # two summits separated only by a NaN column: two domains, two roots
     z = np.array([[1, 5, np.nan, 6, 1], [1, 2, np.nan, 2, 1]], np.float32)
-    peaks = _analyze(z, min_prominence=0).peaks
+    peaks = _analyze(z, min_prominence_m=0).peaks
     assert sorted(peaks["prominence"]) == [5.0, 6.0]
     assert (peaks["island_parent"] == -1).all()
 
@@ -135,6 +135,6 @@ def test_root_below_threshold_with_prominent_child():
     # root (0, 0) has prominence = elevation = 0 < eps; peak (0, 2) has prominence 1 >= eps:
     # the root is kept as the parent of a kept peak
     z = np.array([[0, -1, 0]], np.float32)
-    peaks = _analyze(z, min_prominence=0.5).peaks
+    peaks = _analyze(z, min_prominence_m=0.5).peaks
     assert list(zip(peaks["row"], peaks["col"], peaks["prominence"], peaks["island_parent"])) == [(0, 0, 0.0, -1), (0, 2, 1.0, 0)]
     assert peaks["saddle_elevation"].iloc[1] == -1.0

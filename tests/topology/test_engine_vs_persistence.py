@@ -45,7 +45,7 @@ def _roots_of_domains_with_kept_peaks(z: np.ndarray, peaks) -> list[float]:
 
 
 def check(z: np.ndarray, eps: float) -> None:
-    peaks = orokit.analyze(make_dem(z), min_prominence=eps, isolation=False).peaks
+    peaks = orokit.analyze(make_dem(z), min_prominence_m=eps, isolation=False).peaks
     got_fin, got_roots = engine_pairs(peaks)
     exp_fin, exp_roots = oracle_pairs(z, eps)
     if eps > 0:

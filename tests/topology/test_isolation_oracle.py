@@ -18,7 +18,7 @@ import orokit
 
 def check_isolation(z: np.ndarray, dx: float, dy: float) -> None:
     dem = make_dem(z, res=(dx, dy))
-    peaks = orokit.analyze(dem, min_prominence=0.0, isolation=True).peaks
+    peaks = orokit.analyze(dem, min_prominence_m=0.0, isolation=True).peaks
     zz = z.astype(np.float64)
     for _, p in peaks.iterrows():
         r, c = int(p["row"]), int(p["col"])
@@ -48,13 +48,13 @@ def test_isolation_simple_cases():
     z = np.zeros((7, 9), np.float32)
     z[3, 2], z[3, 7] = 5, 9     # 5 m peak, higher 9 m peak 5 columns east
     z[0, 2] = 4                  # lower, nearer: irrelevant
-    peaks = orokit.analyze(make_dem(z, res=(20.0, 20.0)), min_prominence=0).peaks.set_index(["row", "col"])
+    peaks = orokit.analyze(make_dem(z, res=(20.0, 20.0)), min_prominence_m=0).peaks.set_index(["row", "col"])
     assert peaks.loc[(3, 2), "isolation"] == pytest.approx(100.0)
     assert not peaks.loc[(3, 2), "isolation_exact"]   # the west edge is 60 m away
     assert np.isnan(peaks.loc[(3, 7), "isolation"])
     z = np.zeros((21, 21), np.float32)
     z[10, 10], z[10, 12] = 5, 9
-    peaks = orokit.analyze(make_dem(z, res=(20.0, 20.0)), min_prominence=0).peaks.set_index(["row", "col"])
+    peaks = orokit.analyze(make_dem(z, res=(20.0, 20.0)), min_prominence_m=0).peaks.set_index(["row", "col"])
     assert peaks.loc[(10, 10), "isolation"] == pytest.approx(40.0)
     assert peaks.loc[(10, 10), "isolation_exact"]
 
@@ -94,8 +94,8 @@ def test_isolation_geographic_vs_projected():
     ulon, ulat = to_geo.transform(UX, UY)
     utm = make_dem(_bumps(ulon, ulat, centres).astype(np.float32), res=(cell, cell), crs="EPSG:32632",
                    x0=west, y0=north)
-    pg = orokit.analyze(geo, min_prominence=100.0).peaks
-    pu = orokit.analyze(utm, min_prominence=100.0).peaks
+    pg = orokit.analyze(geo, min_prominence_m=100.0).peaks
+    pu = orokit.analyze(utm, min_prominence_m=100.0).peaks
     assert len(pg) == len(pu) == 4
     gx, gy = to_utm.transform(pg["x"].to_numpy(), pg["y"].to_numpy())
     tol = np.hypot(64.0, 93.0) + np.hypot(cell, cell)  # one cell diagonal of each grid

@@ -58,9 +58,9 @@ def test_orometry_does_not_depend_on_threads():
     before = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        one = _fields(engine.orometry(z, min_prominence=3.0))
+        one = _fields(engine.orometry(z, min_prominence_m=3.0))
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-        many = _fields(engine.orometry(z, min_prominence=3.0))
+        many = _fields(engine.orometry(z, min_prominence_m=3.0))
     finally:
         numba.set_num_threads(before)
     assert one.keys() == many.keys()

@@ -122,9 +122,9 @@ def test_real_dem_parents_match_a_brute_force_walk(real_data, name):
     import orokit
     from orokit.io.dem import read_dem
 
-    dem = read_dem(real_data(f"dems/{name}.png"), z_units="ft", cell_size=30.87 if name == "pyrenees" else 92.61)
-    result = orokit.analyze(dem, min_prominence=100 * FT, isolation=False)
-    peaks, tree = result.peaks, result.divide_tree
+    dem = read_dem(real_data(f"dems/{name}.png"), z_units="ft", cell_size_m=30.87 if name == "pyrenees" else 92.61)
+    result = orokit.analyze(dem, min_prominence_m=100 * FT, isolation=False)
+    peaks, tree = result.peaks, result.tree
     assert len(peaks) > 100
     e = tree.edges[["peak_a", "peak_b", "saddle"]].to_numpy(np.int64)
     lp, pp, prom, _ = brute_parents(tree.peaks["elevation"], tree.saddles["elevation"], e)
@@ -150,12 +150,12 @@ def test_chunked_engine_parents_are_the_walk_on_its_own_tree(make_dem):
     rng = np.random.default_rng(7)
     z = rng.normal(size=(120, 150)).cumsum(0).cumsum(1) + 25 * rng.normal(size=(120, 150))
     dem = make_dem(z.astype(np.float32))
-    a = orokit.analyze(dem, min_prominence=20.0, isolation=False)
-    b = orokit.analyze(dem, min_prominence=20.0, isolation=False, chunks=40)
+    a = orokit.analyze(dem, min_prominence_m=20.0, isolation=False)
+    b = orokit.analyze(dem, min_prominence_m=20.0, isolation=False, chunks=40)
     for col in ("row", "col", "prominence", "island_parent", "saddle_row", "saddle_col"):
         assert a.peaks[col].tolist() == b.peaks[col].tolist()
     for result in (a, b):
-        tree = result.divide_tree
+        tree = result.tree
         e = tree.edges[["peak_a", "peak_b", "saddle"]].to_numpy(np.int64)
         lp, pp, _, _ = brute_parents(tree.peaks["elevation"], tree.saddles["elevation"], e)
         np.testing.assert_array_equal(result.peaks["line_parent"].to_numpy(), lp)

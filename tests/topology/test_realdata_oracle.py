@@ -34,7 +34,7 @@ def _check_persistence(dem, eps_list=(0.0, 100 * FT)):
     fin, ess = persistence_pairs(z)
     fin = np.array(fin).reshape(-1, 2)
     for eps in eps_list:
-        peaks = orokit.analyze(dem, min_prominence=eps, isolation=False).peaks
+        peaks = orokit.analyze(dem, min_prominence_m=eps, isolation=False).peaks
         got_fin, got_roots = _pairs(peaks)
         keep = fin[:, 0] - fin[:, 1] >= eps
         exp = fin[keep]
@@ -47,7 +47,7 @@ def _check_persistence(dem, eps_list=(0.0, 100 * FT)):
 @pytest.mark.realdata
 @pytest.mark.parametrize("name", DEMS)
 def test_png_dems_match_persistence(real_data, name):
-    dem = read_dem(real_data(f"dems/{name}.png"), z_units="ft", cell_size=_cell(name))
+    dem = read_dem(real_data(f"dems/{name}.png"), z_units="ft", cell_size_m=_cell(name))
     _check_persistence(dem)
 
 
@@ -70,9 +70,9 @@ def test_geotiff_matches_persistence(real_data):
 def test_reference_tree_peaks_are_ours(real_data, name):
     """>= 97 % of the reference peaks sit at or next to one of ours (issue: ~99 %), and
     >= 90 % of our exact peaks of prominence >= 102 ft sit at or next to a reference peak."""
-    dem = read_dem(real_data(f"dems/{name}.png"), z_units="ft", cell_size=_cell(name))
+    dem = read_dem(real_data(f"dems/{name}.png"), z_units="ft", cell_size_m=_cell(name))
     ref = read_divide_tree_txt(real_data(f"dems/{name}.txt"), height=dem.shape[0])
-    peaks = orokit.analyze(dem, min_prominence=0.0, isolation=False).peaks
+    peaks = orokit.analyze(dem, min_prominence_m=0.0, isolation=False).peaks
     ref_rc = ref.peaks[["row", "col"]].to_numpy()
     ours = peaks[["row", "col"]].to_numpy()
     assert near_share(ref_rc, ours, dem.shape) >= 0.97

@@ -19,7 +19,7 @@ def result():
 
     dem = xr.DataArray(z, dims=("y", "x"), coords={"y": 30.0 * np.arange(30)[::-1] + 15, "x": 30.0 * np.arange(40) + 15})
     dem = dem.rio.write_crs("EPSG:32633")
-    return orokit.analyze(dem, min_prominence=5.0)
+    return orokit.analyze(dem, min_prominence_m=5.0)
 
 
 def test_analysis_tables_follow_the_schema(result):
@@ -55,7 +55,7 @@ def test_validation_names_the_problem(result):
 def test_synthesized_peaks_table_uses_the_same_none(result):
     from orokit.synthesis.tree import peaks_table
 
-    table = peaks_table(result.divide_tree)
+    table = peaks_table(result.tree)
     validate_peak_table(table)
     for c in ("row", "col", "saddle_row", "saddle_col", "island_parent_row", "island_parent_col", "line_parent_row",
               "line_parent_col", "prominence_parent_row", "prominence_parent_col", "isolation_row", "isolation_col"):
@@ -77,3 +77,23 @@ def test_written_tables_are_validated_on_read(result, tmp_path):
     broken.to_parquet(tmp_path / "a" / "peaks.parquet")
     with pytest.raises(SchemaError, match="peaks.parquet: the peaks table lacks columns"):
         read_analysis(tmp_path / "a")
+
+
+def test_analysis_folders_of_older_versions_read_under_the_current_keys(result, tmp_path):
+    """analysis.json written before the naming rules (``min_prominence``, ``cell_size``) still reads."""
+    import json
+
+    from orokit.analysis import read_analysis, write_analysis
+
+    write_analysis(result, tmp_path / "a")
+    meta_path = tmp_path / "a" / "analysis.json"
+    meta = json.loads(meta_path.read_text())
+    assert meta["min_prominence_m"] == 5.0 and meta["cell_size_m"] == [30.0, 30.0]
+    assert "min_prominence" not in meta and "cell_size" not in meta
+    meta["min_prominence"] = meta.pop("min_prominence_m")
+    meta["cell_size"] = meta.pop("cell_size_m")
+    meta_path.write_text(json.dumps(meta))
+    back = read_analysis(tmp_path / "a")
+    assert back.attrs["min_prominence_m"] == 5.0 and back.attrs["cell_size_m"] == [30.0, 30.0]
+    assert "min_prominence" not in back.attrs and "cell_size" not in back.attrs
+    assert back.tree.n_peaks == result.tree.n_peaks

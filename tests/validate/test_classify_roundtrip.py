@@ -36,7 +36,7 @@ def rendered_folder(tmp_path_factory):
     src = xr.DataArray(z.astype(np.float32), dims=("y", "x"), attrs={"units": "m"},
                        coords={"y": y0 - 50.0 - 100.0 * np.arange(300), "x": x0 + 50.0 + 100.0 * np.arange(300)})
     src = src.rio.write_crs("EPSG:32633").rio.write_transform(Affine(100.0, 0.0, x0, 0.0, -100.0, y0))
-    tree = orokit.analyze(src, min_prominence=30.0, isolation=False).divide_tree
+    tree = orokit.analyze(src, min_prominence_m=30.0, isolation=False).tree
     out = tmp_path_factory.mktemp("twin")
     write_divide_tree_gpkg(tree, out / "dividetree.gpkg")
     ext = (x0, y0 - 30000.0, x0 + 30000.0, y0)
@@ -126,7 +126,7 @@ def test_synthesize_like_takes_the_size_and_cell_size_of_a_dem(rendered_folder, 
 
     folder, _ = rendered_folder
     like = read_dem(str(folder / "dem.tif"), z_units="m")
-    ttype = TerrainType.from_analysis(orokit.analyze(like, min_prominence=30.0), name="noise")
+    ttype = TerrainType.from_analysis(orokit.analyze(like, min_prominence_m=30.0), name="noise")
     type_file = ttype.save(tmp_path / "noise.json")
     out = tmp_path / "twin"
     r = CliRunner().invoke(cli, ["synthesize", "--type", str(type_file), "--like", str(folder / "dem.tif"),

@@ -99,8 +99,8 @@ def test_validate_writes_only_into_out_and_keeps_existing_json(twin, tmp_path, m
                                      "--append-to", str(log)])
         assert r.exit_code == 0, r.output
     table = pd.read_csv(log)
-    assert len(table) == 2 and (table["min_prominence"] == 50.0).all()
-    assert json.loads((twin / "validation.json").read_text())["summary"]["min_prominence"] == 50.0
+    assert len(table) == 2 and (table["min_prominence_m"] == 50.0).all()
+    assert json.loads((twin / "validation.json").read_text())["summary"]["min_prominence_m"] == 50.0
     # a raster (not a folder) with -o JSON; an existing -o is kept without --overwrite
     res = tmp_path / "v.json"
     args = ["validate", str(twin / "dem.tif"), "--tree", str(twin / "dividetree.gpkg"), "-o", str(res)]
@@ -153,10 +153,10 @@ def test_model_zero_options_are_kept(monkeypatch):
     dem = render_elevation(tree, resolution_m=100.0, erosion=False, rng=0)
     model = SimpleNamespace(radius_m=1000.0, feature_set=None,
                             metadata={"min_prominence_m": 0.0, "min_peaks": 0, "relative_elevation": None})
-    roundtrip(dem, tree, min_prominence=30.0, model=model)
+    roundtrip(dem, tree, min_prominence_m=30.0, model=model)
     assert seen["min_prominence_m"] == 0.0 and seen["min_peaks"] == 0
     assert seen["relative_elevation"] == "minmax"
-    assert model_feature_options({}, min_prominence=12.0) == {
+    assert model_feature_options({}, min_prominence_m=12.0) == {
         "min_prominence_m": 12.0, "min_peaks": 20, "relative_elevation": "minmax"}
 
 

@@ -22,7 +22,7 @@ def test_compare_peaks_counts_recovered_and_extra():
     tree = two_peak_tree()  # prominences 600 (root) and 100
     raster = pd.DataFrame({"x": [1010.0, 3000.0, 2000.0, 100.0], "y": [1000.0, 1500.0, 300.0, 100.0],
                            "prominence": [600.0, 100.0, 45.0, 10.0]})
-    comp = compare_peaks(tree, raster, min_prominence=30.0, distance_tol_m=100.0)
+    comp = compare_peaks(tree, raster, min_prominence_m=30.0, distance_tol_m=100.0)
     # peak 1's nearest raster peak is 500 m away: not recovered, and that raster peak is extra
     # like the 45 m one; the 10 m one is below eps
     assert comp.peaks["recovered"].tolist() == [True, False]
@@ -43,7 +43,7 @@ def test_roundtrip_of_rendered_tree():
 
     tree = two_peak_tree()
     dem = render_elevation(tree, resolution_m=50.0, erosion=False, params=RenderParams(erosion_steps=1), rng=1)
-    rt = roundtrip(dem, tree, min_prominence=30.0)
+    rt = roundtrip(dem, tree, min_prominence_m=30.0)
     s = rt.summary()
     assert s["recovered_share"] == 1.0 and s["extra_peaks"] == 0
     assert s["tree_peaks"] == 2
@@ -100,11 +100,11 @@ def test_real_tree_round_trip(real_data):
 
     ds = load_manifest()["alaska"]
     cell = ds.cell_size_m  # 92.61 m, as the manifest says
-    dem = read_dem(real_data("alaska"), z_units=ds.z_units, cell_size=cell)
-    res = orokit.analyze(dem, min_prominence=30.0, isolation=False)
+    dem = read_dem(real_data("alaska"), z_units=ds.z_units, cell_size_m=cell)
+    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
     ny, nx = dem.shape
-    out = render_elevation(res.divide_tree, resolution_m=cell, extent=(0.0, -ny * cell, nx * cell, 0.0),
+    out = render_elevation(res.tree, resolution_m=cell, extent=(0.0, -ny * cell, nx * cell, 0.0),
                            erosion=True, rng=0)
-    s = roundtrip(out, res.divide_tree, min_prominence=30.0).summary()
+    s = roundtrip(out, res.tree, min_prominence_m=30.0).summary()
     assert s["recovered_share"] >= 0.95
     assert s["extra_share"] <= 0.05
