@@ -33,10 +33,7 @@ FILE_MODULES = {"np", "numpy", "json", "pickle", "joblib", "rasterio", "Image", 
 
 #: algorithm modules that still open files, and who moves that IO to orokit/io
 KNOWN_FILE_ACCESS = {
-    "classify/inputs.py": "issue 12 (classify): feature-table / analysis-folder IO -> io",
     "classify/peaklist.py": "issue 12 (classify): peak-list readers -> io",
-    "synthesis/controls.py": "issue 14: control rasters read through io",
-    "synthesis/terrain_type.py": "issue 14: terrain-type JSON read by io",
 }
 
 

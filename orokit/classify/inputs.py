@@ -12,7 +12,6 @@ peak list alone                    inside the convex hull of the peaks eroded by
 """
 from __future__ import annotations
 
-import json
 import logging
 import warnings
 from pathlib import Path
@@ -25,6 +24,8 @@ from orokit._typing import PathLike, SeedLike
 from orokit.classify.features import feature_table, features_from_dem, features_from_region
 from orokit.classify.peaklist import read_peaks
 from orokit.errors import InputError, OrokitWarning
+from orokit.io.analysis_io import read_analysis_meta, read_peak_cells
+from orokit.io.region_io import read_region
 from orokit.sampling.disks import sample_disks_in_mask
 from orokit.sampling.feature_sets import FeatureSet
 
@@ -39,31 +40,11 @@ def default_label(source: PathLike) -> str:
     p = Path(source)
     if p.is_dir():
         try:
-            dataset = json.loads((p / "analysis.json").read_text(encoding="utf-8")).get("dataset")
-        except (OSError, ValueError, AttributeError):
+            dataset = read_analysis_meta(p).get("dataset")
+        except (InputError, AttributeError):
             dataset = None
         return str(dataset) if dataset else p.name
     return p.name.split(".")[0]
-
-
-def read_region(path: PathLike) -> Any:
-    """Read a region polygon file (shapefile, KML, GeoPackage, GeoJSON) as a GeoDataFrame."""
-    import geopandas as gpd
-
-    p = Path(path)
-    if not p.exists():
-        raise InputError(f"region file {p} does not exist")
-    try:
-        g = gpd.read_file(p)
-    except Exception as exc:
-        raise InputError(f"cannot read region polygon {p}: {exc}") from exc
-    g = g[g.geometry.notna() & ~g.geometry.is_empty]
-    if g.empty or not g.geom_type.isin(["Polygon", "MultiPolygon"]).any():
-        raise InputError(f"region file {p} holds no polygon")
-    if g.crs is None:
-        warnings.warn(f"region file {p} has no CRS; assuming EPSG:4326 (lon/lat)", OrokitWarning, stacklevel=2)
-        g = g.set_crs("EPSG:4326")
-    return g
 
 
 def _analysis_domain(peaks: pd.DataFrame, meta: dict[str, Any]) -> tuple[np.ndarray, Any] | None:
@@ -146,7 +127,7 @@ def features_for_input(source: PathLike, *, radius_m: float, label: str | None =
         return features_from_region(peaks, region, **kw)
     meta = peaks.attrs.get("analysis")
     if meta is not None:
-        raw = pd.read_parquet(p / "peaks.parquet", columns=["row", "col", "x", "y"]) if p.is_dir() else peaks
+        raw = read_peak_cells(p) if p.is_dir() else peaks
         dom = _analysis_domain(raw, meta)
         if dom is not None:
             valid, transform = dom

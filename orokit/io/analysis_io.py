@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import logging
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -16,11 +17,13 @@ import pandas as pd
 from orokit._typing import PathLike
 from orokit.errors import InputError
 from orokit.io.atomic import atomic_path, staged_folder, write_text_atomic
+from orokit.io.files import read_json_file
 from orokit.topology.tables import AnalysisResult, upgrade_attrs, validate_peak_table, validate_saddle_table
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["write_analysis", "read_analysis", "read_peaks", "analysis_json", "ANALYSIS_FILES"]
+__all__ = ["write_analysis", "read_analysis", "read_analysis_meta", "read_peaks", "read_peak_cells", "analysis_json",
+           "ANALYSIS_FILES"]
 
 ANALYSIS_FILES = ("peaks.csv", "peaks.parquet", "saddles.parquet", "dividetree.gpkg", "analysis.json")
 
@@ -103,7 +106,7 @@ def read_analysis(outdir: PathLike) -> AnalysisResult:
     meta_path = out / "analysis.json"
     if not meta_path.exists():
         raise InputError(f"{out} is not a complete orokit analysis folder (no analysis.json); rerun `orokit analyze`")
-    meta = upgrade_attrs(json.loads(meta_path.read_text()))  # files of older orokit versions too
+    meta = read_analysis_meta(out)
     peaks = gpd.read_parquet(out / "peaks.parquet")
     validate_peak_table(peaks, source=str(out / "peaks.parquet"))
     saddles = gpd.read_parquet(out / "saddles.parquet")
@@ -114,6 +117,28 @@ def read_analysis(outdir: PathLike) -> AnalysisResult:
     dep_path = out / "depressions.parquet"
     depressions = gpd.read_parquet(dep_path) if dep_path.exists() else None
     return AnalysisResult(peaks, saddles, tree, crs, meta, depressions)
+
+
+def read_analysis_meta(outdir: PathLike) -> dict[str, Any]:
+    """``analysis.json`` of an analysis folder, keys of older orokit versions renamed (``upgrade_attrs``).
+
+    Raises
+    ------
+    InputError
+        No readable ``analysis.json`` (not an analysis folder) or not a JSON object.
+    """
+    meta = read_json_file(Path(outdir) / "analysis.json", what="analysis metadata")
+    if not isinstance(meta, dict):
+        raise InputError(f"{Path(outdir) / 'analysis.json'} is not a JSON object; rerun `orokit analyze`")
+    return upgrade_attrs(meta)
+
+
+def read_peak_cells(outdir: PathLike) -> pd.DataFrame:
+    """The raster cell and place of every peak of an analysis folder: ``row``, ``col``, ``x``, ``y``."""
+    p = Path(outdir) / "peaks.parquet"
+    if not p.exists():
+        raise InputError(f"no peaks table at {p}; pass an `orokit analyze` output folder")
+    return pd.read_parquet(p, columns=["row", "col", "x", "y"])
 
 
 def read_peaks(source: PathLike):

@@ -35,7 +35,7 @@ from orokit.io._units import TO_METRES, is_known_units, normalize_units
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["read_dem", "raster_cell_count"]
+__all__ = ["read_dem", "read_raster_band", "raster_cell_count"]
 
 ChunksLike = int | str | Sequence[int] | Mapping[str, int] | None
 CellSizeLike = float | tuple[float, float] | None
@@ -237,6 +237,29 @@ def _normalize_chunks(chunks: ChunksLike, shape: tuple[int, int]) -> tuple[tuple
     except (ValueError, TypeError) as exc:
         raise InputError(f"invalid chunks={chunks!r} for a raster of shape {shape}: {exc}") from exc
 
+
+def read_raster_band(source: PathLike, *, what: str = "raster") -> xr.DataArray:
+    """The single band of any raster, as stored (no unit conversion), nodata masked to NaN.
+
+    For inputs that are not elevations (control maps: density, type codes); CRS and
+    transform as in the file (none for a plain image). ``what`` names the input in errors.
+
+    Raises
+    ------
+    InputError
+        Unreadable file, or more than one band.
+    """
+    try:
+        da = rioxarray.open_rasterio(source, masked=True)
+    except Exception as exc:  # noqa: BLE001 - rasterio errors vary
+        raise InputError(f"cannot read {what} {str(source)!r}: {exc}") from exc
+    if not isinstance(da, xr.DataArray):
+        raise InputError(f"{what} {str(source)!r} holds several subdatasets; give a single-band raster")
+    if "band" in da.dims:
+        if da.sizes["band"] != 1:
+            raise InputError(f"{what} {str(source)!r} has {da.sizes['band']} bands; give a single-band raster")
+        da = da.squeeze("band", drop=True)
+    return da
 
 def read_dem(
     source: PathLike,

@@ -141,22 +141,15 @@ class ControlMaps:
 
 
 def _as_dataarray(src: Any):
-    import rioxarray  # noqa: F401
     import xarray as xr
 
     if isinstance(src, xr.DataArray):
         return src
     if isinstance(src, np.ndarray):
         return None
-    try:
-        da = rioxarray.open_rasterio(src, masked=True)
-    except Exception as exc:  # noqa: BLE001 - rasterio errors vary
-        raise InputError(f"cannot read control raster {src!r}: {exc}") from exc
-    if "band" in da.dims:
-        if da.sizes["band"] != 1:
-            raise InputError(f"control raster {src!r} has {da.sizes['band']} bands; give a single-band raster")
-        da = da.squeeze("band", drop=True)
-    return da
+    from orokit.io.dem import read_raster_band
+
+    return read_raster_band(src, what="control raster")
 
 
 def load_control(src: Any, domain: Domain, *, kind: str = "density") -> np.ndarray:

@@ -586,14 +586,10 @@ def load_terrain_type(path: PathLike) -> TerrainType:
     SchemaError
         Not a type file, another format version, or malformed histograms.
     """
-    p = Path(path)
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise InputError(f"terrain type file {p} does not exist") from None
-    except IsADirectoryError:
-        raise InputError(f"terrain type {p} is a folder; give the JSON file written by `orokit type`") from None
-    return loads_terrain_type(raw, source=str(p))
+    from orokit.io.files import read_input_bytes
+
+    raw = read_input_bytes(path, what="terrain type file", fix="give the JSON file written by `orokit type`")
+    return loads_terrain_type(raw, source=str(path))
 
 
 def loads_terrain_type(text: bytes | str, *, source: str = "terrain type") -> TerrainType:
