@@ -184,12 +184,17 @@ roundtrip: $(ROUNDTRIP_README) $(RELIEF_README)  ## synthetic twins of every reg
 # the table, README.csv and side-by-side hillshades in reports/generators/.
 GEN_REGIONS := sahara appalachians karakoram norway
 GEN_SEEDS := 0 1 2
-GEN_NAMES := argudo belhadj rusnell michel
+GEN_NAMES := argudo belhadj rusnell michel guerin
+# guerin-cross: Guérin with another region's DEM as exemplar (real texture may flatter reclassification)
+GEN_CROSS_sahara := appalachians
+GEN_CROSS_appalachians := karakoram
+GEN_CROSS_karakoram := norway
+GEN_CROSS_norway := sahara
 GEN_SIZE := 60011.28m
 GEN_RUNDIR := $(REPORTS)/generators/runs
 GEN_SRC := $(wildcard orokit/generators/*.py) orokit/cli/generators_cmd.py orokit/cli/generator_options.py \
            orokit/cli/render.py $(wildcard orokit/raster/*.py) orokit/validate/roundtrip.py orokit/validate/landform.py
-GEN_RESULTS := $(foreach r,$(GEN_REGIONS),$(foreach s,$(GEN_SEEDS),$(foreach g,$(GEN_NAMES),$(GEN_RUNDIR)/$(r)/seed$(s)/$(g)/result.json)))
+GEN_RESULTS := $(foreach r,$(GEN_REGIONS),$(foreach s,$(GEN_SEEDS),$(foreach g,$(GEN_NAMES) guerin-cross,$(GEN_RUNDIR)/$(r)/seed$(s)/$(g)/result.json)))
 GEN_README := $(REPORTS)/generators/README.md
 REPORT_OUTPUTS += $(GEN_README)
 
@@ -202,7 +207,13 @@ $(GEN_RUNDIR)/$(1)/seed$(2)/$(3)/result.json: $(GEN_RUNDIR)/$(1)/seed$(2)/tree/s
 	$(OROKIT) -q generators-run --tree $$(<D) --type $(REPORTS)/synthesis/types/$(1).json --like $(1) \
 	  --generator $(3) --seed $(2) --model $(REGION_MODEL) -o $$@ --overwrite
 endef
+define GEN_CROSS_RULE
+$(GEN_RUNDIR)/$(1)/seed$(2)/guerin-cross/result.json: $(GEN_RUNDIR)/$(1)/seed$(2)/tree/synthesis.json $(DATA_STAMP) $(CLASSIFICATION_README) $(GEN_SRC) | $(INSTALLED)
+	$(OROKIT) -q generators-run --tree $$(<D) --type $(REPORTS)/synthesis/types/$(1).json --like $(1) \
+	  --generator guerin --exemplar $(GEN_CROSS_$(1)) --label guerin-cross --seed $(2) --model $(REGION_MODEL) -o $$@ --overwrite
+endef
 $(foreach r,$(GEN_REGIONS),$(foreach s,$(GEN_SEEDS),$(eval $(call GEN_TREE_RULE,$(r),$(s)))))
+$(foreach r,$(GEN_REGIONS),$(foreach s,$(GEN_SEEDS),$(eval $(call GEN_CROSS_RULE,$(r),$(s)))))
 $(foreach r,$(GEN_REGIONS),$(foreach s,$(GEN_SEEDS),$(foreach g,$(GEN_NAMES),$(eval $(call GEN_RUN_RULE,$(r),$(s),$(g))))))
 
 $(GEN_README): $(GEN_RESULTS) orokit/reports/generators.py orokit/cli/generators_cmd.py | $(INSTALLED)

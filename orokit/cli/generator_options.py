@@ -8,11 +8,11 @@ from typing import Any
 
 import click
 
-__all__ = ["generator_options", "check_generator_inputs", "render_generator", "file_sha256", "EXTRA_TAGS"]
+__all__ = ["generator_options", "check_generator_inputs", "render_generator", "file_inputs", "file_sha256", "EXTRA_TAGS"]
 
 #: raster attrs written as COG tags besides those :func:`write_cog` always writes
-EXTRA_TAGS = ("generator_paper", "tree_sha256", "tree_file_sha256", "exemplar_sha256", "cell_counts",
-              "n_tree_peaks")
+EXTRA_TAGS = ("generator_paper", "tree_sha256", "tree_file_sha256", "exemplar_sha256", "coarse_sha256",
+              "generators_sha256", "cell_counts", "n_tree_peaks")
 
 
 def _list_generators(ctx: click.Context, param: click.Parameter, value: bool) -> None:
@@ -77,6 +77,44 @@ def check_generator_inputs(generator: str, params: tuple[str, ...], exemplar: st
     return parsed
 
 
+def file_inputs(params: Any) -> tuple[dict[str, Any], dict[str, str]]:
+    """Read the file-valued parameters of a backend (fields with ``metadata={"file": kind}``).
+
+    ``dem``: a DEM file or manifest dataset (:func:`exemplar_dem`); ``table``: a CSV file
+    (pandas). Returns the data by parameter name and their
+    sha256 (``<name>_sha256``) for the raster tags.
+    """
+    import dataclasses
+
+    from orokit.errors import InputError
+
+    data: dict[str, Any] = {}
+    hashes: dict[str, str] = {}
+    for f in dataclasses.fields(params):
+        kind = f.metadata.get("file") if f.metadata else None
+        value = getattr(params, f.name)
+        if not kind or not value:
+            continue
+        if kind == "dem":
+            try:
+                data[f.name], hashes[f"{f.name}_sha256"] = exemplar_dem(str(value))
+            except InputError:
+                raise InputError(f"--param {f.name}={value}: neither a DEM file nor a dataset of the manifest; "
+                                 "pass an existing DEM") from None
+        else:
+            import pandas as pd
+
+            path = Path(str(value))
+            if not path.is_file():
+                raise InputError(f"--param {f.name}={value}: no such file; pass an existing CSV file")
+            try:
+                data[f.name] = pd.read_csv(path)
+            except (ValueError, OSError) as exc:
+                raise InputError(f"--param {f.name}={value}: not a readable CSV file ({exc})") from None
+            hashes[f"{f.name}_sha256"] = file_sha256(path)
+    return data, hashes
+
+
 def render_generator(tree, *, generator: str, params: Any, resolution_m: float, extent, seed: int | None,
                      tree_path: Path | None = None, exemplar: str | None = None):
     """Render with a registered generator; records the input files' hashes in the attrs."""
@@ -85,8 +123,10 @@ def render_generator(tree, *, generator: str, params: Any, resolution_m: float, 
     ex = ex_sha = None
     if exemplar is not None:
         ex, ex_sha = exemplar_dem(exemplar)
+    inputs, hashes = file_inputs(params)
     dem = render_terrain(tree, generator=generator, params=params, resolution_m=resolution_m, extent=extent,
-                         seed=seed, exemplar=ex)
+                         seed=seed, exemplar=ex, inputs=inputs)
+    dem.attrs.update(hashes)
     if tree_path is not None and Path(tree_path).is_file():
         dem.attrs["tree_file_sha256"] = file_sha256(Path(tree_path))
     if ex_sha is not None:

@@ -25,6 +25,8 @@ def _real_dem(like: str):
 @click.option("--param", "params", multiple=True, metavar="K=V", help="Generator parameter (repeatable).")
 @click.option("--exemplar", default=None,
               help="Exemplar DEM (file or dataset) for generators that learn from one [default: the --like DEM].")
+@click.option("--label", default=None,
+              help="Row name in the ranking [default: the generator], e.g. guerin-cross for another exemplar.")
 @seed_option(what="the render", required=True)
 @click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Region model (.skops) for the reclassification.")
@@ -32,8 +34,8 @@ def _real_dem(like: str):
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="result.json; dem.tif and hillshade.png are written beside it.")
 @overwrite_option("an existing result")
-def generators_run(tree_dir, type_file, like, generator, params, exemplar, seed, model_path, min_prominence_m, out,
-                   overwrite) -> None:
+def generators_run(tree_dir, type_file, like, generator, params, exemplar, label, seed, model_path, min_prominence_m,
+                   out, overwrite) -> None:
     """One ranking run: render TREE with GENERATOR in its own process, then measure it.
 
     The render runs as a child `orokit render` process (its wall time and peak RSS are
@@ -67,7 +69,7 @@ def generators_run(tree_dir, type_file, like, generator, params, exemplar, seed,
 
     tree = read_tree(tree_dir)
     ext = tree_extent(tree)
-    result: dict = {"generator": generator, "region": like, "seed": seed, "exemplar": exemplar, "params": list(params), "tree": str(tree_dir), "failed": False,
+    result: dict = {"generator": label or generator, "backend": generator, "region": like, "seed": seed, "exemplar": exemplar, "params": list(params), "tree": str(tree_dir), "failed": False,
                     "load_average_before": list(os.getloadavg())}
     cmd = [sys.executable, "-m", "orokit.cli.main", "-q", "render",
            str(tree_dir), "-o", str(dem_path), "--resolution", f"{res}m", "--extent", *(str(v) for v in ext),

@@ -12,6 +12,7 @@ name       paper                                         status
 argudo     Argudo et al. 2019 (orokit's renderer)        complete
 belhadj    Belhadj 2007 (skeleton, MDI, MD)              tree skeleton only
 rusnell    Rusnell 2009 (least-cost fields, blending)    no secondary ridges
+guerin     Guérin 2016 (sparse construction tree)        amplification from a tree
 michel     Michel 2015 (plates, warped fBm, watershed)   peak positions only
 =========  ============================================  ========================
 """
@@ -64,6 +65,10 @@ GENERATORS: dict[str, GeneratorSpec] = {
                              "orokit.generators.rusnell", "RusnellParams", ("tree", "exemplar"),
                              "Algorithm 1 with profile fit (exemplar) or w_s = 1; no secondary ridges, "
                              "no water halting, no generator files"),
+    "guerin": GeneratorSpec("guerin", "Guérin et al. 2016, doi:10.1111/cgf.12821",
+                            "orokit.generators.guerin", "GuerinParams", ("tree", "rivers", "exemplar"),
+                            "amplification (§5.3) of the tree's interpolated ridges and rivers, or of a coarse DEM "
+                            "(coarse=DEM), with a complete, constrained or K-SVD dictionary of exemplar patches"),
     "michel": GeneratorSpec("michel", "Michel et al. 2015, doi:10.2312/egsh.20151011",
                             "orokit.generators.michel", "MichelParams", ("tree", "rivers"),
                             "peak positions + rivers (no vector-map mode); orokit's defaults for T1, T2, blur, k, "
@@ -104,6 +109,7 @@ def render_terrain(
     rivers=None,
     exemplar: xr.DataArray | None = None,
     seed: int | None = None,
+    inputs: dict[str, Any] | None = None,
 ) -> xr.DataArray:
     """Elevation raster of a Divide Tree with the backend ``generator``.
 
@@ -117,6 +123,8 @@ def render_terrain(
         (default :func:`orokit.generators.base.tree_rivers` on the grid).
     exemplar : a real DEM (metres) for generators whose inputs include ``exemplar`` (each
         backend says when it needs one).
+    inputs : data of file-valued parameters (``metadata={"file": ...}`` fields, e.g. Guérin's
+        ``coarse``), already read by the caller; passed to the backend by name.
     seed : int seed; None draws fresh entropy. The int is recorded in ``attrs['seed']``
         and the same seed gives the same raster.
 
@@ -150,6 +158,7 @@ def render_terrain(
         rivers = tree_rivers(tree, grid)
     t_rivers = time.perf_counter() - t0
     extra = {"exemplar": exemplar} if "exemplar" in spec.inputs else {}
+    extra.update(inputs or {})
     da = render(tree, rivers, grid, rng, params, **extra)
     timings = da.attrs.get("timings", {})
     timings = json.loads(timings) if isinstance(timings, str) else dict(timings)

@@ -64,6 +64,7 @@ METRICS: dict[str, tuple[str, bool, bool]] = {
     "landform.spectral_slope": ("spectral slope", False, False),
     "landform.flat_share": ("flat share", False, False),
     "landform.hypsometry": ("hypsometry", False, False),
+    "landform_ok_share": ("landforms within target %", True, True),
     "disk_accuracy": ("disk accuracy %", True, True),
     "vote_correct": ("vote right %", True, True),
     "wall_s": ("time (s)", False, False),
@@ -74,7 +75,10 @@ METRICS: dict[str, tuple[str, bool, bool]] = {
 def _value(run: dict, key: str) -> float:
     if run.get("failed"):
         return float("nan")
-    if key.startswith("landform."):
+    if key == "landform_ok_share":
+        n = run.get("landform_n")
+        v = run.get("landform_ok", 0) / n if n else None
+    elif key.startswith("landform."):
         v = (run.get("landform") or {}).get(key.split(".", 1)[1])
     else:
         v = run.get(key)
@@ -107,6 +111,8 @@ def ranking_tables(runs: list[dict]) -> tuple[Any, Any, Any]:
     for region, grp in agg.groupby(level="region"):
         for k, (_, higher, _) in METRICS.items():
             m = grp[(k, "mean")] if (k, "mean") in grp else pd.Series(float("nan"), index=grp.index)
+            if m.isna().all():  # nobody measured it here (e.g. no model): it ranks nobody
+                continue
             score = -m if higher else m
             rk = score.rank(method="min", na_option="bottom")
             for (reg, gen), v in rk.items():
@@ -137,7 +143,10 @@ def ranking_markdown(runs: list[dict]) -> str:
              "process (`orokit generators-run`); the raster is re-analysed at eps 30 m, compared with the tree "
              "and the terrain type, reclassified by `models/regions-10km.skops`, and its landforms compared "
              "with the real DEM (`orokit.validate.landform.compare_landforms`). Values: mean [min–max] over "
-             "seeds. Lower is better except for recovered peaks, disk accuracy and vote. Time is the wall "
+             "seeds. Lower is better except for recovered peaks, landforms within target, disk accuracy and vote. "
+             "The landform target of each region is twice the distance between the real DEM's north and south "
+             "halves (or the issue's floor), listed under each table; a run meets it when its distance is at "
+             "most the target. Time is the wall "
              f"time of the render process (start-up and writing included); RSS its peak.{load}", "",
              "## Mean rank (over every metric and region; 1 = best)", "", "| generator | mean rank |", "|---|---|"]
     for g, v in mean_rank.items():
@@ -151,6 +160,14 @@ def ranking_markdown(runs: list[dict]) -> str:
             for k, (_, _, pct) in METRICS.items():
                 mean, lo, hi = (row.get((k, s), float("nan")) for s in ("mean", "min", "max"))
                 cells.append(f"{_fmt(mean, pct)} [{_fmt(lo, pct)}–{_fmt(hi, pct)}]" if mean == mean else "–")
+            lines.append("| " + " | ".join(cells) + " |")
+        target = next((r.get("landform_target") for r in runs if r["region"] == region and r.get("landform_target")),
+                      None)
+        if target:
+            cells = ["target (2 x real halves)", "", ""]
+            for k in METRICS:
+                v = target.get(k.split(".", 1)[1]) if k.startswith("landform.") else None
+                cells.append(_fmt(float(v), False) if v is not None else "")
             lines.append("| " + " | ".join(cells) + " |")
     failed = per_run[per_run["failed"]]
     lines += ["", "## Failed runs", ""]
