@@ -388,7 +388,10 @@ def _exemplar_at(exemplar: xr.DataArray, cell_m: float) -> tuple[np.ndarray, flo
     """The exemplar's values and its cell size (m); block-averaged/resampled to ``cell_m``
     when its cells are finer."""
     t = exemplar.rio.transform() if hasattr(exemplar, "rio") else None
-    res = float(exemplar.attrs.get("cell_size_m") or exemplar.attrs.get("cell_size") or (abs(t.a) if t else 0.0))
+    cell = exemplar.attrs.get("cell_size_m")  # a number, or (dx, dy) since the attrs rename
+    if cell is None and t is not None and not (exemplar.rio.crs is not None and exemplar.rio.crs.is_geographic):
+        cell = (abs(t.a), abs(t.e))
+    res = float(np.max(np.abs(np.atleast_1d(np.asarray(cell, float))))) if cell is not None else 0.0
     if not (res > 0):
         raise InputError("the exemplar DEM has no cell size in metres; read it with a cell size (--cell-size)")
     z = np.asarray(exemplar.values, float)

@@ -123,7 +123,7 @@ def test_8x_amplification_beats_bicubic(real_data):
     from orokit.io.dem import read_dem
 
     ds = load_manifest()["norway"]
-    z = read_dem(real_data("norway"), z_units=ds.z_units, cell_size=ds.cell_size_m).values.astype(float)
+    z = read_dem(real_data("norway"), z_units=ds.z_units, cell_size_m=ds.cell_size_m).values.astype(float)
     ex, truth = z[:, :320], z[:, 328:648]  # disjoint halves
     coarse = block_mean(truth, 8)
     truth = truth[: coarse.shape[0] * 8, : coarse.shape[1] * 8]
