@@ -168,49 +168,55 @@ def _normalised_pairs(high: np.ndarray, low: np.ndarray, mean: np.ndarray) -> tu
     return lc[idx] / s[:, None], (high[idx] - mean[idx, None, None]) / s[:, None, None], idx
 
 
-def sparse_codes(low: np.ndarray, signals: np.ndarray, sparsity: int) -> np.ndarray:
-    """OMP codes (n_signals, N) of zero-mean ``signals`` (n, k_L) over the atoms ``low`` (N, k_L).
+def sparse_codes(low: np.ndarray, signals: np.ndarray, sparsity: int):
+    """OMP codes of zero-mean ``signals`` (n, k_L) over the unit atoms ``low`` (N, k_L), as a
+    ``scipy.sparse`` CSR matrix (n, N) with at most ``sparsity`` entries a row.
 
-    scikit-learn's ``orthogonal_mp_gram``; at s = 1 the single best atom is
-    ``argmax |<d_j, y>|`` with coefficient ``<d_j, y>`` (atoms have unit norm), computed
-    directly (the same answer, without the Gram matrix of a large dictionary).
+    At s = 1 the best atom is ``argmax |<d_j, y>|`` with coefficient ``<d_j, y>``: for short
+    atoms (k_L <= 16) the nearest of the +-d_j to ``y / |y|`` (``scipy.spatial.cKDTree``;
+    ``|u - d|^2 = 2 - 2 <u, d>``), else blocks of correlations. At s > 1 scikit-learn's
+    ``orthogonal_mp_gram`` (N <= 4096) or ``orthogonal_mp``, by blocks of signals.
     """
-    n, big = signals.shape[0], low.shape[0]
-    x = np.zeros((n, big))
-    block = max(1, 2_000_000 // max(big, 1))  # signals per block: ~16 MB of correlations
-    if (sparsity == 1 or big == 1) and low.shape[1] <= 16:
-        # unit atoms: argmax |<d, y>| is the nearest of +-d to y / |y| (|u - d|^2 = 2 - 2 <u, d>)
-        from scipy.spatial import cKDTree
+    from scipy import sparse
 
-        norm = np.linalg.norm(signals, axis=1)
-        u = signals / np.where(norm > 0, norm, 1.0)[:, None]
-        _, j = cKDTree(np.concatenate([low, -low])).query(u)
-        j = j % big
-        corr = np.einsum("ij,ij->i", signals, low[j])
-        x[np.arange(n), j] = corr
-        return x
+    n, big = signals.shape[0], low.shape[0]
+    if n == 0:
+        return sparse.csr_matrix((0, big))
     if sparsity == 1 or big == 1:
-        for b in range(0, n, block):
-            corr = signals[b:b + block] @ low.T
-            j = np.abs(corr).argmax(axis=1)
-            rows = np.arange(corr.shape[0])
-            x[b + rows, j] = corr[rows, j]
-        return x
+        if low.shape[1] <= 16:
+            from scipy.spatial import cKDTree
+
+            norm = np.linalg.norm(signals, axis=1)
+            u = signals / np.where(norm > 0, norm, 1.0)[:, None]
+            _, j = cKDTree(np.concatenate([low, -low])).query(u)
+            j = np.asarray(j) % big
+        else:
+            block = max(1, 4_000_000 // big)
+            j = np.concatenate([np.abs(signals[b:b + block] @ low.T).argmax(axis=1) for b in range(0, n, block)])
+        coef = np.einsum("ij,ij->i", signals, low[j])
+        return sparse.csr_matrix((coef, (np.arange(n), j)), shape=(n, big))
     import warnings
 
     from sklearn.linear_model import orthogonal_mp, orthogonal_mp_gram
 
     s = min(sparsity, big, low.shape[1])
+    block = max(1, 4_000_000 // big)
+    parts = []
     with warnings.catch_warnings():  # exact fits before s atoms stop early: the codes are still right
         warnings.filterwarnings("ignore", message="Orthogonal matching pursuit ended prematurely")
-        if big <= 4096:
-            gram = low @ low.T
-            for b in range(0, n, block):
-                xy = low @ signals[b:b + block].T
-                x[b:b + block] = np.asarray(orthogonal_mp_gram(gram, xy, n_nonzero_coefs=s), float).reshape(big, -1).T
-        else:
-            x[:] = np.asarray(orthogonal_mp(low.T, signals.T, n_nonzero_coefs=s), float).reshape(big, n).T
-    return x
+        gram = low @ low.T if big <= 4096 else None
+        for b in range(0, n, block):
+            y = signals[b:b + block]
+            if gram is not None:
+                x = orthogonal_mp_gram(gram, low @ y.T, n_nonzero_coefs=s)
+            else:
+                x = orthogonal_mp(low.T, y.T, n_nonzero_coefs=s)
+            parts.append(sparse.csr_matrix(np.asarray(x, float).reshape(big, -1).T))
+    return sparse.vstack(parts, format="csr")
+
+
+#: at most this many exemplar primitives are coded in each learning iteration (random subset)
+LEARN_SIGNALS = 8192
 
 
 def build_dictionary(exemplar: np.ndarray, params: GuerinParams, rng: np.random.Generator) -> Dictionary:
@@ -241,11 +247,12 @@ def build_dictionary(exemplar: np.ndarray, params: GuerinParams, rng: np.random.
         return Dictionary(lo, hi, idx, R, f)
     n = min(params.n_atoms, idx.size)
     pick = np.sort(rng.choice(idx.size, size=n, replace=False))
-    signals = low[idx] - mean[idx, None]
+    train = np.sort(rng.choice(idx.size, size=min(idx.size, LEARN_SIGNALS), replace=False))
+    signals = low[idx[train]] - mean[idx[train], None]
     if params.dictionary == "constrained":
         atoms = pick.copy()
         for _ in range(params.iterations):
-            x = sparse_codes(lo[atoms], signals, params.sparsity)
+            x = sparse_codes(lo[atoms], signals, params.sparsity).toarray()
             approx = x @ lo[atoms]
             for j in range(atoms.size):
                 users = np.flatnonzero(x[:, j])
@@ -267,9 +274,10 @@ def build_dictionary(exemplar: np.ndarray, params: GuerinParams, rng: np.random.
     hs = hi.reshape(hi.shape[0], -1) / f
     joined = np.concatenate([lo, hs], axis=1)
     d = joined[pick] / np.linalg.norm(joined[pick], axis=1)[:, None]
-    ysig = np.concatenate([signals, (high[idx] - mean[idx, None, None]).reshape(idx.size, -1) / f], axis=1)
+    it = idx[train]
+    ysig = np.concatenate([signals, (high[it] - mean[it, None, None]).reshape(it.size, -1) / f], axis=1)
     for _ in range(params.iterations):
-        x = sparse_codes(d, ysig, params.sparsity)
+        x = sparse_codes(d, ysig, params.sparsity).toarray()
         for j in range(d.shape[0]):
             users = np.flatnonzero(x[:, j])
             if users.size == 0:
@@ -325,15 +333,15 @@ def synthesize(coarse: np.ndarray, dictionary: Dictionary, sparsity: int, shape:
     hny, hnx = rows[-1] + R + pad, cols[-1] + R + pad
     num = np.zeros((hny, hnx))
     den = np.zeros((hny, hnx))
-    nz = [np.flatnonzero(row) for row in x]
+    ptr, ind, val = x.indptr, x.indices, x.data
     k = 0
     for r in rows:
         for c in cols:
-            js = nz[k]
+            js, xs = ind[ptr[k]:ptr[k + 1]], val[ptr[k]:ptr[k + 1]]
             if js.size == 1:
-                patch = mean[k] + x[k, js[0]] * dictionary.high[js[0]]
+                patch = mean[k] + xs[0] * dictionary.high[js[0]]
             else:
-                patch = mean[k] + np.tensordot(x[k, js], dictionary.high[js], axes=1)
+                patch = mean[k] + np.tensordot(xs, dictionary.high[js], axes=1)
             r0, c0 = r - R + pad, c - R + pad
             num[r0:r0 + side, c0:c0 + side] += w * patch
             den[r0:r0 + side, c0:c0 + side] += w
