@@ -366,9 +366,9 @@ def amplify(coarse: np.ndarray, exemplar: np.ndarray, params: GuerinParams, rng:
 def coarse_from_tree(tree, rivers, grid: Grid) -> np.ndarray:
     """The coarse terrain of a tree on ``grid``: its ridges (linear from peak to saddle) and
     rivers rasterised (:func:`orokit.generators.belhadj.tree_skeleton`), the other cells
-    interpolated linearly between them (``scipy.interpolate.LinearNDInterpolator``), and
-    outside their convex hull the nearest of them."""
-    from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
+    interpolated from the 16 nearest of them (``scipy.interpolate.RBFInterpolator``,
+    polyharmonic kernel r with a linear trend: planes are reproduced exactly)."""
+    from scipy.interpolate import RBFInterpolator
 
     from orokit.generators.belhadj import tree_skeleton
 
@@ -377,19 +377,17 @@ def coarse_from_tree(tree, rivers, grid: Grid) -> np.ndarray:
     iy, ix = np.nonzero(known)
     if iy.size == 0:
         raise InputError("no peak, saddle or river of the Divide Tree lies inside the grid")
-    pts = np.column_stack([iy, ix]).astype(float)
-    vals = z[known].astype(float)
-    gy, gx = np.mgrid[0:grid.ny, 0:grid.nx]
-    q = np.column_stack([gy.ravel(), gx.ravel()]).astype(float)
-    out = np.full(q.shape[0], np.nan)
-    if iy.size >= 3 and np.linalg.matrix_rank(pts - pts.mean(axis=0)) == 2:
-        out = LinearNDInterpolator(pts, vals)(q)
-    miss = ~np.isfinite(out)
-    if miss.any():
-        out[miss] = NearestNDInterpolator(pts, vals)(q[miss])
-    grid_z = out.reshape(grid.ny, grid.nx)
-    grid_z[known] = vals
-    return grid_z
+    out = np.where(known, z, np.nan).astype(float)
+    qy, qx = np.nonzero(~known)
+    if qy.size:
+        pts = np.column_stack([iy, ix]).astype(float)
+        vals = z[known].astype(float)
+        if iy.size >= 3 and np.linalg.matrix_rank(pts - pts.mean(axis=0)) == 2:
+            interp = RBFInterpolator(pts, vals, neighbors=min(16, iy.size), kernel="linear")
+        else:  # one point or a line of them: the nearest known cell
+            interp = RBFInterpolator(pts, vals, neighbors=1, kernel="linear", degree=0)
+        out[qy, qx] = interp(np.column_stack([qy, qx]).astype(float))
+    return out
 
 
 def _exemplar_at(exemplar: xr.DataArray, cell_m: float) -> tuple[np.ndarray, float]:
