@@ -188,10 +188,10 @@ def render_elevation(
         # texture where the skeleton is steep (real valley floors and glaciers are smooth),
         # faded near peaks and saddles; mean amplitude = gain x the type's texture RMS
         fade = 1.0 - falloff(dist / np.float32(max(params.texture_clearance_m, grid.res)))
-        amp = _slope_weight(z, grid.res, params.texture_largest_m, params.texture_slope_power) * fade
+        weight = _slope_weight(z, grid.res, params.texture_largest_m, params.texture_slope_power) * fade
         z += spectral_noise(z.shape, grid.res, rms=params.texture_gain * params.texture_rms_m,
-                            beta=params.texture_beta, largest_m=params.texture_largest_m, rng=rng) * amp
-        del fade, amp
+                            beta=params.texture_beta, largest_m=params.texture_largest_m, rng=rng) * weight
+        del fade, weight
     del dist, mask
     amp = params.noise_ratio * params.min_prominence_m
     if amp > 0:

@@ -50,7 +50,7 @@ def plot_landforms(dems: dict[str, xr.DataArray], *, title: str = "", max_pixels
 
     n = len(dems)
     fig = plt.figure(figsize=(4.2 * n, 7.6), dpi=150)
-    gs = fig.add_gridspec(2, max(n, 2), height_ratios=[1.25, 1.0])
+    gs = fig.add_gridspec(2, max(n, 2), height_ratios=[1.25, 1.0], wspace=0.4)
     zmin = min(float(np.nanmin(d.values)) for d in dems.values())
     zmax = max(float(np.nanmax(d.values)) for d in dems.values())
     im = None

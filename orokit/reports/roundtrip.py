@@ -249,7 +249,8 @@ def render_landform_markdown(name: str, table: pd.DataFrame, labels: list[str]) 
     for stat, r in table.iterrows():
         cells = [f"{_fmt(float(r[lab]), 3)}{'' if bool(r[f'{lab} met']) else ' (over)'}" for lab in labels]
         floor = "" if not math.isfinite(float(r["floor"])) else f", floor {float(r['floor']):g}"
-        lines.append(f"| {DISTANCES.get(str(stat), stat)}{' *' if stat in SIX else ''} | "
+        label = DISTANCES.get(str(stat), str(stat)).replace("|", "\\|")  # a pipe would split the cell
+        lines.append(f"| {label}{' *' if stat in SIX else ''} | "
                      f"{_fmt(float(r['halves']), 3)} | {_fmt(float(r['target']), 3)}{floor} | " + " | ".join(cells) + " |")
     met = [f"{lab}: {int(table.loc[list(SIX), f'{lab} met'].sum())} of 6" for lab in labels]
     lines += ["", f"Six floored statistics (*) within target: {'; '.join(met)}.", "",
