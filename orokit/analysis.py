@@ -140,22 +140,26 @@ def analyze(
                 from orokit.errors import TilingError
 
                 raise TilingError(f"cannot reach the dask scheduler at {scheduler}: {exc}") from None
+        from orokit.io.dem import bounded_gdal_cache
+
         try:
             if chunks is not None:
                 data = data.rechunk(chunks) if hasattr(data, "rechunk") else _as_dask(data, chunks)
             from orokit.metrics.isolation import GridMetric
 
             metric = GridMetric.from_grid(transform, crs) if isolation else None
-            tiled_core = tiled_orometry(data, min_prominence_m=min_prominence_m, outside=outside, scheduler=scheduler,
-                                        checkpoint=checkpoint, progress=progress, isolation_metric=metric)
-            core = tiled_core.orometry
-            t_core = time.perf_counter()
-            iso = None
-            if isolation and core.n_kept:
-                iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform,
-                                      crs=crs, compute=get_compute(scheduler),
-                                      chunk_stats=tiled_core.chunk_stats, known=tiled_core.chunk_isolation)
-            t_iso = time.perf_counter()
+            with bounded_gdal_cache():  # chunks are read once (plus halos): GDAL's cache would only grow
+                tiled_core = tiled_orometry(data, min_prominence_m=min_prominence_m, outside=outside,
+                                            scheduler=scheduler, checkpoint=checkpoint, progress=progress,
+                                            isolation_metric=metric)
+                core = tiled_core.orometry
+                t_core = time.perf_counter()
+                iso = None
+                if isolation and core.n_kept:
+                    iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform,
+                                          crs=crs, compute=get_compute(scheduler),
+                                          chunk_stats=tiled_core.chunk_stats, known=tiled_core.chunk_isolation)
+                t_iso = time.perf_counter()
         finally:
             if client is not None:
                 client.close()

@@ -81,12 +81,14 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
                  depressions=depressions, sea_level_m=sea_level_m)
     from orokit.io.analysis_io import write_analysis
 
+    shape = da.shape
+    del da  # the raster is not needed to write the tables: lower peak memory
     write_analysis(result, outdir, overwrite=True)
     n = len(result.peaks)
     if (ctx.find_root().obj or {}).get("quiet"):
         return
     click.echo(
         f"{n} peaks with prominence >= {min_prominence_m:g} m, {len(result.saddles)} saddles, "
-        f"{da.shape[0]}x{da.shape[1]} cells in {time.perf_counter() - t0:.2f} s -> {outdir}"
+        f"{shape[0]}x{shape[1]} cells in {time.perf_counter() - t0:.2f} s -> {outdir}"
         + ("" if result.depressions is None else f" ({len(result.depressions)} depressions)")
     )

@@ -35,7 +35,7 @@ from orokit.io._units import TO_METRES, is_known_units, normalize_units
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["read_dem", "read_raster_band", "raster_cell_count"]
+__all__ = ["read_dem", "read_raster_band", "raster_cell_count", "bounded_gdal_cache"]
 
 ChunksLike = int | str | Sequence[int] | Mapping[str, int] | None
 CellSizeLike = float | tuple[float, float] | None
@@ -53,6 +53,24 @@ PLAUSIBLE_MAX_M = 9_000.0
 VOID_SENTINELS = (-9999.0, -32768.0, -32767.0, -99999.0)
 #: SRTM .hgt tiles: (rows, cols) for 2-byte samples
 _HGT_SHAPES = ((1201, 1201), (3601, 3601), (1801, 3601))
+#: GDAL block cache (bytes) while orokit reads: by default GDAL caches up to 5 % of the RAM,
+#: so a whole-raster read kept a second copy of the raster in the cache (twice the peak memory)
+READ_CACHE_BYTES = 32 * 2**20
+
+
+@contextlib.contextmanager
+def bounded_gdal_cache(nbytes: int = READ_CACHE_BYTES) -> Iterator[None]:
+    """GDAL's block cache bounded to ``nbytes`` (process-wide) while the block runs.
+
+    A user's own ``GDAL_CACHEMAX`` (environment) wins. The cache size is global to the
+    process, so only the main thread changes it (dask worker threads read under the
+    bound their caller set).
+    """
+    if "GDAL_CACHEMAX" in os.environ or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    with rasterio.Env(GDAL_CACHEMAX=int(nbytes)):
+        yield
 
 
 def _is_virtual(path: str) -> bool:
@@ -171,6 +189,9 @@ class _BandReader:
             try:
                 if out_shape is not None:
                     raw = src.read(self.band, out_shape=out_shape, resampling=Resampling.nearest)
+                elif window is None:  # the whole raster, from the caller's thread: no cached second copy
+                    with bounded_gdal_cache():
+                        raw = src.read(self.band)
                 else:
                     raw = src.read(self.band, window=window)
             except rasterio.errors.RasterioError as exc:

@@ -24,7 +24,11 @@ EARTH_RADIUS_M = 6371008.8
 
 @njit(cache=True, nogil=True)
 def build_pyramid(level0):
-    """Block-maximum pyramid stored flat. Returns (values, offsets, heights, widths)."""
+    """Block-maximum pyramid stored flat. Returns (values, offsets, heights, widths).
+
+    Level 0 is ``level0`` itself and is not copied: ``values`` holds levels 1.. (level
+    k at ``offsets[k]``; ``offsets[0] == offsets[1] == 0``); read a level with :func:`_level_value`.
+    """
     H, W = level0.shape
     heights = [H]
     widths = [W]
@@ -36,30 +40,37 @@ def build_pyramid(level0):
     ws = np.empty(nlev, np.int64)
     offs = np.empty(nlev + 1, np.int64)
     offs[0] = 0
+    offs[1] = 0
     for k in range(nlev):
         hs[k] = heights[k]
         ws[k] = widths[k]
-        offs[k + 1] = offs[k] + hs[k] * ws[k]
+        if k > 0:
+            offs[k + 1] = offs[k] + hs[k] * ws[k]
     vals = np.empty(offs[nlev], level0.dtype)
-    for r in range(H):
-        for c in range(W):
-            vals[r * W + c] = level0[r, c]
     for k in range(1, nlev):
         ph, pw, po = hs[k - 1], ws[k - 1], offs[k - 1]
         h, w, o = hs[k], ws[k], offs[k]
         for r in range(h):
             for c in range(w):
-                m = vals[po + (2 * r) * pw + 2 * c]
+                m = _level_value(level0, vals, offs, ws, k - 1, 2 * r, 2 * c)
                 for dr in range(2):
                     for dc in range(2):
                         rr = 2 * r + dr
                         cc = 2 * c + dc
                         if rr < ph and cc < pw:
-                            v = vals[po + rr * pw + cc]
+                            v = _level_value(level0, vals, offs, ws, k - 1, rr, cc)
                             if v > m:
                                 m = v
                 vals[o + r * w + c] = m
     return vals, offs, hs, ws
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _level_value(level0, vals, offs, ws, k, r, c):
+    """Cell (r, c) of level k of a pyramid from :func:`build_pyramid` (level 0 = ``level0``)."""
+    if k == 0:
+        return level0[r, c]
+    return vals[offs[k] + r * ws[k] + c]
 
 
 @njit(cache=True, nogil=True)
@@ -102,7 +113,8 @@ def _cell_distance(pr, pc, r, c, geo, dx, dy, lat0, dlat, dlon):
 
 
 @njit(cache=True, nogil=True)
-def _nearest(vals, offs, hs, ws, pr, pc, thresh, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, cand, ncand_max):
+def _nearest(level0, vals, offs, hs, ws, pr, pc, thresh, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, cand,
+             ncand_max):
     """Best-first search of the nearest cell with value > thresh, up to ``cutoff``.
 
     Fills ``cand`` with (flat cell) candidates within ``slack`` of the optimum and
@@ -126,7 +138,7 @@ def _nearest(vals, offs, hs, ws, pr, pc, thresh, cutoff, geo, dx, dy, lat0, dlat
         lb, k, r, c = heapq.heappop(heap)
         if lb > cutoff or lb > best * (1.0 + slack):
             break
-        if vals[offs[k] + r * ws[k] + c] <= thresh:
+        if _level_value(level0, vals, offs, ws, k, r, c) <= thresh:
             continue
         if k == 0:
             d = lb
@@ -202,8 +214,10 @@ def block_pyramid(block):
 
 @njit(cache=True, nogil=True)
 def nan_pyramid(block):
-    """Pyramid of "holds a NaN" (1.0) of a block."""
-    return build_pyramid(np.isnan(block).astype(np.float32))
+    """(mask, pyramid...) of "holds a NaN" (1.0) of a block."""
+    mask = np.isnan(block).astype(np.float32)
+    vals, offs, hs, ws = build_pyramid(mask)
+    return mask, vals, offs, hs, ws
 
 
 @njit(cache=True, parallel=True)
@@ -230,7 +244,7 @@ def nearest_query(zz, vals, offs, hs, ws, prow, pcol, pz, cutoff, geo, dx, dy, l
             # most peaks have higher ground a few cells away: a small window proves it
             b, m = _window_scan(zz, prow[i], pcol[i], pz[i], cutoff[i], geo, dx, dy, lat0, dlat, dlon, 6, buf)
         if m == 0:
-            b, m = _nearest(vals, offs, hs, ws, prow[i], pcol[i], pz[i], cutoff[i], geo, dx, dy, lat0, dlat,
+            b, m = _nearest(zz, vals, offs, hs, ws, prow[i], pcol[i], pz[i], cutoff[i], geo, dx, dy, lat0, dlat,
                             dlon, slack, buf, ncand)
         best[i] = b
         for j in range(m):
@@ -239,15 +253,15 @@ def nearest_query(zz, vals, offs, hs, ws, prow, pcol, pz, cutoff, geo, dx, dy, l
 
 
 @njit(cache=True, nogil=True)
-def nearest_nan_query(vals, offs, hs, ws, prow, pcol, cutoff, geo, dx, dy, lat0, dlat, dlon):
+def nearest_nan_query(mask, vals, offs, hs, ws, prow, pcol, cutoff, geo, dx, dy, lat0, dlat, dlon):
     """Distance from each query cell to the nearest NaN cell (inf if none), on a NaN pyramid."""
     n = prow.size
     out = np.full(n, np.inf)
-    if vals[offs[hs.size - 1]] < 0.5:
+    if _level_value(mask, vals, offs, ws, hs.size - 1, 0, 0) < 0.5:
         return out
     buf = np.empty(1, np.int64)
     for i in range(n):
-        d, _ = _nearest(vals, offs, hs, ws, prow[i], pcol[i], 0.5, cutoff[i], geo, dx, dy, lat0, dlat, dlon,
+        d, _ = _nearest(mask, vals, offs, hs, ws, prow[i], pcol[i], 0.5, cutoff[i], geo, dx, dy, lat0, dlat, dlon,
                         0.0, buf, 1)
         out[i] = d
     return out
