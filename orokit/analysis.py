@@ -59,7 +59,9 @@ def analyze(
     Parameters
     ----------
     dem : DataArray from :func:`orokit.io.dem.read_dem` (dims y, x; metres; NaN =
-        nodata; CRS and transform through rioxarray) or a path to read with it.
+        nodata; CRS and transform through rioxarray), a
+        :class:`~orokit.io.dem.DemArray` from :func:`~orokit.io.dem.read_dem_array`,
+        or a path to read with it.
     min_prominence_m : keep peaks with prominence >= this many metres (0 = every peak).
     outside : what lies beyond the data (raster edge and NaN cells). ``"unknown"``
         (default): prominences whose key saddle is below a path to the edge are upper
@@ -225,6 +227,7 @@ def analyze(
 def _depressions(dem, transform, crs, *, min_prominence_m, outside, sea_level_m, chunks, scheduler):
     """Depressions table: the engine on -h (see :mod:`orokit.topology.depressions`)."""
     import geopandas as gpd
+    import rioxarray  # noqa: F401  (registers the .rio accessor: a DemArray input did not import it)
     import xarray as xr
     from affine import Affine
 
@@ -295,9 +298,13 @@ def plan_chunks(source: str | Path, *, memory_fraction: float = 0.5) -> int | No
 
 
 def _georef(dem):
-    """Affine transform and CRS of a DataArray (local grid when it has none)."""
+    """Affine transform and CRS of a DataArray or DemArray (local grid when it has none)."""
     from affine import Affine
 
+    from orokit.io.dem import DemArray
+
+    if isinstance(dem, DemArray):
+        return dem.transform, (None if dem.attrs.get("local_grid") else dem.crs)
     crs = None
     transform = None
     try:

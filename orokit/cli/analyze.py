@@ -75,7 +75,13 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         chunks = plan_chunks(str(dem.path))
         if chunks is not None:
             click.echo(f"{dem.path} is too large for memory: analysing in {chunks} x {chunks} chunks", err=True)
-    da = dem.read_dem(z_units=z_units, cell_size_m=cell_size_m, chunks=chunks, band=band)
+    if chunks is None and dem.dataset is None:
+        from orokit.io.dem import read_dem_array
+
+        # in memory: plain numpy (no xarray/rioxarray/dask imports: faster start, less memory)
+        da = read_dem_array(str(dem.path), z_units=z_units, cell_size_m=cell_size_m, band=band)
+    else:
+        da = dem.read_dem(z_units=z_units, cell_size_m=cell_size_m, chunks=chunks, band=band)
     result = run(da, min_prominence_m=min_prominence_m, outside=outside, isolation=not no_isolation,
                  progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint,
                  depressions=depressions, sea_level_m=sea_level_m)

@@ -15,13 +15,11 @@ import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, ClassVar, cast
 
 import numpy as np
 import rasterio
 import rasterio.errors
-import rioxarray  # noqa: F401  (registers the .rio accessor)
-import xarray as xr
 from numpy.typing import NDArray
 from pyproj import CRS
 from rasterio.enums import Resampling
@@ -33,9 +31,12 @@ from orokit.errors import CRSError, InputError, OrokitWarning, UnitsError
 from orokit.geodesy import cell_size_key, parse_crs
 from orokit.io._units import TO_METRES, is_known_units, normalize_units
 
+if TYPE_CHECKING:
+    import xarray as xr
+
 logger = logging.getLogger(__name__)
 
-__all__ = ["read_dem", "read_raster_band", "raster_cell_count", "bounded_gdal_cache"]
+__all__ = ["read_dem", "read_dem_array", "DemArray", "read_raster_band", "raster_cell_count", "bounded_gdal_cache"]
 
 ChunksLike = int | str | Sequence[int] | Mapping[str, int] | None
 CellSizeLike = float | tuple[float, float] | None
@@ -372,6 +373,81 @@ def read_dem(
     >>> dem.dims, str(dem.dtype), dem.attrs["units"], int(dem.isnull().sum())
     (('y', 'x'), 'float32', 'm', 1)
     """
+    return cast("xr.DataArray", _read_dem(source, z_units=z_units, cell_size_m=cell_size_m, band=band,
+                                          chunks=chunks, nodata=nodata, crs=crs))
+
+
+@dataclass(frozen=True)
+class DemArray:
+    """A DEM read into memory without xarray (:func:`read_dem_array`).
+
+    The same pixels, georeference and ``attrs`` as :func:`read_dem`'s DataArray, for
+    callers that need neither xarray nor dask (``orokit analyze`` in memory starts
+    faster and smaller without them). ``transform`` is the affine transform and
+    ``crs`` the CRS (None on a local metric grid).
+    """
+
+    values: NDArray[np.float32]
+    transform: Affine
+    crs: CRS | None
+    attrs: dict[str, Any]
+    dims: ClassVar[tuple[str, str]] = ("y", "x")
+    chunks: ClassVar[None] = None
+
+    @property
+    def data(self) -> NDArray[np.float32]:
+        return self.values
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.values.shape  # type: ignore[return-value]
+
+    @property
+    def ndim(self) -> int:
+        return 2
+
+
+def read_dem_array(
+    source: PathLike,
+    *,
+    z_units: str | None = None,
+    cell_size_m: CellSizeLike = None,
+    band: int | None = None,
+    nodata: float | None = None,
+    crs: Any = None,
+) -> DemArray:
+    """:func:`read_dem` into memory as a :class:`DemArray` (no xarray, rioxarray or dask).
+
+    Same arguments (but ``chunks``), checks, errors, warnings, pixels and attrs.
+
+    Examples
+    --------
+    >>> import numpy as np, rasterio, tempfile, os
+    >>> from rasterio.transform import Affine
+    >>> path = os.path.join(tempfile.mkdtemp(), "dem.tif")
+    >>> with rasterio.open(path, "w", driver="GTiff", width=3, height=2, count=1, dtype="int16",
+    ...                    crs="EPSG:32633", transform=Affine(30, 0, 500000, 0, -30, 4000000), nodata=-32768) as dst:
+    ...     dst.write(np.array([[1, 2, 3], [4, -32768, 6]], dtype="int16"), 1)
+    >>> dem = read_dem_array(path)
+    >>> dem.shape, str(dem.values.dtype), dem.transform.a, dem.crs.to_epsg(), int(np.isnan(dem.values).sum())
+    ((2, 3), 'float32', 30.0, 32633, 1)
+    """
+    return cast(DemArray, _read_dem(source, z_units=z_units, cell_size_m=cell_size_m, band=band, chunks=None,
+                                    nodata=nodata, crs=crs, as_array=True))
+
+
+def _read_dem(
+    source: PathLike,
+    *,
+    z_units: str | None,
+    cell_size_m: CellSizeLike,
+    band: int | None,
+    chunks: ChunksLike,
+    nodata: float | None,
+    crs: Any,
+    as_array: bool = False,
+) -> xr.DataArray | DemArray:
+    """:func:`read_dem` (``as_array``: :func:`read_dem_array`)."""
     path = os.fspath(source)
     if not _is_virtual(path):
         p = Path(path)
@@ -552,6 +628,13 @@ def read_dem(
         "nodata_in": nd,
         "long_name": "elevation",
     }
+    if as_array:
+        logger.info("read %s: %d x %d cells, %s, units %s -> m", path, height, width,
+                    eff_crs.to_string() if eff_crs is not None else "local metric grid", zu)
+        return DemArray(data, transform, eff_crs, attrs)
+    import rioxarray  # noqa: F401  (registers the .rio accessor)
+    import xarray as xr
+
     dem = xr.DataArray(data, dims=("y", "x"), coords={"y": y, "x": x}, name="elevation", attrs=attrs)
     # in place: rioxarray's default copies the whole array (deeply) at each call
     if eff_crs is not None:

@@ -1,0 +1,91 @@
+"""read_dem_array: the in-memory reader without xarray gives what read_dem gives."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import rasterio
+from rasterio.transform import Affine
+
+from orokit.errors import InputError
+from orokit.io.dem import DemArray, read_dem, read_dem_array
+
+
+def _write(path, z, *, crs="EPSG:32633", transform=Affine(30, 0, 500000, 0, -30, 4000000), nodata=None,
+           unit=None):
+    with rasterio.open(path, "w", driver="GTiff", width=z.shape[1], height=z.shape[0], count=1, dtype=z.dtype,
+                       crs=crs, transform=transform, nodata=nodata) as ds:
+        ds.write(z, 1)
+        if unit:
+            ds.set_band_unit(1, unit)
+    return path
+
+
+def _cases(tmp_path):
+    rng = np.random.default_rng(7)
+    z16 = rng.integers(0, 3000, (37, 53)).astype(np.int16)
+    z16[3, 4] = -32768
+    z32 = rng.normal(1000.0, 300.0, (41, 29)).astype(np.float32)
+    z32[0, 0] = np.nan
+    return {
+        "int16 nodata": _write(tmp_path / "a.tif", z16, nodata=-32768),
+        "float32 feet": _write(tmp_path / "b.tif", z32, unit="ft"),
+        "geographic": _write(tmp_path / "c.tif", z32, crs="EPSG:4326",
+                             transform=Affine(1 / 3600, 0, 7.0, 0, -1 / 3600, 46.0)),
+        "local grid": _write(tmp_path / "d.tif", z32, crs=None, transform=Affine(5, 0, 0, 0, -5, 0), unit="m"),
+    }
+
+
+@pytest.mark.parametrize("case", ["int16 nodata", "float32 feet", "geographic", "local grid"])
+def test_same_pixels_georeference_and_attrs_as_read_dem(tmp_path, case):
+    path = _cases(tmp_path)[case]
+    da = read_dem(path)
+    arr = read_dem_array(path)
+    assert isinstance(arr, DemArray)
+    assert arr.values.dtype == np.float32 and arr.shape == da.shape and arr.dims == da.dims
+    np.testing.assert_array_equal(arr.values, da.values)  # NaN == NaN here
+    assert arr.transform == da.rio.transform()
+    assert (arr.crs is None) == (da.rio.crs is None)
+    if arr.crs is not None:
+        assert arr.crs.equals(da.rio.crs)
+    assert arr.attrs == {k: v for k, v in da.attrs.items() if k != "_FillValue"}  # rioxarray's nodata marker
+
+
+def test_bad_input_is_the_same_error(tmp_path):
+    with pytest.raises(InputError, match="not found"):
+        read_dem_array(tmp_path / "missing.tif")
+    z = np.full((4, 4), -32768, np.int16)
+    path = _write(tmp_path / "void.tif", z, nodata=-32768)
+    with pytest.raises(InputError, match="no valid cells"):
+        read_dem_array(path)
+
+
+def test_analyze_a_dem_array_gives_the_tables_of_the_data_array(tmp_path):
+    import orokit
+
+    path = _cases(tmp_path)["int16 nodata"]
+    a = orokit.analyze(read_dem(path), min_prominence_m=0.0)
+    b = orokit.analyze(read_dem_array(path), min_prominence_m=0.0)
+    assert len(a.peaks) > 5
+    assert a.peaks.drop(columns="geometry").equals(b.peaks.drop(columns="geometry"))
+    assert a.saddles.drop(columns="geometry").equals(b.saddles.drop(columns="geometry"))
+    assert {k: v for k, v in a.attrs.items() if k != "timings_s"} == {k: v for k, v in b.attrs.items()
+                                                                      if k != "timings_s"}
+
+
+def test_cli_in_memory_analysis_imports_neither_xarray_nor_dask(tmp_path):
+    """`orokit analyze` in memory reads with rasterio only: no xarray/rioxarray/dask start-up cost."""
+    path = _cases(tmp_path)["float32 feet"]
+    code = (
+        "import json, sys\n"
+        "from orokit.cli.main import cli\n"
+        f"cli(['-q', 'analyze', {str(path)!r}, '-o', {str(tmp_path / 'out')!r}, '--no-progress'],"
+        " standalone_mode=False)\n"
+        "print(json.dumps(sorted(m for m in ('xarray', 'rioxarray', 'dask', 'dask.array') if m in sys.modules)))\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert json.loads(res.stdout.strip().splitlines()[-1]) == []
+    assert (tmp_path / "out" / "analysis.json").exists()
