@@ -400,7 +400,7 @@ class DemArray:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.values.shape  # type: ignore[return-value]
+        return self.values.shape
 
     @property
     def ndim(self) -> int:
