@@ -36,7 +36,8 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["read_dem", "read_dem_array", "DemArray", "read_raster_band", "raster_cell_count", "bounded_gdal_cache"]
+__all__ = ["read_dem", "read_dem_array", "DemArray", "read_raster_band", "raster_cell_count",
+           "bounded_gdal_cache"]
 
 ChunksLike = int | str | Sequence[int] | Mapping[str, int] | None
 CellSizeLike = float | tuple[float, float] | None
@@ -271,6 +272,9 @@ def read_raster_band(source: PathLike, *, what: str = "raster") -> xr.DataArray:
     InputError
         Unreadable file, or more than one band.
     """
+    import rioxarray
+    import xarray as xr
+
     try:
         da = rioxarray.open_rasterio(source, masked=True)
     except Exception as exc:  # noqa: BLE001 - rasterio errors vary
@@ -282,6 +286,7 @@ def read_raster_band(source: PathLike, *, what: str = "raster") -> xr.DataArray:
             raise InputError(f"{what} {str(source)!r} has {da.sizes['band']} bands; give a single-band raster")
         da = da.squeeze("band", drop=True)
     return da
+
 
 def read_dem(
     source: PathLike,
