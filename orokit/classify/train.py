@@ -394,9 +394,7 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
     -------
     Evaluation
     """
-    # scikit-learn's wrappers pass its configuration to the worker threads (a forest's own joblib calls warn
-    # when they are nested in plain joblib ones)
-    from sklearn.utils.parallel import Parallel, delayed
+    from joblib import Parallel, delayed
 
     if runs < 1:
         raise InputError(f"runs must be >= 1, got {runs}")

@@ -41,12 +41,16 @@ from orokit.cli.options import (
 @click.option("--max-disks", type=int, default=100, show_default=True, help="At most this many disks per region.")
 @click.option("--max-train", type=int, default=80, show_default=True,
               help="At most this many training disks per region in each run (paper: 80).")
+@click.option("--block-runs", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Also evaluate the spatial k-fold block split (blocks of R/2, every disk held out once) with "
+                   "this many runs; 0 skips it.")
 @seed_option(what="the disks, the splits and the forests")
 @click.option("--n-jobs", type=int, default=2, show_default=True, help="Parallel fits.")
 @overwrite_option("an existing report and model")
 @progress_option()
 def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominence_m, min_peaks, model_path, z_units,
-           cell_size_m, feature_set, classifier, separation, max_disks, max_train, seed, n_jobs, overwrite, progress):
+           cell_size_m, feature_set, classifier, separation, max_disks, max_train, block_runs, seed, n_jobs, overwrite,
+           progress):
     """Classification report on INPUTs (DEMs, analysis folders or peak lists; one region each).
 
     Accuracies in the tables are percentages; radii in km.
@@ -71,7 +75,8 @@ def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominen
                                       min_prominence_m=min_prominence_m, min_peaks=min_peaks, model_path=model_path,
                                       n_jobs=n_jobs, progress=progress, seed=seed, z_units=z_units,
                                       cell_size_m=cell_size_m, feature_set=feature_set, classifier=classifier,
-                                      separation=separation, max_disks=max_disks, max_train=max_train)
+                                      separation=separation, max_disks=max_disks, max_train=max_train,
+                                      block_runs=block_runs)
     for r, e in sorted(res["evaluations"].items()):
         sp = e["spatial"].mean_accuracy
         sp_text = f"{100 * sp:.1f} %" if sp == sp else "not measurable (crops too small for this radius)"
