@@ -38,6 +38,8 @@ def variants():
     spec = HistogramSpec.paper()
     nodir = tuple(n for n in spec.names if "direction" not in n)
     oro = FeatureSet.orometry()
+    # the default until this ablation: R/2 and R, every histogram but the direction ones
+    prev = dataclasses.replace(oro, name="v", radii=(0.5, 1.0), histograms=nodir)
     rows = [
         ("paper histograms, Random Forest (reference)", paper, {}, {"classifier": "rf"}),
         ("paper histograms, extremely randomized trees", paper, {}, {}),
@@ -46,9 +48,12 @@ def variants():
                                                                    cumulative=True), {}, {}),
         ("+ summaries, cumulative, no direction histograms",
          dataclasses.replace(paper, name="v", summaries=True, cumulative=True, histograms=nodir), {}, {}),
-        ("+ elevation summaries (R only)", dataclasses.replace(oro, name="v", radii=(1.0,)), {}, {}),
-        ("orometry (default): + radii R/2 and R", oro, {}, {}),
-        ("orometry, radii R/4, R/2, R", dataclasses.replace(oro, name="v", radii=(0.25, 0.5, 1.0)), {}, {}),
+        ("+ elevation summaries (R only)", dataclasses.replace(prev, name="v", radii=(1.0,)), {}, {}),
+        ("+ radii R/2 and R (previous default)", prev, {}, {}),
+        ("+ radii R/4, R/2, R", dataclasses.replace(prev, name="v", radii=(0.25, 0.5, 1.0)), {}, {}),
+        ("R/2 and R, without the disk-relative histograms", dataclasses.replace(oro, name="v", radii=(0.5, 1.0)),
+         {}, {}),
+        ("orometry (default): R only, without the disk-relative histograms", oro, {}, {}),
         ("summaries + elevation only (no histograms)", dataclasses.replace(oro, name="v", histograms=()), {}, {}),
         ("orometry, denser disks (0.25 R apart, <= 400 per region, <= 400 training)", oro,
          {"separation": 0.25, "max_disks": 400}, {"max_train": 400}),

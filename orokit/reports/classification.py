@@ -211,8 +211,9 @@ def write_training_report(features: pd.DataFrame, evals: Mapping[str, Any], outd
 _CLASSIFIERS = {"rf": "Random Forest, {n} trees", "et": "extremely randomized trees (ExtraTrees), 2 x {n} trees",
                 "hgb": "gradient boosting (HistGradientBoosting), {n} iterations"}
 _FEATURE_SETS = {"paper": "the paper's Table 1 histograms at R ({n} numbers, `--features paper`, reference mode)",
-                 "orometry": "orokit's default (`--features orometry`, {n} numbers), at R/2 and at R: the Table 1 "
-                             "histograms made cumulative, without the two direction histograms; disk summaries "
+                 "orometry": "orokit's default (`--features orometry`, {n} numbers), at R: five Table 1 histograms "
+                             "made cumulative (dominance, dominance groups, isolation distance, key-saddle distance, "
+                             "prominence; the direction and disk-relative histograms left out); disk summaries "
                              "(peak density, prominence spectrum, maximum and quantiles of prominence, isolation, "
                              "key-saddle distance, dominance); quantiles of peak and key-saddle elevation. Chosen "
                              "on the spatial hold-out: see `ablation.md`"}
