@@ -171,14 +171,14 @@ def test_block_folds_buffer_and_cover(counts, sources, block_km, buffer_km, seed
 
 
 def test_block_split_tests_every_disk(feats):
-    ev = evaluate(feats, runs=2, split="blocks", feature_groups=False, rng=0)
+    ev = evaluate(feats, runs=1, split="blocks", feature_groups=False, n_estimators=30, rng=0)
     assert ev.params["block_m"] == 10_000.0 and ev.params["buffer_m"] == 20_000.0
     n = len(feats)
     # each run tests every disk once, but for those whose region kept no training disk in their fold
-    assert ev.confusion.sum() == 2 * (n - ev.params["untested_disks_per_run"])
+    assert ev.confusion.sum() == n - ev.params["untested_disks_per_run"]
     assert ev.params["untested_disks_per_run"] < 0.2 * n
     assert np.isfinite(ev.accuracies).all() and ev.mean_accuracy > 0.6  # 3 styles; chance is 1/3
-    sp = evaluate(feats, runs=2, split="spatial", feature_groups=False, rng=0)
+    sp = evaluate(feats, runs=2, split="spatial", feature_groups=False, n_estimators=30, rng=0)
     # the block split trains on more ground than the strip: that is its point
     assert sum(ev.mean_train.values()) > sum(sp.mean_train.values())
 
