@@ -18,7 +18,7 @@ from orokit.synthesis.controls import ControlMaps, Domain
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["pass_bounds", "draw_candidates", "ridge_density", "place_peaks"]
+__all__ = ["pass_bounds", "draw_candidates", "ridge_density", "void_density", "place_peaks"]
 
 
 def pass_bounds(n: int, n_passes: int) -> list[tuple[int, int]]:
@@ -74,6 +74,27 @@ def ridge_density(x: np.ndarray, y: np.ndarray, a: np.ndarray, b: np.ndarray, do
     return grid / m if m > 0 else grid
 
 
+def void_density(x: np.ndarray, y: np.ndarray, domain: Domain, sigma_m: float) -> np.ndarray:
+    """``min(d / (4 sigma), 1)^2`` with d the distance of each grid cell to the nearest placed peak.
+
+    Added to the ridge density between passes, it draws lower peaks into the holes the
+    earlier passes left (without it the distance from a point to the nearest peak had a
+    90th percentile 1.5 x the real trees', issue 11); ``4 sigma`` is twice the mean
+    spacing of the peaks placed so far.
+    """
+    from scipy import ndimage
+
+    free = np.ones(domain.shape, bool)
+    if x.size:
+        row, col = domain.cell_index(x, y)
+        free[row, col] = False
+    else:
+        return np.ones(domain.shape)
+    cx, cy = domain.cell
+    d = ndimage.distance_transform_edt(free, sampling=(cy, cx))
+    return np.clip(d / (4.0 * sigma_m), 0.0, 1.0) ** 2
+
+
 def _ramp(k: np.ndarray) -> np.ndarray:
     """Concatenation of ``linspace(0, 1, k_i)`` for every k_i (vectorised)."""
     start = np.repeat(np.cumsum(k) - k, k)
@@ -97,6 +118,7 @@ def place_peaks(
     ridge_floor: float = 0.15,
     floor_w: float = 0.05,
     forced: tuple[np.ndarray, np.ndarray] | None = None,
+    void_weight: float = 0.0,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Positions of peaks sorted by decreasing elevation ``z``.
@@ -108,6 +130,8 @@ def place_peaks(
     controls, domain : control maps and their grid.
     iso_dist, iso_dir : per type, isolation distance/direction histograms.
     rho : per-peak ridge exponent (for the ridges diffused between passes).
+    void_weight : weight of :func:`void_density` beside the ridge density between passes
+        (0: the paper's ridge density only).
 
     Returns
     -------
@@ -189,6 +213,9 @@ def place_peaks(
                                 forced=None if fa is None else (fa, fb))
             sigma_m = 0.5 * np.sqrt(domain.width * domain.height / e)
             dens_r = ridge_density(px[:e], py[:e], a, b, domain, sigma_m)
+            if void_weight > 0:
+                dens_r = dens_r + void_weight * void_density(px[:e], py[:e], domain, sigma_m)
+                dens_r /= max(1.0, float(dens_r.max()))
             density = controls.density * (ridge_floor + (1 - ridge_floor) * dens_r)
         logger.debug("pass %d: placed peaks %d..%d", p_i, s, e)
     return px, py, {"passes": passes}

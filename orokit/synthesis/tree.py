@@ -91,6 +91,11 @@ class SynthesisParams:
     use_bands : draw prominence/dominance targets per elevation band of the type
         (True), from its marginal histograms (False), or "auto": run both and keep the
         saddles whose dominance and prominence histograms match the type better.
+    void_weight : between dart-throwing passes, lower peaks are drawn to the holes left by
+        the earlier ones with this weight (:func:`orokit.synthesis.darts.void_density`;
+        0 = the paper's ridge density only, the default: 1.0 brought the 90th percentile of the
+        distance to the nearest peak from 1.54 to 1.18 x the real trees' on the tuning regions,
+        its effect on the landforms and the classification is not measured yet, issue 11).
     """
 
     n_passes: int = 4
@@ -100,6 +105,7 @@ class SynthesisParams:
     grid_cells: int = 256
     auto_elevation_m: float | None = 8000.0
     use_bands: bool | Literal["auto"] = "auto"
+    void_weight: float = 0.0
 
     def __post_init__(self) -> None:
         if self.use_bands not in ("auto", True, False):
@@ -109,6 +115,8 @@ class SynthesisParams:
         for name in ("n_passes", "n_candidates", "max_ot_iterations"):
             if int(getattr(self, name)) < 1:
                 raise InputError(f"{name} must be >= 1, got {getattr(self, name)!r}")
+        if not (np.isfinite(self.void_weight) and self.void_weight >= 0):
+            raise InputError(f"void_weight must be a number >= 0, got {self.void_weight!r}")
         if self.auto_elevation_m is not None and not float(self.auto_elevation_m) > 0:
             raise InputError(f"auto_elevation_m must be > 0 metres or None, got {self.auto_elevation_m!r}")
 
@@ -243,7 +251,8 @@ def synthesize_divide_tree(
     px, py, dart_info = place_peaks(
         peaks.z, peaks.ptype, peaks.fixed, peaks.fxy, controls, domain,
         [t.histograms["isolation_distance"] for t in types], [t.histograms["isolation_direction"] for t in types],
-        peaks.rho, n_passes=p.n_passes, n_candidates=p.n_candidates, forced=peaks.forced, rng=rng,
+        peaks.rho, n_passes=p.n_passes, n_candidates=p.n_candidates, forced=peaks.forced,
+        void_weight=float(p.void_weight), rng=rng,
     )
     timings["dart_throwing"] = time.perf_counter() - t1
 
