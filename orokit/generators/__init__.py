@@ -11,7 +11,7 @@ name       paper                                         status
 =========  ============================================  ========================
 argudo     Argudo et al. 2019 (orokit's renderer)        complete
 belhadj    Belhadj 2007 (skeleton, MDI, MD)              tree skeleton only
-rusnell    Rusnell 2009 (least-cost fields, blending)    no secondary ridges
+rusnell    Rusnell 2009 (least-cost fields, blending)    no pareidolia mode
 guerin     Guérin 2016 (sparse construction tree)        amplification from a tree
 michel     Michel 2015 (plates, warped fBm, watershed)   peak positions only
 =========  ============================================  ========================
@@ -62,9 +62,9 @@ GENERATORS: dict[str, GeneratorSpec] = {
                              "orokit.generators.belhadj", "BelhadjParams", ("tree", "rivers"),
                              "tree skeleton (the paper's particle skeleton is not implemented)"),
     "rusnell": GeneratorSpec("rusnell", "Rusnell et al. 2009, doi:10.1007/s00371-009-0350-5",
-                             "orokit.generators.rusnell", "RusnellParams", ("tree", "exemplar"),
-                             "Algorithm 1 with profile fit (exemplar) or w_s = 1; no secondary ridges, "
-                             "no water halting, no generator files"),
+                             "orokit.generators.rusnell", "RusnellParams", ("tree", "exemplar", "rivers"),
+                             "Algorithm 1 with profile fit (exemplar) or w_s = 1, secondary ridges, halting at "
+                             "water (rivers), generators=FILE; no pareidolia mode"),
     "guerin": GeneratorSpec("guerin", "Guérin et al. 2016, doi:10.1111/cgf.12821",
                             "orokit.generators.guerin", "GuerinParams", ("tree", "rivers", "exemplar"),
                             "amplification (§5.3) of the tree's interpolated ridges and rivers, or of a coarse DEM "

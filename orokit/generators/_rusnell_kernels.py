@@ -43,7 +43,8 @@ def _scale(c, cg, cs, table, use_profile):
 
 
 @njit(cache=True)
-def cost_field(w, gen_i, gen_j, gen_c, cs, table, use_profile, ca, halt_frac, stamp, tag, cost, src, touched, fixed):
+def cost_field(w, gen_i, gen_j, gen_c, cs, table, use_profile, ca, halt_frac, stamp, tag, cost, src, touched, fixed,
+               stop):
     """Least-cost field from the generators (in place over the cells it reaches).
 
     Cost of the next node: ``c + w_e * w_s(c)`` (w_s from the profile table at the
@@ -52,7 +53,8 @@ def cost_field(w, gen_i, gen_j, gen_c, cs, table, use_profile, ca, halt_frac, st
     of ``cs`` or, when ``ca`` is given (non-empty), whose height ``cs - c`` is below
     ``halt_frac * (cs - ca)``. Cells reached get ``stamp = tag``; ``cost`` and ``src``
     (the generator's cost) are valid there; their flat indices are ``touched[:m]``.
-    Returns ``m``.
+    Cells where ``stop`` (non-empty) is non-zero are reached but never expanded (water halts
+    the search). Returns ``m``.
     """
     ny, nx = stamp.shape
     heap = [(0.0, np.int64(0), 0.0)]
@@ -71,6 +73,7 @@ def cost_field(w, gen_i, gen_j, gen_c, cs, table, use_profile, ca, halt_frac, st
         src[i, j] = gen_c[g]
         heapq.heappush(heap, (gen_c[g], np.int64(i * nx + j), gen_c[g]))
     use_ca = ca.size > 0
+    use_stop = stop.size > 0
     while heap:
         c, idx, cg = heapq.heappop(heap)
         i = idx // nx
@@ -80,6 +83,8 @@ def cost_field(w, gen_i, gen_j, gen_c, cs, table, use_profile, ca, halt_frac, st
         if c >= cs - 0.5:
             continue
         if use_ca and (cs - c) < halt_frac * (cs - ca[i, j]):
+            continue
+        if use_stop and stop[i, j] != 0 and fixed[i, j] != tag:
             continue
         ws = _scale(c, cg, cs, table, use_profile)
         for k in range(8):

@@ -276,7 +276,7 @@ def watershed_map(rivers: RiverNetwork | None, grid: Grid, *, river_slope: float
     srcc = np.zeros((grid.ny, grid.nx))
     touched = np.empty(grid.ny * grid.nx, np.int64)
     _k.cost_field(w, gi.astype(np.int64), gj.astype(np.int64), h0[gi, gj], np.inf, np.ones(2), False,
-                  np.zeros((0, 0)), 0.0, stamp, 0, cost, srcc, touched, fixed)
+                  np.zeros((0, 0)), 0.0, stamp, 0, cost, srcc, touched, fixed, np.zeros((0, 0), np.uint8))
     return cost, src
 
 

@@ -5,8 +5,10 @@ The Visual Computer 25 (2009) 573-579 (doi:10.1007/s00371-009-0350-5). From a Di
 Tree: one feature per peak (the peak and its half-ridges to its saddles), generator cost
 = highest peak - elevation (m); the feature profile is fitted on a real DEM (the
 exemplar) with scikit-learn's ``IsotonicRegression``, or ``profile=none`` (w_s = 1).
-Not implemented: secondary ridges from random nodes, halting at water, the paper's own
-generator files and the pareidolia mode.
+Secondary ridges are least-cost paths from random nodes (§4, ``secondary``); halting the
+searches at water is the paper's future work (§6, ``water``: the shared rivers stop
+them); ``generators=FILE`` reads the paper's own input (generator nodes with costs and
+feature ids) instead of the tree. Not implemented: the pareidolia (shadow image) mode.
 """
 from __future__ import annotations
 
@@ -26,7 +28,8 @@ from orokit.raster.rasterize import Grid
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["RusnellParams", "PRESETS", "fit_profile", "edge_weights", "features", "render", "blend"]
+__all__ = ["RusnellParams", "PRESETS", "fit_profile", "edge_weights", "features", "file_features", "river_cells",
+           "secondary_paths", "render", "blend"]
 
 #: Table 1 of the paper: mu_w, r, s, b
 PRESETS: dict[str, tuple[float, float, float, float]] = {
@@ -55,6 +58,18 @@ class RusnellParams:
     profile : ``fit`` (isotonic fit of the drop below the nearest peak against the
         distance to it on the exemplar DEM; scaled vertically to ``[0, c_s]`` as in §3.1) or
         ``none`` (w_s = 1: the ablation).
+    secondary : number of secondary ridges (§4): least-cost paths of the all-generator field
+        from random reached nodes down to a generator; their nodes join that generator's
+        feature as generators. The paper gives no count; default 0.
+    secondary_scale : the path nodes' cost, "a function of the existing node cost" (§4):
+        ``c_g + secondary_scale x (C_a - c_g)`` with ``c_g`` the cost of the generator the
+        path reaches (1 leaves the field unchanged, 0 lifts the ridge to the generator;
+        orokit's default 0.5; the paper bounds it below, as c_g does here).
+    water : halt every search at the river cells of the shared rivers (the paper's future
+        work, §6): rivers are reached but not crossed.
+    generators : a CSV of the paper's own generator nodes (columns ``x, y, cost`` in the
+        grid's coordinates and cost metres, optional ``feature``; CLI ``--param
+        generators=FILE``) used instead of the tree; elevation = ``c_s -`` blended cost.
     """
 
     preset: str = field(default="foothills", metadata={"choices": tuple(PRESETS)})
@@ -63,6 +78,10 @@ class RusnellParams:
     s: float = math.nan
     b: float = math.nan
     profile: str = field(default="fit", metadata={"choices": ("fit", "none")})
+    secondary: int = 0
+    secondary_scale: float = 0.5
+    water: bool = False
+    generators: str = field(default="", metadata={"file": "table"})
 
     def __post_init__(self) -> None:
         if self.preset not in PRESETS:
@@ -80,6 +99,10 @@ class RusnellParams:
             raise InputError(f"b (blending bias) must be >= 0, got {self.b!r}")
         if self.profile not in ("fit", "none"):
             raise InputError(f"profile={self.profile!r} is not one of fit, none")
+        if not (0.0 <= self.secondary_scale <= 1.0):
+            raise InputError(f"secondary_scale must be in [0, 1], got {self.secondary_scale!r}")
+        if not (isinstance(self.secondary, int) and 0 <= self.secondary <= 100_000):
+            raise InputError(f"secondary must be an integer in [0, 100000], got {self.secondary!r}")
 
 
 def fit_profile(distance_m: np.ndarray, drop_m: np.ndarray, *, n_bins: int = 64) -> tuple[np.ndarray, np.ndarray]:
@@ -210,6 +233,83 @@ def features(tree, grid: Grid) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]
     return out
 
 
+def file_features(table, grid: Grid) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Generator cells ``(rows, cols, costs)`` per feature of a generator table (columns
+    ``x, y, cost``, optional ``feature``; rows outside the grid dropped, the lowest cost kept
+    per cell).
+
+    Raises
+    ------
+    InputError : missing columns, non-finite values, negative costs, or no node on the grid.
+    """
+    cols = {str(c).strip().lower(): c for c in table.columns}
+    missing = [c for c in ("x", "y", "cost") if c not in cols]
+    if missing:
+        raise InputError(f"the generators table lacks the column(s) {', '.join(missing)}; it needs x, y, cost "
+                         "(and optionally feature)")
+    xy = table[[cols["x"], cols["y"]]].to_numpy(float)
+    c = table[cols["cost"]].to_numpy(float)
+    fid = table[cols["feature"]].to_numpy() if "feature" in cols else np.arange(len(table))
+    if not (np.isfinite(xy).all() and np.isfinite(c).all()):
+        raise InputError("the generators table has non-finite x, y or cost values")
+    if (c < 0).any():
+        raise InputError("generator costs must be >= 0 (low cost = high ground)")
+    row, col, ok = grid.cell_of(xy)
+    if not ok.any():
+        raise InputError("no generator of the table lies inside the grid; check its x, y against the extent")
+    out = []
+    for f in np.unique(fid[ok]):
+        sel = ok & (fid == f)
+        r, q, cc = row[sel], col[sel], c[sel]
+        order = np.lexsort((cc, r * grid.nx + q))
+        cell = (r * grid.nx + q)[order]
+        first = np.r_[True, cell[1:] != cell[:-1]]
+        out.append((r[order][first].astype(np.int64), q[order][first].astype(np.int64), cc[order][first]))
+    return out
+
+
+def river_cells(rivers, grid: Grid) -> np.ndarray:
+    """uint8 mask of the grid cells the river edges cross (sampled every half cell)."""
+    mask = np.zeros((grid.ny, grid.nx), np.uint8)
+    if rivers is None or not rivers.n_nodes:
+        return mask
+    e = rivers.edges()
+    if not e.size:
+        return mask
+    p0, p1 = rivers.xy[e[:, 0]], rivers.xy[e[:, 1]]
+    n = np.maximum(np.ceil(np.hypot(*(p1 - p0).T) / (0.5 * grid.res)).astype(np.int64), 1) + 1
+    seg = np.repeat(np.arange(e.shape[0]), n)
+    t = (np.arange(seg.size) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
+    row, col, ok = grid.cell_of(p0[seg] + t[:, None] * (p1[seg] - p0[seg]))
+    mask[row[ok], col[ok]] = 1
+    return mask
+
+
+def secondary_paths(ca: np.ndarray, generator: np.ndarray, starts: np.ndarray) -> list[np.ndarray]:
+    """Paths of flat cell indices from each start cell down the cost field ``ca`` to a
+    generator cell (``generator`` bool mask): each step goes to the 8-neighbour of lowest
+    cost, which is lower than the current one (Dijkstra fields with positive weights
+    always have one), so every path is strictly decreasing and ends on a generator."""
+    ny, nx = ca.shape
+    out = []
+    for s0 in starts:
+        i, j = divmod(int(s0), nx)
+        path = [i * nx + j]
+        while not generator[i, j]:
+            best, bi, bj = ca[i, j], -1, -1
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    r, q = i + di, j + dj
+                    if (di or dj) and 0 <= r < ny and 0 <= q < nx and ca[r, q] < best:
+                        best, bi, bj = ca[r, q], r, q
+            if bi < 0:
+                break  # a local minimum that is not a generator (halted searches): stop here
+            i, j = bi, bj
+            path.append(i * nx + j)
+        out.append(np.asarray(path, np.int64))
+    return out
+
+
 def blend(heights: np.ndarray, b: float) -> np.ndarray:
     """Eq. 2 over axis 0: ``sum h^(b+1) / sum h^b`` (0 where every height is 0).
 
@@ -224,32 +324,41 @@ def blend(heights: np.ndarray, b: float) -> np.ndarray:
 
 
 def render(tree, rivers, grid: Grid, rng: np.random.Generator, params: RusnellParams | None = None, *,
-           exemplar: xr.DataArray | None = None) -> xr.DataArray:
+           exemplar: xr.DataArray | None = None, generators=None) -> xr.DataArray:
     """Elevation raster of a Divide Tree after Rusnell 2009, Algorithm 1 (pure: no file IO).
 
     Notes
     -----
     1. Graph: the 8-connected grid with edge weights ``(mu_w + r U[-1, 1])`` x step length.
     2. Generators: per peak, the cells of the peak and its half-ridges, cost = highest
-       peak - elevation; sea level ``c_s = s x`` the largest generator cost.
+       peak - elevation (or the ``generators`` table); sea level ``c_s = s x`` the largest
+       generator cost.
     3. Profile (``fit``): the exemplar's drop below the nearest peak against the distance,
        isotonic; w_s = profile slope / mu_w at ``c_m = (c - c_g) / (c_s - c_g) c_s`` (eq. 1).
-    4. One search over all generators gives C_a; each feature's own search stops within 0.5
-       of c_s or where its height is below 5 % of C_a's height.
+    4. One search over all generators gives C_a; ``secondary`` random reached nodes send
+       their least-cost path down C_a into the feature they reach (secondary ridges). Each
+       feature's own search stops within 0.5 of c_s or where its height is below 5 % of
+       C_a's height; with ``water`` every search halts at the river cells.
     5. Blend (eq. 2) with bias b; elevation = highest peak - c_s + blended height (cells no
-       feature reaches are at ``highest peak - c_s``).
-
-    ``rivers`` is not used (the paper has no rivers).
+       feature reaches are at ``highest peak - c_s``); from a table, ``c_s -`` blended cost.
     """
     params = params or RusnellParams()
     crs = check_crs(tree)
+    if params.generators and generators is None:
+        raise InputError(f"generators={params.generators!r} is a file the caller reads: pass "
+                         "render_terrain(..., inputs={'generators': table}) (the CLI does it)")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    feats = features(tree, grid)
-    if not feats:
-        raise InputError("no peak of the Divide Tree lies inside the grid")
-    top = max(float(f[2].max()) for f in feats)
-    costs = [top - f[2] for f in feats]
+    if generators is not None:
+        feats = file_features(generators, grid)
+        costs = [f[2] for f in feats]
+        top = None
+    else:
+        feats = features(tree, grid)
+        if not feats:
+            raise InputError("no peak of the Divide Tree lies inside the grid")
+        top = max(float(f[2].max()) for f in feats)
+        costs = [top - f[2] for f in feats]
     cmax = max(float(c.max()) for c in costs)
     cs = params.s * max(cmax, 1.0)
     use_profile = params.profile == "fit"
@@ -265,6 +374,7 @@ def render(tree, rivers, grid: Grid, rng: np.random.Generator, params: RusnellPa
     t0 = time.perf_counter()
     w = edge_weights(grid.ny, grid.nx, params.mu_w, params.r, rng, cell_m=grid.res)
     ny, nx = grid.ny, grid.nx
+    stop = river_cells(rivers, grid) if params.water else np.zeros((0, 0), np.uint8)
     stamp = np.full((ny, nx), -1, np.int32)
     fixed = np.full((ny, nx), -1, np.int32)
     cost = np.zeros((ny, nx))
@@ -273,18 +383,40 @@ def render(tree, rivers, grid: Grid, rng: np.random.Generator, params: RusnellPa
     gi = np.concatenate([f[0] for f in feats])
     gj = np.concatenate([f[1] for f in feats])
     gc = np.concatenate(costs)
-    _k.cost_field(w, gi, gj, gc, cs, table, use_profile, np.zeros((0, 0)), 0.0, stamp, 0, cost, src, touched, fixed)
+    _k.cost_field(w, gi, gj, gc, cs, table, use_profile, np.zeros((0, 0)), 0.0, stamp, 0, cost, src, touched, fixed,
+                  stop)
     ca = np.where(stamp == 0, cost, cs)
     timings["all_generators"] = time.perf_counter() - t0
+    if params.secondary:
+        t0 = time.perf_counter()
+        owner = np.full((ny, nx), -1, np.int64)
+        for f, (fi, fj, _) in enumerate(feats):
+            owner[fi, fj] = f
+        reached = np.flatnonzero(((stamp == 0) & (ca < cs) & (owner < 0)).ravel())
+        starts = rng.choice(reached, size=min(params.secondary, reached.size), replace=False) if reached.size \
+            else np.zeros(0, np.int64)
+        feats = [(fi, fj, c) for (fi, fj, _), c in zip(feats, costs)]
+        for path in secondary_paths(ca, owner >= 0, starts):
+            end = owner.ravel()[path[-1]]
+            if end < 0:
+                continue
+            new = path[owner.ravel()[path] < 0]
+            fi, fj, c = feats[end]
+            cg = ca.ravel()[path[-1]]
+            feats[end] = (np.concatenate([fi, new // nx]), np.concatenate([fj, new % nx]),
+                          np.concatenate([c, cg + params.secondary_scale * (ca.ravel()[new] - cg)]))
+            owner.ravel()[new] = end
+        costs = [f[2] for f in feats]
+        timings["secondary"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     num = np.zeros((ny, nx))
     den = np.zeros((ny, nx))
     for f, (fi, fj, _), c in zip(range(len(feats)), feats, costs):
         m = _k.cost_field(w, fi, fj, c, cs, table, use_profile, ca, HALT_FRACTION, stamp, f + 1, cost, src,
-                          touched, fixed)
+                          touched, fixed, stop)
         _k.blend_add(touched, m, cost, cs, float(params.b), num, den)
     hf = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
     timings["features"] = time.perf_counter() - t0
-    z = (top - cs + hf).astype(np.float32)
+    z = ((top - cs + hf) if top is not None else hf).astype(np.float32)
     logger.info("rusnell: %d features, c_s %.0f m, %s profile", len(feats), cs, params.profile)
     return as_dataarray(z, grid, crs, {"timings": timings})

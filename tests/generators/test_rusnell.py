@@ -34,7 +34,8 @@ def grid_graph(w: np.ndarray) -> sp.csr_matrix:
     return m + m.T
 
 
-def _field(w, gens, costs, cs, table=np.ones(2), use_profile=False, ca=np.zeros((0, 0)), halt=0.0):
+def _field(w, gens, costs, cs, table=np.ones(2), use_profile=False, ca=np.zeros((0, 0)), halt=0.0,
+           stop=np.zeros((0, 0), np.uint8)):
     ny, nx, _ = w.shape
     stamp = np.full((ny, nx), -1, np.int32)
     fixed = np.full((ny, nx), -1, np.int32)
@@ -43,7 +44,7 @@ def _field(w, gens, costs, cs, table=np.ones(2), use_profile=False, ca=np.zeros(
     gi = np.array([g[0] for g in gens], np.int64)
     gj = np.array([g[1] for g in gens], np.int64)
     m = K.cost_field(w, gi, gj, np.asarray(costs, float), cs, table, use_profile, ca, halt, stamp, 1, cost, src,
-                     touched, fixed)
+                     touched, fixed, stop)
     return np.where(stamp == 1, cost, np.inf), m
 
 
@@ -161,3 +162,91 @@ def test_render_with_an_exemplar_profile():
     ex = as_dataarray(300 + bumps, grid, None)
     dem = render_terrain(tree, generator="rusnell", resolution_m=100.0, exemplar=ex, seed=1)
     assert np.isfinite(dem.values).all() and dem.values.max() <= 1500.0 + 1e-3
+
+
+def test_water_halts_the_search():
+    """A river row is reached but never crossed: the cells beyond it stay unreached."""
+    w = R.edge_weights(15, 12, 1.0, 0.0, np.random.default_rng(0))
+    stop = np.zeros((15, 12), np.uint8)
+    stop[7, :] = 1
+    got, m = _field(w, [(2, 5)], [0.0], cs=1e9, stop=stop)
+    assert np.isfinite(got[:8]).all() and np.isinf(got[8:]).all()
+    assert m == 8 * 12
+    free, _ = _field(w, [(2, 5)], [0.0], cs=1e9)
+    np.testing.assert_array_equal(got[:8], free[:8])  # above the river: the same least costs (no detour is shorter)
+
+
+def test_secondary_paths_descend_to_a_generator():
+    rng = np.random.default_rng(1)
+    w = R.edge_weights(30, 30, 1.0, 0.5, rng)
+    gens = [(5, 5), (20, 24)]
+    ca, _ = _field(w, gens, [0.0, 10.0], cs=1e9)
+    gmask = np.zeros((30, 30), bool)
+    for g in gens:
+        gmask[g] = True
+    starts = rng.choice(900, size=25, replace=False)
+    for p in R.secondary_paths(ca, gmask, starts):
+        c = ca.ravel()[p]
+        assert (np.diff(c) < 0).all()  # strictly down the least-cost field
+        assert gmask.ravel()[p[-1]]
+        steps = np.abs(np.diff(np.column_stack(np.divmod(p, 30)), axis=0))
+        assert (steps.max(axis=1) == 1).all()  # 8-neighbour steps
+
+
+def test_render_with_secondary_ridges_and_water():
+    tree = small_tree()
+    base = render_terrain(tree, generator="rusnell", resolution_m=100.0, seed=0, params={"profile": "none"})
+    sec = render_terrain(tree, generator="rusnell", resolution_m=100.0, seed=0,
+                         params={"profile": "none", "secondary": 30})
+    assert not np.array_equal(base.values, sec.values)
+    again = render_terrain(tree, generator="rusnell", resolution_m=100.0, seed=0,
+                           params={"profile": "none", "secondary": 30})
+    assert again.values.tobytes() == sec.values.tobytes()
+    wet = render_terrain(tree, generator="rusnell", resolution_m=100.0, seed=0,
+                         params={"profile": "none", "water": True})
+    assert not np.array_equal(base.values, wet.values)
+
+
+def test_generators_table_replaces_the_tree():
+    import pandas as pd
+
+    grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 100.0)
+    table = pd.DataFrame({"x": [2050.0, 2150.0, 6050.0], "y": [2050.0, 2050.0, 6050.0], "cost": [0.0, 0.0, 300.0],
+                          "feature": [1, 1, 2]})
+    feats = R.file_features(table, grid)
+    assert [f[0].size for f in feats] == [2, 1]
+    p = R.RusnellParams(profile="none", r=0.0)
+    dem = R.render(small_tree(), None, grid, np.random.default_rng(0), p, generators=table)
+    z = dem.values
+    cs = p.s * 300.0
+    assert float(z.max()) == pytest.approx(cs)  # the zero-cost generators are the highest ground, at c_s
+    assert z[59, 20] == pytest.approx(cs) and z[19, 60] < z[59, 20]
+    for bad, msg in ((table.drop(columns="cost"), "lacks the column"), (table.assign(cost=-1.0), ">= 0"),
+                     (table.assign(x=1e7), "inside the grid")):
+        with pytest.raises(InputError, match=msg):
+            R.file_features(bad, grid)
+    with pytest.raises(InputError, match="caller reads"):
+        render_terrain(small_tree(), generator="rusnell", resolution_m=100.0, seed=0,
+                       params={"profile": "none", "generators": "g.csv"})
+
+
+def test_cli_render_rusnell_from_a_generators_file(tmp_path):
+    import rasterio
+    from click.testing import CliRunner
+
+    from orokit.cli.main import cli
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+
+    write_divide_tree_gpkg(small_tree(crs="EPSG:32633"), tmp_path / "tree.gpkg")
+    (tmp_path / "gen.csv").write_text("x,y,cost,feature\n2050,2050,0,1\n6050,6050,200,2\n")
+    args = ["render", str(tmp_path / "tree.gpkg"), "-o", str(tmp_path / "dem.tif"), "--resolution", "100m",
+            "--generator", "rusnell", "--param", "profile=none", "--param", f"generators={tmp_path / 'gen.csv'}",
+            "--seed", "0"]
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code == 0, r.output
+    with rasterio.open(tmp_path / "dem.tif") as src:
+        assert len(src.tags()["generators_sha256"]) == 64
+        z = src.read(1)
+    assert z[59, 20] == pytest.approx(z.max())  # the zero-cost generator is the summit
+    bad = CliRunner().invoke(cli, args[:3] + [str(tmp_path / "bad.tif")] + args[4:8] + ["--param", "generators=no.csv"])
+    assert bad.exit_code != 0 and "generators=no.csv" in bad.output and "Traceback" not in bad.output
