@@ -120,7 +120,7 @@ def _checkpoint_dir(checkpoint, data, min_prominence_m: float) -> Path | None:
         "chunks": [list(c) for c in data.chunks],
         "min_prominence_m": float(min_prominence_m),
         "graph": data.name,  # dask name: a hash of the source and its processing
-        "format": 1,
+        "format": 2,  # 2: exit nodes (nexit) in the summaries
     }
     return open_checkpoint(checkpoint, fingerprint)
 

@@ -8,6 +8,14 @@ rectangles merge exactly: add "seam" edges between adjacent side cells (weight =
 the lower cell), take the maximum spanning tree, and contract the nodes that are no
 longer needed (DESIGN.md §2 step 5).
 
+Basins follow the raster's own steepest ascent (the halo is read): a chain that
+leaves the chunk ends at an *exit* node, tied to the cell it climbs to in the next
+chunk by an edge of infinite height, and every side cell is tied to its basin the
+same way. So a node stands for (a piece of) one basin of the whole raster, the merged
+graph is the in-memory engine's basin graph, and removed peaks are absorbed into the
+same kept peaks as in memory (same pruned Divide Tree, hence the same line and
+prominence parents).
+
 Nodes whose prominence *within the rectangle* is below the threshold are contracted
 early: terrain outside can only add paths and higher ground, so a chunk-local
 prominence is an upper bound of the true one.
@@ -26,6 +34,7 @@ from orokit.topology.engine import Orometry, finalize_graph
 
 __all__ = ["ChunkSummary", "chunk_summary", "merge_summaries", "finalize_summary"]
 
+_FIELDS = ("key", "z", "ismax", "bmax", "nmin", "nexit", "ea", "eb", "ez", "ekey")
 _OFFSETS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 
 
@@ -40,6 +49,7 @@ class ChunkSummary:
     ismax: np.ndarray            # node is a maximum (candidate peak)
     bmax: np.ndarray             # highest border ("unknown outside") value reachable
     nmin: np.ndarray             # lowest elevation of the node's absorbed area
+    nexit: np.ndarray            # exit node: global cell its ascent climbs to next (else -1)
     ea: np.ndarray
     eb: np.ndarray
     ez: np.ndarray               # saddle elevation
@@ -51,10 +61,10 @@ class ChunkSummary:
         return int(self.key.size)
 
     def nbytes(self) -> int:
-        return sum(getattr(self, f).nbytes for f in ("key", "z", "ismax", "bmax", "nmin", "ea", "eb", "ez", "ekey"))
+        return sum(getattr(self, f).nbytes for f in _FIELDS)
 
     def to_npz(self) -> dict:
-        out = {f: getattr(self, f) for f in ("key", "z", "ismax", "bmax", "nmin", "ea", "eb", "ez", "ekey")}
+        out = {f: getattr(self, f) for f in _FIELDS}
         out["meta"] = np.array([*self.region, *self.shape, self.n_maxima], dtype=np.int64)
         return out
 
@@ -63,7 +73,7 @@ class ChunkSummary:
         m = data["meta"]
         return cls(
             tuple(int(v) for v in m[:4]), (int(m[4]), int(m[5])),
-            *(data[f] for f in ("key", "z", "ismax", "bmax", "nmin", "ea", "eb", "ez", "ekey")),
+            *(data[f] for f in _FIELDS),
             n_maxima=int(m[6]),
         )
 
@@ -100,7 +110,7 @@ def _reduce(s: ChunkSummary, min_prominence_m: float, needed: np.ndarray) -> Chu
     kept = np.flatnonzero(keep)
     new_id[kept] = np.arange(kept.size)
     return ChunkSummary(
-        s.region, s.shape, s.key[kept], s.z[kept], s.ismax[kept], nb[kept], nm[kept],
+        s.region, s.shape, s.key[kept], s.z[kept], s.ismax[kept], nb[kept], nm[kept], s.nexit[kept],
         new_id[oa], new_id[ob], tz[oe], tk[oe], s.n_maxima,
     )
 
@@ -119,13 +129,13 @@ def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
     core = np.ascontiguousarray(zh[1:-1, 1:-1])
     h, w = core.shape
     region = (row0, row0 + h, col0, col0 + w)
-    ptr, border = _k.steepest_ascent(zh)
-    label, max_cell = _k.label_basins(ptr)
-    npk = max_cell.size
+    ptr, exit_to, border = _k.steepest_ascent(zh)
+    label, end_cell = _k.label_basins(ptr)
+    npk = end_cell.size
     empty_i = np.empty(0, np.int64)
     if npk == 0:
         return ChunkSummary(region, (H, W), empty_i, np.empty(0), np.empty(0, bool), np.empty(0), np.empty(0),
-                            empty_i, empty_i, np.empty(0), empty_i, 0)
+                            empty_i, empty_i, empty_i, np.empty(0), empty_i, 0)
     zf = core.ravel()
     bz = _k.basin_border_max(core, label, border, npk)
     nmin = _k.basin_min(core, label, npk)
@@ -134,41 +144,32 @@ def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
     def glob(i):
         return (row0 + i // w) * W + col0 + i % w
 
-    # side cells that are not maxima become extra nodes tied to their basin's maximum
+    # chain ends: maxima of the raster, or exits whose ascent goes on in a neighbour chunk
+    out = exit_to[end_cell]
+    is_exit = out >= 0
+    nexit = np.where(is_exit, (row0 - 1 + out // (w + 2)) * W + col0 - 1 + out % (w + 2), -1)
+    # side cells that are not chain ends become extra nodes, tied to their basin
     rr, cc = np.divmod(np.arange(h * w), w)
     side = (rr == 0) | (rr == h - 1) | (cc == 0) | (cc == w - 1)
     side_cells = np.flatnonzero(side & (label >= 0))
     side_cells = side_cells[_side_mask(glob(side_cells), region, shape)]
-    is_max_cell = np.zeros(h * w, bool)
-    is_max_cell[max_cell] = True
-    extra = side_cells[~is_max_cell[side_cells]]
+    is_end = np.zeros(h * w, bool)
+    is_end[end_cell] = True
+    extra = side_cells[~is_end[side_cells]]
     ne = extra.size
-    key = np.concatenate([glob(max_cell), glob(extra)])
-    z = np.concatenate([zf[max_cell], zf[extra]]).astype(np.float64)
-    ismax = np.concatenate([np.ones(npk, bool), np.zeros(ne, bool)])
+    key = np.concatenate([glob(end_cell), glob(extra)])
+    z = np.concatenate([zf[end_cell], zf[extra]]).astype(np.float64)
+    ismax = np.concatenate([~is_exit, np.zeros(ne, bool)])
     bmax = np.concatenate([bz, np.full(ne, -np.inf)])
     nm = np.concatenate([nmin, zf[extra].astype(np.float64)])
+    nx = np.concatenate([nexit, np.full(ne, -1, np.int64)])
     xa = np.concatenate([ea, npk + np.arange(ne)])
     xb = np.concatenate([eb, label[extra]])
     xk = np.concatenate([glob(ec), glob(extra)])
-    xz = np.concatenate([zf[ec], zf[extra]]).astype(np.float64)
-    n_global_max = int(_count_global_maxima(zh, max_cell, w))
-    s = ChunkSummary(region, (H, W), key, z, ismax, bmax, nm, xa, xb, xz, xk, n_global_max)
+    # a side cell is part of its basin: an edge above every saddle
+    xz = np.concatenate([zf[ec].astype(np.float64), np.full(ne, np.inf)])
+    s = ChunkSummary(region, (H, W), key, z, ismax, bmax, nm, nx, xa, xb, xz, xk, int((~is_exit).sum()))
     return _reduce(s, min_prominence_m, _side_mask(key, region, shape))
-
-
-def _count_global_maxima(zh, max_cell, w) -> int:
-    """Chunk maxima that stay maxima of the whole raster (checked against the halo)."""
-    r = max_cell // w + 1
-    c = max_cell % w + 1
-    zc = zh[r, c]
-    ok = np.ones(max_cell.size, bool)
-    for dr, dc in _OFFSETS:
-        zn = zh[r + dr, c + dc]
-        # a halo neighbour before the cell in raster order wins ties
-        before = (dr < 0) | ((dr == 0) & (dc < 0))
-        ok &= ~((zn > zc) | ((zn == zc) & before))
-    return int(ok.sum())
 
 
 def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence_m: float) -> ChunkSummary:
@@ -197,12 +198,14 @@ def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence_m: float) -
     za, zb = a.z[sea], b.z[seb]
     ka, kbb = a.key[sea], b.key[seb]
     a_lower = (za < zb) | ((za == zb) & (ka > kbb))
-    sz = np.where(a_lower, za, zb)
+    # an exit and the cell its ascent climbs to belong to one basin: an edge above every saddle
+    same_basin = (a.nexit[sea] == kbb) | (b.nexit[seb] == ka)
+    sz = np.where(same_basin, np.inf, np.where(a_lower, za, zb))
     sk = np.where(a_lower, ka, kbb)
     s = ChunkSummary(
         region, a.shape,
         np.concatenate([a.key, b.key]), np.concatenate([a.z, b.z]), np.concatenate([a.ismax, b.ismax]),
-        np.concatenate([a.bmax, b.bmax]), np.concatenate([a.nmin, b.nmin]),
+        np.concatenate([a.bmax, b.bmax]), np.concatenate([a.nmin, b.nmin]), np.concatenate([a.nexit, b.nexit]),
         np.concatenate([a.ea, b.ea + na, sea]), np.concatenate([a.eb, b.eb + na, seb + na]),
         np.concatenate([a.ez, b.ez, sz]), np.concatenate([a.ekey, b.ekey, sk]),
         a.n_maxima + b.n_maxima,

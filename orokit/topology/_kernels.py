@@ -29,23 +29,27 @@ def above(za, ka, zb, kb):
 
 @njit(cache=True, nogil=True)
 def steepest_ascent(zh):
-    """Pointer of every cell to its highest 8-neighbour, and border flags.
+    """Pointer of every cell to its highest 8-neighbour, exits and border flags.
 
     ``zh`` is the raster (or a chunk of it) with a one-cell halo all round: NaN
-    outside the raster, neighbouring values around a chunk. Pointers only follow
-    cells of the core ``zh[1:-1, 1:-1]``; the halo is read only to flag "border"
-    cells (next to a NaN cell, so raster-edge cells are border cells).
+    outside the raster, neighbouring values around a chunk. Every cell of the core
+    ``zh[1:-1, 1:-1]`` points to its highest neighbour in the whole raster's total
+    order, halo included, so chains follow the raster's own steepest ascent; a chain
+    that leaves the core ends at an *exit* cell (its highest neighbour lies in the
+    halo). Cells next to a NaN cell are "border" cells (so raster-edge cells are).
 
-    Returns ``ptr`` (flat core index of the highest neighbour if it is above the
-    cell, the cell itself for a local maximum of the total order, -1 for NaN cells)
-    and ``border``. Tie-break keys are the core's raster order, which orders cells
-    exactly as the whole raster's order does.
+    Returns ``ptr`` (flat core index of the highest neighbour if it is in the core and
+    above the cell, the cell itself for a local maximum or an exit, -1 for NaN cells),
+    ``exit_to`` (flat index in ``zh`` of the halo cell an exit points to, else -1) and
+    ``border``. Tie-break keys are positions in ``zh`` (row, then column), which order
+    cells exactly as the whole raster's order does.
     """
     Hh, Wh = zh.shape
     h = Hh - 2
     w = Wh - 2
     n = h * w
     ptr = np.empty(n, np.int64)
+    exit_to = np.full(n, -1, np.int64)
     border = np.zeros(n, np.bool_)
     for r in range(h):
         for c in range(w):
@@ -54,33 +58,41 @@ def steepest_ascent(zh):
             if zi != zi:
                 ptr[i] = -1
                 continue
-            best = i
+            me = (r + 1) * Wh + c + 1
+            best = me
             bz = zi
             isb = False
             for d in _NEIGHBOURS_8:
-                rr = r + d[0]
-                cc = c + d[1]
-                zn = zh[rr + 1, cc + 1]
+                rr = r + 1 + d[0]
+                cc = c + 1 + d[1]
+                zn = zh[rr, cc]
                 if zn != zn:
                     isb = True
                     continue
-                if rr < 0 or rr >= h or cc < 0 or cc >= w:
-                    continue
-                j = rr * w + cc
+                j = rr * Wh + cc
                 if zn > bz or (zn == bz and j < best):
                     best = j
                     bz = zn
-            ptr[i] = best
             border[i] = isb
-    return ptr, border
+            if best == me:
+                ptr[i] = i
+                continue
+            br = best // Wh - 1
+            bc = best % Wh - 1
+            if br < 0 or br >= h or bc < 0 or bc >= w:
+                ptr[i] = i
+                exit_to[i] = best
+            else:
+                ptr[i] = br * w + bc
+    return ptr, exit_to, border
 
 
 @njit(cache=True, nogil=True)
 def label_basins(ptr):
-    """Label every cell with the id of the maximum its ascent chain reaches.
+    """Label every cell with the id of the end (maximum or exit) its ascent chain reaches.
 
-    Maxima (``ptr[i] == i``) get ids 0..n-1 in raster order. Returns ``label``
-    (-1 for NaN cells) and ``peak_cell`` (flat index of each maximum).
+    Chain ends (``ptr[i] == i``) get ids 0..n-1 in raster order. Returns ``label``
+    (-1 for NaN cells) and ``peak_cell`` (flat index of each chain end).
     """
     n = ptr.size
     label = np.full(n, -1, np.int64)

@@ -11,6 +11,8 @@ import pytest
 
 import orokit
 
+from _ridges import ridge_set
+
 pytestmark = pytest.mark.cluster
 
 
@@ -30,16 +32,10 @@ def _terrain(shape=(400, 500), seed=7):
     return z.astype(np.float32)
 
 
-#: line and prominence parents are walks on each engine's pruned Divide Tree, whose ridges
-#: can join the same kept peaks through the same saddle at different ends (NOTES.md,
-#: known gaps); tests/topology/test_parents.py checks them on the chunked tree itself
-WALK_PARENTS = {f"{p}_parent{s}" for p in ("line", "prominence") for s in ("", "_row", "_col")}
-
-
 def _same(a, b):
-    cols = [c for c in a.peaks.columns if c != "geometry" and c not in WALK_PARENTS]
-    assert a.peaks[cols].equals(b.peaks[cols])
-    assert sorted(a.tree.edges["saddle"]) == sorted(b.tree.edges["saddle"])
+    cols = [c for c in a.peaks.columns if c != "geometry"]
+    assert a.peaks[cols].equals(b.peaks[cols])  # line and prominence parents included
+    assert ridge_set(a.tree) == ridge_set(b.tree)
 
 
 def test_local_cluster_equals_in_memory(cluster, make_dem):

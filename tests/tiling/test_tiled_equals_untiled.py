@@ -12,26 +12,22 @@ from orokit.analysis import write_analysis
 from orokit.tiling.summary import chunk_summary, finalize_summary, merge_summaries
 from orokit.topology.engine import orometry
 
+from _ridges import orometry_ridges, ridge_set
+
 FIELDS = ["peak_cell", "peak_z", "prominence", "key_saddle_cell", "parent", "prominence_exact"]
 
 
-#: line and prominence parents are walks on each engine's pruned Divide Tree, whose ridges can join
-#: the same kept peaks through the same saddle at different ends (NOTES.md, known gaps);
-#: tests/topology/test_parents.py checks them on the chunked tree itself
-WALK_PARENTS = {f"{p}_parent{s}" for p in ("line", "prominence") for s in ("", "_row", "_col")}
-
-
 def _assert_same_tables(a, b):
-    cols = [c for c in a.peaks.columns if c != "geometry" and c not in WALK_PARENTS]
-    assert WALK_PARENTS <= set(a.peaks.columns) and "island_parent" in cols
+    """Every column (line and prominence parents included) and the same pruned Divide Tree."""
+    cols = [c for c in a.peaks.columns if c != "geometry"]
+    assert {"island_parent", "line_parent", "prominence_parent"} <= set(cols)
     for c in cols:
         np.testing.assert_array_equal(a.peaks[c].to_numpy(), b.peaks[c].to_numpy(), err_msg=c)
     sc = [c for c in a.saddles.columns if c != "geometry"]
     for c in sc:
         np.testing.assert_array_equal(a.saddles[c].to_numpy(), b.saddles[c].to_numpy(), err_msg=c)
     assert a.tree.n_peaks == b.tree.n_peaks
-    # ridge sets: equal saddle multisets; the tree is unique up to ridges sharing a saddle cell
-    assert sorted(a.tree.edges["saddle"]) == sorted(b.tree.edges["saddle"])
+    assert ridge_set(a.tree) == ridge_set(b.tree)
     np.testing.assert_array_equal(a.tree.prominence(), b.tree.prominence())
 
 
@@ -77,7 +73,8 @@ def test_chunk_summaries_merge_exactly(case, eps, outside):
     for f in FIELDS:
         np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
     assert a.n_maxima == b.n_maxima
-    assert sorted(a.ridge_saddle_cell) == sorted(b.ridge_saddle_cell)
+    # the same pruned Divide Tree: every ridge joins the same two peaks through the same saddle
+    assert orometry_ridges(a) == orometry_ridges(b)
 
 
 @settings(max_examples=40, deadline=None,
