@@ -99,13 +99,15 @@ def _reduce(s: ChunkSummary, min_prominence_m: float, needed: np.ndarray) -> Chu
         return s
     order = np.lexsort((s.ekey, -s.ez))
     ea, eb, ez, ekey = s.ea[order], s.eb[order], s.ez[order], s.ekey[order]
-    in_tree, key_edge, _, _ = _k.kruskal_sweep(s.z, s.key, ea, eb, ez, ekey, s.bmax)
+    _, key_edge, _, _ = _k.kruskal_sweep(s.z, s.key, ea, eb, ez, ekey, s.bmax)
     root = key_edge < 0
     prom = np.full(n, np.inf)
     prom[~root] = s.z[~root] - ez[key_edge[~root]]
     keep = needed | (s.ismax & (root | ((prom >= min_prominence_m) & (prom > 0))))
-    ta, tb, tz, tk = ea[in_tree], eb[in_tree], ez[in_tree], ekey[in_tree]
-    oa, ob, oe, nb, nm = _k.prune_edges(n, ta, tb, tz, keep, s.bmax, s.nmin)
+    # defer: where one saddle joins several kept parts, a removed part stays and every edge of
+    # that saddle is kept, until the final prune (same choices as the in-memory engine)
+    oa, ob, oe, nb, nm, keep = _k.prune_edges(n, ea, eb, ez, ekey, keep, s.bmax, s.nmin, s.z, s.key, True)
+    tz, tk = ez, ekey
     new_id = np.full(n, -1, np.int64)
     kept = np.flatnonzero(keep)
     new_id[kept] = np.arange(kept.size)
@@ -165,8 +167,9 @@ def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
     nx = np.concatenate([nexit, np.full(ne, -1, np.int64)])
     xa = np.concatenate([ea, npk + np.arange(ne)])
     xb = np.concatenate([eb, label[extra]])
-    xk = np.concatenate([glob(ec), glob(extra)])
-    # a side cell is part of its basin: an edge above every saddle
+    # a side cell is part of its basin: an edge above every saddle; its key (-1 - cell) is
+    # no saddle cell, so no sweep takes it for the same event as a real saddle
+    xk = np.concatenate([glob(ec), -1 - glob(extra)])
     xz = np.concatenate([zf[ec].astype(np.float64), np.full(ne, np.inf)])
     s = ChunkSummary(region, (H, W), key, z, ismax, bmax, nm, nx, xa, xb, xz, xk, int((~is_exit).sum()))
     return _reduce(s, min_prominence_m, _side_mask(key, region, shape))
@@ -202,6 +205,7 @@ def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence_m: float) -
     same_basin = (a.nexit[sea] == kbb) | (b.nexit[seb] == ka)
     sz = np.where(same_basin, np.inf, np.where(a_lower, za, zb))
     sk = np.where(a_lower, ka, kbb)
+    sk = np.where(same_basin, -1 - sk, sk)
     s = ChunkSummary(
         region, a.shape,
         np.concatenate([a.key, b.key]), np.concatenate([a.z, b.z]), np.concatenate([a.ismax, b.ismax]),

@@ -499,28 +499,66 @@ def kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, border_z):
     return in_tree, key_edge, parent, touched
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _node_before(x, y, node_z, node_key):
+    """x before y in a decreasing order of nodes, -1 (none) last."""
+    if x == y:
+        return False
+    if y < 0:
+        return True
+    if x < 0:
+        return False
+    return above(node_z[x], node_key[x], node_z[y], node_key[y])
+
+
 @njit(cache=True, nogil=True)
-def prune_edges(n, ea, eb, ez, keep, bmax, nmin):
+def _before(g, h, key_t, key_hi, key_lo, node_z, node_key):
+    """Edge g goes before edge h at one saddle (see :func:`prune_edges`)."""
+    for keys in (key_t, key_hi, key_lo):
+        if keys[g] != keys[h]:
+            return _node_before(keys[g], keys[h], node_z, node_key)
+    return g < h
+
+
+@njit(cache=True, nogil=True)
+def prune_edges(n, ea, eb, ez, ekey, keep, bmax, nmin, node_z, node_key, defer):
     """Divide Tree restricted to the kept nodes, preserving bottleneck saddles.
 
-    Edges must be the tree edges sorted from the highest to the lowest saddle. The
-    result is the maximum spanning forest of the kept nodes under bottleneck (max-min)
-    saddle heights, so every kept node keeps its prominence and key saddle when all
-    removed nodes have a lower prominence than all kept ones. A removed node is
-    absorbed into the neighbour across its highest saddle (star contraction), which
-    keeps ridges between geographic neighbours.
+    Edges (of any graph) must be sorted from the highest to the lowest saddle, those
+    of one saddle (same ``ekey``) consecutive; edges closing a cycle are skipped. The
+    result is the maximum spanning
+    forest of the kept nodes under bottleneck (max-min) saddle heights, so every kept
+    node keeps its prominence and key saddle when all removed nodes have a lower
+    prominence than all kept ones. A removed node is absorbed into the neighbour
+    across its highest saddle (star contraction), which keeps ridges between
+    geographic neighbours. When one saddle joins several parts holding kept nodes, a
+    part without any is absorbed into the one whose top (highest node, in the order
+    ``node_z`` then ``node_key``) is highest: the edges of one saddle are taken by
+    decreasing top of their parts with kept nodes, so the pruned tree does not depend
+    on how the graph lists them (the in-memory and the chunked engines agree); among
+    edges of one saddle joining the same two parts, the one whose kept ends are
+    highest is the ridge.
+
+    ``defer`` (chunk summaries, whose kept set is larger than the final one): a
+    removed part of a saddle with two or more edges reaching kept parts is not
+    absorbed but kept (its first node), and every edge of one
+    saddle between kept parts is returned, so the choices are made once the final
+    kept set is known.
 
     ``bmax`` (highest border elevation reachable in a node's basin) and ``nmin``
     (lowest elevation of the basin) are carried to the node a removed node is
     absorbed into; the border value through the absorbing saddle ``w`` is
     ``min(bmax, w)``, which keeps the "touched the unknown outside" flags exact.
 
-    Returns ``(out_a, out_b, out_edge, bmax_new, nmin_new)``: kept endpoints and the
-    index of the original edge (its saddle) of each output ridge, and the carried
-    per-node values (meaningful at kept nodes).
+    Returns ``(out_a, out_b, out_edge, bmax_new, nmin_new, keep_new)``: kept endpoints
+    and the index of the original edge (its saddle) of each output ridge, the carried
+    per-node values (meaningful at kept nodes) and the kept nodes (``keep`` plus the
+    deferred ones).
     """
     uf = np.arange(n)
+    keep = keep.copy()
     haskept = keep.copy()
+    top = np.arange(n)
     comp_b = bmax.copy()
     comp_m = nmin.copy()
     nb = bmax.copy()
@@ -530,35 +568,124 @@ def prune_edges(n, ea, eb, ez, keep, bmax, nmin):
     out_a = np.empty(ea.size, np.int64)
     out_b = np.empty(ea.size, np.int64)
     out_e = np.empty(ea.size, np.int64)
+    pre_a = np.empty(ea.size, np.int64)
+    pre_b = np.empty(ea.size, np.int64)
+    key_t = np.empty(ea.size, np.int64)
+    key_hi = np.empty(ea.size, np.int64)
+    key_lo = np.empty(ea.size, np.int64)
     k = 0
-    for e in range(ea.size):
-        a = ea[e]
-        b = eb[e]
-        ra = _find(uf, a)
-        rb = _find(uf, b)
-        if ra == rb:
-            continue
-        if haskept[ra] and haskept[rb]:
-            out_a[k] = _find(anchor, a)
-            out_b[k] = _find(anchor, b)
-            out_e[k] = e
-            k += 1
-        elif haskept[rb] or haskept[ra]:
-            # the component without a kept node is absorbed across this saddle
-            if haskept[rb]:
-                src, dst = ra, _find(anchor, b)
+    e = 0
+    while e < ea.size:
+        f = e + 1
+        while f < ea.size and ekey[f] == ekey[e]:
+            f += 1
+        for g in range(e, f):
+            pre_a[g] = _find(uf, ea[g])
+            pre_b[g] = _find(uf, eb[g])
+        seq = np.arange(e, f)
+        if f - e > 1:
+            if defer:
+                n_kept_parts = 0
+                n_bare = 0
+                roots = np.empty(2 * (f - e), np.int64)
+                m = 0
+                for g in range(e, f):
+                    for r in (pre_a[g], pre_b[g]):
+                        seen = False
+                        for t in range(m):
+                            if roots[t] == r:
+                                seen = True
+                        if not seen:
+                            roots[m] = r
+                            m += 1
+                for t in range(m):
+                    if not haskept[roots[t]]:
+                        n_bare += 1
+                for g in range(e, f):
+                    if haskept[pre_a[g]] or haskept[pre_b[g]]:
+                        n_kept_parts += 1  # edges reaching a kept part
+                if n_kept_parts >= 2 and n_bare >= 1:
+                    for t in range(m):
+                        r = roots[t]
+                        if not haskept[r]:
+                            d = _find(anchor, r)
+                            keep[d] = True
+                            haskept[r] = True
+                            nb[d] = max(nb[d], comp_b[r])
+                            nm[d] = min(nm[d], comp_m[r])
+            # order of the saddle's edges: decreasing top of their kept parts, then
+            # decreasing kept ends (higher, then lower), then edge order
+            for g in range(e, f):
+                best = -1
+                hi = -1
+                lo = -1
+                for side in range(2):
+                    r = pre_a[g] if side == 0 else pre_b[g]
+                    x = ea[g] if side == 0 else eb[g]
+                    if not haskept[r]:
+                        continue
+                    t = top[r]
+                    if best < 0 or above(node_z[t], node_key[t], node_z[best], node_key[best]):
+                        best = t
+                    y = _find(anchor, x)
+                    if hi < 0 or above(node_z[y], node_key[y], node_z[hi], node_key[hi]):
+                        lo = hi
+                        hi = y
+                    else:
+                        lo = y
+                key_t[g] = best
+                key_hi[g] = hi
+                key_lo[g] = lo
+            for i in range(1, f - e):
+                g = seq[i]
+                j = i - 1
+                while j >= 0 and _before(g, seq[j], key_t, key_hi, key_lo, node_z, node_key):
+                    seq[j + 1] = seq[j]
+                    j -= 1
+                seq[j + 1] = g
+        for g in seq:
+            a = ea[g]
+            b = eb[g]
+            ra = _find(uf, a)
+            rb = _find(uf, b)
+            if ra == rb:
+                # a second edge of this saddle between two parts it already joined: kept
+                # while deferring (the final prune chooses among them)
+                if defer and pre_a[g] != pre_b[g] and haskept[ra]:
+                    x = _find(anchor, a)
+                    y = _find(anchor, b)
+                    if x != y and keep[x] and keep[y]:
+                        out_a[k] = x
+                        out_b[k] = y
+                        out_e[k] = g
+                        k += 1
+                continue
+            if haskept[ra] and haskept[rb]:
+                out_a[k] = _find(anchor, a)
+                out_b[k] = _find(anchor, b)
+                out_e[k] = g
+                k += 1
+            elif haskept[rb] or haskept[ra]:
+                # the component without a kept node is absorbed across this saddle
+                if haskept[rb]:
+                    src, dst = ra, _find(anchor, b)
+                else:
+                    src, dst = rb, _find(anchor, a)
+                nb[dst] = max(nb[dst], min(comp_b[src], ez[g]))
+                nm[dst] = min(nm[dst], comp_m[src])
+                anchor[_find(anchor, src)] = dst
             else:
-                src, dst = rb, _find(anchor, a)
-            nb[dst] = max(nb[dst], min(comp_b[src], ez[e]))
-            nm[dst] = min(nm[dst], comp_m[src])
-            anchor[_find(anchor, src)] = dst
-        else:
-            anchor[_find(anchor, rb)] = _find(anchor, ra)
-            comp_b[ra] = max(comp_b[ra], comp_b[rb])
-            comp_m[ra] = min(comp_m[ra], comp_m[rb])
-        uf[rb] = ra
-        haskept[ra] = haskept[ra] or haskept[rb]
-    return out_a[:k], out_b[:k], out_e[:k], nb, nm
+                anchor[_find(anchor, rb)] = _find(anchor, ra)
+                comp_b[ra] = max(comp_b[ra], comp_b[rb])
+                comp_m[ra] = min(comp_m[ra], comp_m[rb])
+            ta = top[ra]
+            tb = top[rb]
+            uf[rb] = ra
+            if above(node_z[tb], node_key[tb], node_z[ta], node_key[ta]):
+                top[ra] = tb
+            haskept[ra] = haskept[ra] or haskept[rb]
+        e = f
+    return out_a[:k], out_b[:k], out_e[:k], nb, nm, keep
 
 
 @njit(cache=True, nogil=True)

@@ -225,7 +225,11 @@ class DivideTree:
         order = self._sorted_edges()
         sz = self.saddles["elevation"].to_numpy(float)[s[order]]
         inf = np.full(self.n_peaks, np.inf)
-        oa, ob, oe, _, _ = _kernels.prune_edges(self.n_peaks, a[order], b[order], sz, keep, -inf, inf)
+        pz = self.peaks["elevation"].to_numpy(float)
+        ids = np.arange(self.n_peaks, dtype=np.int64)
+        oa, ob, oe, _, _, _ = _kernels.prune_edges(
+            self.n_peaks, a[order], b[order], sz, s[order], keep, -inf, inf, pz, ids, False
+        )
         new_id = np.full(self.n_peaks, -1, np.int64)
         new_id[keep] = np.arange(int(keep.sum()))
         saddle_ids = s[order][oe]

@@ -187,8 +187,9 @@ def finalize_graph(
     dom_has = np.zeros(dmin.size, bool)
     dom_has[dom[keep & ~is_root]] = True
     keep |= is_root & node_ismax & dom_has[dom]
-    oa, ob, oe, _, _ = _kernels.prune_edges(n, ta, tb, ez[in_tree], keep, bmax, node_nmin)
-    tkey, tz = ekey[in_tree], ez[in_tree]
+    # every edge: of several edges at one saddle, the prune picks the same one in both engines
+    oa, ob, oe, _, _, _ = _kernels.prune_edges(n, ea, eb, ez, ekey, keep, bmax, node_nmin, node_z, node_key, False)
+    tkey, tz = ekey, ez
     new_id = np.full(n, -1, np.int64)
     kept = np.flatnonzero(keep)
     new_id[kept] = np.arange(kept.size)

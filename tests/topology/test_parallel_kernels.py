@@ -10,7 +10,7 @@ from orokit.topology import _kernels, engine
 
 
 def _sequential(z):
-    ptr, border = _kernels.steepest_ascent(np.pad(z, 1, constant_values=np.nan))
+    ptr, _, border = _kernels.steepest_ascent(np.pad(z, 1, constant_values=np.nan))
     label, max_cell = _kernels.label_basins(ptr)
     n = max_cell.size
     ea, eb, ec = _kernels.basin_passes(z, label, n)
