@@ -53,6 +53,11 @@ def analyze(
     checkpoint: str | Path | None = None,
     depressions: bool = False,
     sea_level_m: float | None = None,
+    dem_error_m: float | None = None,
+    error_k: float = 2.0,
+    error_corr_m: float = 0.0,
+    samples: int = 0,
+    seed: int | None = None,
 ) -> AnalysisResult:
     """Peaks, key saddles, prominence, dominance, isolation and the Divide Tree.
 
@@ -82,6 +87,14 @@ def analyze(
         With ``outside="sea"`` a depression that reaches the edge spills into the sea.
     sea_level_m : with ``depressions``, cells at or below this elevation are sea: land
         depressions spill into it and no pit is reported inside it.
+    dem_error_m : standard deviation sigma of the DEM error (metres). Adds
+        ``prominence_low`` / ``prominence_high``: guaranteed bounds for any error of at
+        most ``error_k * sigma`` (:func:`orokit.topology.uncertainty.prominence_bounds`).
+    error_k, error_corr_m, samples, seed : with ``samples`` > 0 (in memory only), that
+        many realisations of Gaussian error of correlation length ``error_corr_m``
+        (seeded by ``seed``; None = fresh entropy, recorded in ``attrs["seed"]``) add
+        ``p_exists`` (share of realisations with a peak of prominence >= the threshold
+        within one correlation length, at least one cell) and ``prominence_median``.
 
     Returns
     -------
@@ -213,6 +226,12 @@ def analyze(
         "%d peaks with prominence >= %g m (of %d maxima) in %.2f s",
         len(result.peaks), min_prominence_m, core.n_maxima, t_end - t0,
     )
+    if dem_error_m is not None:
+        _dem_error(result, dem, core, transform, crs, sigma_m=float(dem_error_m), k=float(error_k),
+                   corr_m=float(error_corr_m), samples=int(samples), seed=seed, tiled=tiled,
+                   min_prominence_m=min_prominence_m, outside=outside)
+    elif samples:
+        raise InputError("samples (Monte Carlo) needs dem_error_m (CLI: --dem-error SIGMA)")
     if depressions:
         result.depressions = _depressions(dem, transform, crs, min_prominence_m=min_prominence_m, outside=outside,
                                           sea_level_m=sea_level_m, chunks=chunks if tiled else None,
@@ -222,6 +241,37 @@ def analyze(
     elif sea_level_m is not None:
         raise InputError("sea_level_m only applies to depressions; pass depressions=True (CLI: --depressions)")
     return result
+
+
+def _dem_error(result, dem, core, transform, crs, *, sigma_m, k, corr_m, samples, seed, tiled,
+               min_prominence_m, outside) -> None:
+    """Prominence bounds (and Monte Carlo columns) under DEM error, added to ``result.peaks``."""
+    from orokit.geodesy import CellMetric
+    from orokit.topology.uncertainty import monte_carlo, prominence_bounds
+
+    peaks = result.peaks
+    low, high = prominence_bounds(peaks["prominence"].to_numpy(), peaks["saddle_row"].to_numpy() < 0, sigma_m, k)
+    peaks["prominence_low"], peaks["prominence_high"] = low, high
+    result.attrs.update({"dem_error_m": sigma_m, "error_k": k})
+    if samples <= 0:
+        return
+    if tiled:
+        raise InputError("the Monte Carlo of DEM error (samples > 0) runs in memory only; drop chunks "
+                         "(--chunks) or run without --samples (the bounds need no samples)")
+    if not (np.isfinite(corr_m) and corr_m >= 0):
+        raise InputError(f"the error correlation length must be a length >= 0 (metres), got {corr_m!r}")
+    if seed is None:
+        seed = int(np.random.SeedSequence().entropy % 2**63)
+    dx, dy = CellMetric(transform, crs).cell_size_m(np.array([dem.shape[0] // 2]))
+    dx, dy = float(np.asarray(dx).ravel()[0]), float(np.asarray(dy).ravel()[0])
+    corr = (corr_m / dy, corr_m / dx)
+    z = np.ascontiguousarray(np.asarray(dem.values, dtype=np.float64))
+    mc = monte_carlo(z, core.peak_row, core.peak_col, sigma_m=sigma_m, corr_cells=corr, radius_cells=corr,
+                     samples=samples, rng=np.random.default_rng(seed), min_prominence_m=min_prominence_m,
+                     outside=outside)
+    peaks["p_exists"], peaks["prominence_median"] = mc.p_exists, mc.prominence_median
+    result.attrs.update({"error_corr_m": corr_m, "samples": samples, "seed": int(seed),
+                         "max_abs_error_m": float(mc.max_abs_error_m.max())})
 
 
 def _depressions(dem, transform, crs, *, min_prominence_m, outside, sea_level_m, chunks, scheduler):
@@ -254,7 +304,10 @@ def _depressions(dem, transform, crs, *, min_prominence_m, outside, sea_level_m,
         dx, dy = CellMetric(gt, crs).cell_size_m(np.arange(gv.shape[0]))
         area = spill_areas(gv, neg.peaks["row"].to_numpy(), neg.peaks["col"].to_numpy(), dx * dy)
     else:
-        logger.warning("depressions: area_m2 not computed (the raster does not fit in memory)")
+        logger.warning(
+            "depressions: area_m2 left NaN: the flooding pass that measures it needs the whole raster in memory "
+            "(about %.1f GB, %.1f GB free); depths, spill points and spills_into are complete. For areas, analyse "
+            "a crop around the depressions or use a machine with more memory", need / 1e9, available_memory() / 1e9)
     table = depressions_table(neg.peaks, area_m2=area, sea=sea, pad=pad)
     logger.info("%d depressions with depth >= %g m in %.2f s", len(table), min_prominence_m,
                 time.perf_counter() - t0)

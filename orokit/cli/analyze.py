@@ -9,12 +9,17 @@ import click
 from orokit.cli.options import (
     INPUT,
     InputSource,
+    Length,
     cell_size_option,
     min_prominence_option,
     overwrite_option,
     progress_option,
+    seed_option,
     z_units_option,
 )
+
+#: a DEM error or correlation length: 0 allowed
+_ERROR_LENGTH = Length(allow_bare=True, allow_zero=True)
 
 
 @click.command()
@@ -43,11 +48,23 @@ from orokit.cli.options import (
                    "'depressions' layer in dividetree.gpkg.")
 @click.option("--sea-level", "sea_level_m", type=float, default=None,
               help="With --depressions: cells at or below this elevation (metres) are one sea.")
+@click.option("--dem-error", "dem_error_m", type=_ERROR_LENGTH, default=None,
+              help="Standard deviation sigma of the DEM error (a length: 5m, 16ft; a plain number is metres): "
+                   "adds prominence_low/prominence_high, guaranteed for any error of at most k x sigma.")
+@click.option("--error-k", type=click.FloatRange(min=0, min_open=True), default=2.0, show_default=True,
+              help="With --dem-error: the bounds hold for errors of at most this many sigma.")
+@click.option("--error-corr", "error_corr_m", type=_ERROR_LENGTH, default="0", show_default=True,
+              help="With --samples: correlation length of the simulated error (a length; 0 = white noise).")
+@click.option("--samples", type=click.IntRange(min=0), default=0, show_default=True,
+              help="With --dem-error: Monte Carlo realisations of the error (in memory), adding p_exists and "
+                   "prominence_median.")
+@seed_option(what="the DEM-error Monte Carlo", default=None, recorded_in="analysis.json")
 @click.pass_context
 def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m: float, z_units: str | None, cell_size_m: float | None,
             band: int | None, outside: str, no_isolation: bool, chunks: int | None, scheduler: str | None,
             checkpoint: Path | None, overwrite: bool, progress: bool, depressions: bool,
-            sea_level_m: float | None) -> None:
+            sea_level_m: float | None, dem_error_m: float | None, error_k: float, error_corr_m: float,
+            samples: int, seed: int | None) -> None:
     """Analyse DEM into OUTPUT.
 
     DEM is any raster GDAL reads (GeoTIFF, SRTM .hgt, VRT, ASCII grid, PNG with
@@ -67,6 +84,10 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
     t0 = time.perf_counter()
     if chunks is not None and chunks < 1:
         raise click.BadParameter(f"must be a positive number of cells, got {chunks}", param_hint="--chunks")
+    if samples and dem_error_m is None:
+        raise click.UsageError("--samples needs --dem-error SIGMA")
+    if samples and chunks is not None:
+        raise click.UsageError("--samples (the Monte Carlo) runs in memory: drop --chunks")
     if (scheduler or checkpoint) and chunks is None:
         raise click.UsageError("--scheduler and --checkpoint need --chunks N")
     if chunks is None and dem.dataset is None and not dem.path.is_dir():
@@ -84,7 +105,8 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         da = dem.read_dem(z_units=z_units, cell_size_m=cell_size_m, chunks=chunks, band=band)
     result = run(da, min_prominence_m=min_prominence_m, outside=outside, isolation=not no_isolation,
                  progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint,
-                 depressions=depressions, sea_level_m=sea_level_m)
+                 depressions=depressions, sea_level_m=sea_level_m, dem_error_m=dem_error_m, error_k=error_k,
+                 error_corr_m=error_corr_m, samples=samples, seed=seed)
     from orokit.io.analysis_io import write_analysis
 
     shape = da.shape
