@@ -31,6 +31,7 @@ USER_COMMANDS: dict[str, str] = {
     "render": "orokit.cli.render:render",
     "synthesize": "orokit.cli.synthesize:synthesize",
     "validate": "orokit.cli.validate:validate",
+    "compare": "orokit.cli.compare:compare",
 }
 #: commands that build the pages of reports/ (what `make report` runs)
 REPORT_COMMANDS: dict[str, str] = {
@@ -59,6 +60,7 @@ SHORT_HELP: dict[str, str] = {
     "render": "Render a Divide Tree to an elevation raster (COG).",
     "synthesize": "Synthesize a Divide Tree and its terrain in one go.",
     "validate": "Round trip of a rendered terrain: re-analysis, histograms, classes.",
+    "compare": "Compare two peak lists (orokit, Kirmse, reference trees): matches, parents.",
     "report-dataset": "Summary page and hillshade of one manifest DEM.",
     "report-index": "Index page of the dataset summaries.",
     "analysis-report": "Table and Divide Tree figures of analysis folders.",
