@@ -82,7 +82,8 @@ $(INSTALLED): pyproject.toml | $(BIN)/python
 
 venv: $(INSTALLED)  ## create .venv and install orokit[dev]
 
-test: $(INSTALLED)  ## run the test suite on 2 cores
+test: $(INSTALLED)  ## type-check orokit (mypy, cache in .mypy_cache), then run the test suite on 2 cores
+	$(BIN)/python -m mypy
 	$(BIN)/python -m pytest -q --doctest-modules orokit
 	$(BIN)/python -m pytest -n 2 tests $(PYTEST_ARGS)
 

@@ -18,6 +18,7 @@ import pandas as pd
 from orokit import __version__
 from orokit.errors import InputError
 from orokit.geodesy import cell_size_key
+from orokit._typing import PathLike
 from orokit.topology.tables import PEAK_COLUMNS, AnalysisResult, upgrade_attrs
 
 logger = logging.getLogger(__name__)
@@ -25,7 +26,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["analyze", "AnalysisResult", "read_analysis", "write_analysis", "PEAK_COLUMNS"]
 
 
-def read_analysis(outdir: str | Path) -> AnalysisResult:
+def read_analysis(outdir: PathLike) -> AnalysisResult:
     """Read a folder written by :func:`write_analysis` / ``orokit analyze``."""
     from orokit.io.analysis_io import read_analysis as _read
 
@@ -160,9 +161,9 @@ def analyze(
         try:
             if chunks is not None:
                 data = data.rechunk(chunks) if hasattr(data, "rechunk") else _as_dask(data, chunks)
-            from orokit.metrics.isolation import GridMetric
+            from orokit.metrics.isolation import KernelMetric
 
-            metric = GridMetric.from_grid(transform, crs) if isolation else None
+            metric = KernelMetric.from_grid(transform, crs) if isolation else None
             with bounded_gdal_cache():  # chunks are read once (plus halos): GDAL's cache would only grow
                 tiled_core = tiled_orometry(data, min_prominence_m=min_prominence_m, outside=outside,
                                             scheduler=scheduler, checkpoint=checkpoint, progress=progress,

@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -68,7 +68,7 @@ def _analysis_domain(peaks: pd.DataFrame, meta: dict[str, Any]) -> tuple[np.ndar
             from orokit.io.dem import read_dem
 
             # a local grid needs its cell size again; a georeferenced file brings its own
-            cell = [abs(transform.a), abs(transform.e)] if meta.get("local_grid") else None
+            cell = (abs(transform.a), abs(transform.e)) if meta.get("local_grid") else None
             dem = read_dem(str(src), z_units=meta.get("z_units_in") or "m", cell_size_m=cell)
             same = dem.shape == valid.shape and np.allclose(tuple(dem.rio.transform())[:6], tuple(transform)[:6],
                                                             rtol=1e-9, atol=1e-9)
@@ -106,7 +106,7 @@ def open_input_dem(source: PathLike, *, z_units: str | None = None, cell_size_m:
 
 def features_for_input(source: PathLike, *, radius_m: float, label: str | None = None,
                        min_prominence_m: float = 30.0, min_peaks: int = 20, max_disks: int = 100,
-                       separation: float = 0.5, feature_set: FeatureSet | None = None, relative_elevation: str = "minmax",
+                       separation: float = 0.5, feature_set: FeatureSet | None = None, relative_elevation: Literal["minmax", "max"] = "minmax",
                        exact_only: bool = False, z_units: str | None = None, cell_size_m: float | None = None,
                        region: Any = None, isolation: PathLike | None = None, crs: Any = None,
                        rng: SeedLike = None) -> pd.DataFrame:
@@ -114,7 +114,7 @@ def features_for_input(source: PathLike, *, radius_m: float, label: str | None =
     datasets manifest may be given by name)."""
     p = Path(source)
     label = label or default_label(p)
-    kw = dict(radius_m=radius_m, label=label, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
+    kw: dict[str, Any] = dict(radius_m=radius_m, label=label, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
               max_disks=max_disks, separation=separation, feature_set=feature_set, relative_elevation=relative_elevation,
               exact_only=exact_only, rng=rng)
     if region is not None and not hasattr(region, "geometry"):

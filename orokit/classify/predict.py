@@ -96,7 +96,7 @@ def classify_input(model: RegionModel, source: Any, *, z_units: str | None = Non
     eps = md.get("min_prominence_m")
     if min_peaks is None:
         min_peaks = md.get("min_peaks")
-    kw = dict(radius_m=model.radius_m, min_prominence_m=float(eps if eps is not None else 30.0),
+    kw: dict[str, Any] = dict(radius_m=model.radius_m, min_prominence_m=float(eps if eps is not None else 30.0),
               min_peaks=int(min_peaks if min_peaks is not None else 20), feature_set=model.feature_set,
               relative_elevation=md.get("relative_elevation") or "minmax", rng=rng)
     if dem is not None:

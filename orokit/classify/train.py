@@ -120,7 +120,7 @@ def _cat(parts: list[NDArray]) -> NDArray[np.int64]:
     return np.sort(np.concatenate(parts).astype(np.int64)) if parts else np.zeros(0, dtype=np.int64)
 
 
-def metric_coordinates(x: NDArray, y: NDArray, groups: Sequence[Any], *, crs: Any = None,
+def metric_coordinates(x: NDArray, y: NDArray, groups: Sequence[Any] | NDArray, *, crs: Any = None,
                        lon: NDArray | None = None, lat: NDArray | None = None
                        ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Disk centres in metres, group by group, for distance tests between disks.

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Literal
 
 import click
 
@@ -61,7 +62,7 @@ _ERROR_LENGTH = Length(allow_bare=True, allow_zero=True)
 @seed_option(what="the DEM-error Monte Carlo", default=None, recorded_in="analysis.json")
 @click.pass_context
 def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m: float, z_units: str | None, cell_size_m: float | None,
-            band: int | None, outside: str, no_isolation: bool, chunks: int | None, scheduler: str | None,
+            band: int | None, outside: Literal["unknown", "sea"], no_isolation: bool, chunks: int | None, scheduler: str | None,
             checkpoint: Path | None, overwrite: bool, progress: bool, depressions: bool,
             sea_level_m: float | None, dem_error_m: float | None, error_k: float, error_corr_m: float,
             samples: int, seed: int | None) -> None:

@@ -120,8 +120,10 @@ def _measure(dem_path: Path, tree, type_file: Path, real, model_path: Path | Non
     for k in ("predicted", "n_disks", "disk_accuracy", "vote_correct"):
         if k in s:
             r[k] = s[k]
+    hist = rt.histograms
+    assert hist is not None  # the round trip was given the terrain type
     for feat in ("elevation", "prominence", "dominance", "isolation_distance"):
-        r[f"max_bin_error_{feat}"] = float(rt.histograms.loc[feat, "max_bin_error"])
+        r[f"max_bin_error_{feat}"] = float(hist.loc[feat, "max_bin_error"])
     lf = compare_landforms(real, dem)
     r["landform"] = {k: float(v) for k, v in lf["distance"].items()}
     r["landform_target"] = {k: float(v) for k, v in lf["target"].items()}

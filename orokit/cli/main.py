@@ -216,7 +216,7 @@ class _StderrHandler(logging.StreamHandler):
     """A stream handler that always writes to the current ``sys.stderr`` (click's test
     runner and pytest swap it between commands)."""
 
-    @property  # type: ignore[override]
+    @property
     def stream(self):  # noqa: D102
         return sys.stderr
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -27,7 +28,9 @@ def synthesis_report(trees: tuple[Path, ...], output: Path, overwrite: bool) -> 
 
     claim_outputs(output)  # locked for the whole run
     refuse_existing(output, overwrite=overwrite)
-    rows, runs, times = [], [], []
+    rows: list[dict[str, Any]] = []
+    runs: list[Any] = []
+    times: list[Any] = []
     for d in trees:
         meta_path = d / "synthesis.json"
         if not meta_path.is_file():

@@ -42,7 +42,7 @@ def texture_params(ttype) -> dict:
             "texture_largest_m": float(t.get("largest_m", 1000.0))}
 
 
-def like_box(like: str, *, cell_size_m: float | None = None):
+def like_box(like: str | InputSource, *, cell_size_m: float | None = None):
     """South-west corner, width, height, cell size (metres) and CRS (None: local grid) of a
     ``--like`` DEM, so a twin lands on the DEM's own grid."""
     dem = like_dem(like, cell_size_m=cell_size_m)
@@ -105,7 +105,7 @@ def synthesize(type_file, size, resolution, like, cell_size_m, n_peaks, control_
     from orokit.cli.render import write_outputs
     from orokit.raster.params import RenderParams
     from orokit.raster.rasterize import make_grid
-    from orokit.raster.render import render_elevation
+    from orokit.raster.render import render_elevation, resolve_seed
     from orokit.raster.skeleton import tree_extent
     from orokit.synthesis.fidelity import compare_to_type
     from orokit.io.synthesis_io import SYNTHESIS_FILES, write_synthesis
@@ -119,12 +119,13 @@ def synthesize(type_file, size, resolution, like, cell_size_m, n_peaks, control_
     existing = [f for f in outputs if (outdir / f).exists()]
     if existing and not overwrite:
         raise click.UsageError(f"{outdir} already holds {', '.join(existing)}; pass --overwrite to replace them")
-    center_ll = None
+    center_ll: tuple[float, float] | None = None
     if center is not None:
         try:
-            center_ll = tuple(float(v) for v in str(center).split(","))
-            if len(center_ll) != 2:
+            lon_lat = [float(v) for v in str(center).split(",")]
+            if len(lon_lat) != 2:
                 raise ValueError
+            center_ll = (lon_lat[0], lon_lat[1])
         except ValueError:
             raise click.BadParameter(f"{center!r} is not LON,LAT (e.g. 86.9,27.98)", param_hint="--center") from None
         if crs is not None:
@@ -159,7 +160,7 @@ def synthesize(type_file, size, resolution, like, cell_size_m, n_peaks, control_
         # there, or the given --crs centred there), not to a CRS's false origin
         center_ll = ttype.source_center
     if seed is None:
-        seed = int(np.random.SeedSequence().entropy)  # recorded, so the run can be replayed
+        seed = resolve_seed(None)  # fresh entropy, recorded, so the run can be replayed
     bar = None
     if progress:
         from tqdm.auto import tqdm

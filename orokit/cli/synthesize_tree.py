@@ -66,9 +66,9 @@ def synthesize_tree(type_files, size, n_peaks, control_elevation, control_densit
         raise click.BadParameter("several --type need a --type-map telling where each applies", param_hint="--type")
     w, h = size
     if seed is None:
-        import numpy as np
+        from orokit.raster.render import resolve_seed
 
-        seed = int(np.random.SeedSequence().entropy)  # recorded in synthesis.json, so the run can be replayed
+        seed = resolve_seed(None)  # fresh entropy, recorded in synthesis.json, so the run can be replayed
     types = [load_terrain_type(p) for p in type_files]
     if crs is not None and str(crs).lower() == "local":
         crs = None

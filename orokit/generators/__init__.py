@@ -135,7 +135,7 @@ def render_terrain(
     """
     from orokit import __version__
     from orokit.generators.base import params_to_dict, tree_arrays, tree_rivers, tree_sha256
-    from orokit.raster.rasterize import make_grid
+    from orokit.raster.rasterize import as_extent, make_grid
     from orokit.raster.render import resolve_seed
     from orokit.raster.skeleton import tree_extent
 
@@ -149,7 +149,7 @@ def render_terrain(
     if grid is None:
         if resolution_m is None:
             raise InputError("render_terrain needs resolution_m (or a grid)")
-        ext = tuple(float(v) for v in extent) if extent is not None else tree_extent(tree)
+        ext = as_extent(extent) if extent is not None else tree_extent(tree)
         grid = make_grid(ext, resolution_m)
     seed = resolve_seed(seed)
     rng = np.random.default_rng(seed)

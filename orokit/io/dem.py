@@ -256,7 +256,7 @@ def _normalize_chunks(chunks: ChunksLike, shape: tuple[int, int]) -> tuple[tuple
     elif isinstance(chunks, bool):
         chunks = "auto"
     try:
-        return normalize_chunks(chunks, shape=shape, dtype=np.float32)  # type: ignore[no-any-return]
+        return normalize_chunks(chunks, shape=shape, dtype=np.float32)
     except (ValueError, TypeError) as exc:
         raise InputError(f"invalid chunks={chunks!r} for a raster of shape {shape}: {exc}") from exc
 

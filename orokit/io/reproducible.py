@@ -33,7 +33,7 @@ def _collect_ids(node: Any, order: dict[int, int]) -> None:
 
 def _renumber(node: Any, order: dict[int, int]) -> Any:
     if isinstance(node, dict):
-        out = {}
+        out: dict[str, Any] = {}
         for key, value in node.items():
             if key == "__id__" and isinstance(value, int) and value in order:
                 out[key] = order[value]

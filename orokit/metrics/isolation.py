@@ -3,46 +3,55 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from typing import Any
+
 import numpy as np
 import pandas as pd
-from pyproj import CRS
+from affine import Affine
 
 from orokit.errors import CRSError
 from orokit.geodesy import WGS84 as _GEOD
+from orokit.geodesy import CellMetric
 from orokit.metrics import _kernels
 
-__all__ = ["isolation", "GridMetric"]
+__all__ = ["isolation", "KernelMetric"]
 
 SLACK = 0.012  # > max relative difference between sphere and WGS84 geodesic distances
 NCAND = 64
 
 
 @dataclass(frozen=True)
-class GridMetric:
-    """How distances are measured on a north-up grid.
+class KernelMetric:
+    """A :class:`~orokit.geodesy.CellMetric` as the plain scalars the numba isolation kernels take.
 
     Geographic grids use great-circle distances for the search (refined to WGS84
     geodesics by :func:`isolation`); other grids Euclidean distances with the two
-    cell sizes (non-square cells are fine).
+    cell sizes in metres (non-square cells and foot-based CRS are fine).
     """
 
     geo: bool
-    dx: float
-    dy: float
+    dx: float  # metres per column (non-geographic)
+    dy: float  # metres per row (non-geographic)
     lat0: float  # radians, top edge (geographic)
     dlat: float  # radians per row (negative for north-up)
     dlon: float  # radians per column
-    transform: object
+    transform: Affine
 
     @classmethod
-    def from_grid(cls, transform, crs) -> "GridMetric":
-        if transform.b != 0 or transform.d != 0:
+    def of(cls, metric: CellMetric) -> "KernelMetric":
+        """The kernel scalars of ``metric`` (north-up grids only)."""
+        t = metric.transform
+        if t.b != 0 or t.d != 0:
             raise CRSError("rotated or sheared grids are not supported; warp the DEM north-up first")
-        geo = bool(crs is not None and CRS.from_user_input(crs).is_geographic)
-        if geo:
-            return cls(True, 0.0, 0.0, np.radians(transform.f), np.radians(transform.e), np.radians(transform.a),
-                       transform)
-        return cls(False, abs(transform.a), abs(transform.e), 0.0, 0.0, 0.0, transform)
+        if metric.is_geographic:
+            return cls(True, 0.0, 0.0, float(np.radians(t.f)), float(np.radians(t.e)), float(np.radians(t.a)), t)
+        u = metric.unit_m
+        return cls(False, abs(t.a) * u, abs(t.e) * u, 0.0, 0.0, 0.0, t)
+
+    @classmethod
+    def from_grid(cls, transform: Any, crs: Any) -> "KernelMetric":
+        """The kernel scalars of the grid ``transform`` in ``crs`` (None: local metric grid)."""
+        return cls.of(CellMetric(transform, crs))
 
     @property
     def slack(self) -> float:
@@ -52,7 +61,7 @@ class GridMetric:
     def ncand(self) -> int:
         return NCAND if self.geo else 8
 
-    def args(self, row0: int = 0) -> tuple:
+    def args(self, row0: int = 0) -> tuple[bool, float, float, float, float, float]:
         """Kernel arguments for a block whose first row is ``row0``."""
         return (self.geo, self.dx, self.dy, self.lat0 + row0 * self.dlat, self.dlat, self.dlon)
 
@@ -85,7 +94,7 @@ def isolation(z: np.ndarray, rows: np.ndarray, cols: np.ndarray, *, transform, c
        every candidate within 1.2 % of the best; the WGS84 geodesic (Karney, pyproj)
        picks the exact nearest among them.
     """
-    metric = GridMetric.from_grid(transform, crs)
+    metric = KernelMetric.from_grid(transform, crs)
     rows = np.asarray(rows, dtype=np.int64)
     cols = np.asarray(cols, dtype=np.int64)
     z = np.ascontiguousarray(z)
@@ -104,7 +113,7 @@ def isolation(z: np.ndarray, rows: np.ndarray, cols: np.ndarray, *, transform, c
     return finish_isolation(metric, rows, cols, best, cand, W, edge)
 
 
-def finish_isolation(metric: GridMetric, rows, cols, best, cand_flat, width, edge) -> pd.DataFrame:
+def finish_isolation(metric: KernelMetric, rows, cols, best, cand_flat, width, edge) -> pd.DataFrame:
     """Pick the exact nearest candidate and build the isolation table.
 
     ``cand_flat`` holds global flat indices (row * width + col), -1 padded: every cell

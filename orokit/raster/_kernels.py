@@ -147,10 +147,10 @@ def reconstruct_from_markers(indptr: np.ndarray, indices: np.ndarray, h: np.ndar
     done = np.zeros(n, np.bool_)
     heap = [(0.0, np.int64(0))]
     heap.pop()
-    for v in range(n):
-        if marker[v]:
-            out[v] = h[v]
-            heapq.heappush(heap, (-h[v], np.int64(v)))
+    for u in range(n):
+        if marker[u]:
+            out[u] = h[u]
+            heapq.heappush(heap, (-h[u], np.int64(u)))
     while heap:
         negz, v = heapq.heappop(heap)
         if done[v]:
@@ -165,9 +165,9 @@ def reconstruct_from_markers(indptr: np.ndarray, indices: np.ndarray, h: np.ndar
             if cand > out[w]:
                 out[w] = cand
                 heapq.heappush(heap, (-cand, w))
-    for v in range(n):
-        if not done[v]:
-            out[v] = h[v]
+    for u in range(n):
+        if not done[u]:
+            out[u] = h[u]
     return out
 
 

@@ -66,7 +66,7 @@ def erode_multiscale(
     ny, nx = z.shape
     h = z.copy()
     done: set[tuple[int, int]] = set()
-    per_scale = [int(steps)] * len(scales_m) if np.ndim(steps) == 0 else [int(k) for k in steps]  # type: ignore[union-attr]
+    per_scale = [int(steps)] * len(scales_m) if isinstance(steps, (int, np.integer)) else [int(k) for k in steps]
     if len(per_scale) != len(scales_m):
         raise ValueError(f"steps has {len(per_scale)} values for {len(scales_m)} scales; give one per scale")
     for s, n_steps in zip(scales_m, per_scale):

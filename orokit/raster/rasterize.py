@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -10,7 +11,7 @@ from orokit.errors import InputError
 from orokit.raster import _kernels
 from orokit.raster.tin import TIN
 
-__all__ = ["Grid", "make_grid", "rasterize_tin", "burn_max", "MAX_CELLS"]
+__all__ = ["Grid", "as_extent", "make_grid", "rasterize_tin", "burn_max", "MAX_CELLS"]
 
 #: largest raster render_elevation accepts by default (4 bytes per cell, ~8 copies in flight)
 MAX_CELLS = 100_000_000
@@ -42,6 +43,17 @@ class Grid:
         row = np.floor((self.y0 - xy[:, 1]) / self.res).astype(np.int64)
         ok = (row >= 0) & (row < self.ny) & (col >= 0) & (col < self.nx)
         return row, col, ok
+
+
+def as_extent(extent: Any) -> tuple[float, float, float, float]:
+    """``(xmin, ymin, xmax, ymax)`` as four floats; :class:`InputError` for anything else."""
+    try:
+        values = [float(v) for v in extent]
+    except (TypeError, ValueError):
+        raise InputError(f"extent must be four numbers (xmin, ymin, xmax, ymax), got {extent!r}") from None
+    if len(values) != 4:
+        raise InputError(f"extent must be four numbers (xmin, ymin, xmax, ymax), got {extent!r}")
+    return values[0], values[1], values[2], values[3]
 
 
 def make_grid(extent: tuple[float, float, float, float], resolution_m: float, *, max_cells: int = MAX_CELLS) -> Grid:

@@ -25,7 +25,7 @@ from orokit.raster.enforce import enforce_orometry
 from orokit.raster.erosion import erode_multiscale
 from orokit.raster.noise import falloff, fractal_noise, spectral_noise
 from orokit.raster.params import RenderParams
-from orokit.raster.rasterize import MAX_CELLS, burn_max, make_grid, rasterize_tin, set_cells
+from orokit.raster.rasterize import MAX_CELLS, as_extent, burn_max, make_grid, rasterize_tin, set_cells
 from orokit.raster.refine import densify
 from orokit.raster.skeleton import build_skeleton, tree_extent
 
@@ -50,7 +50,9 @@ def resolve_seed(rng: SeedLike | np.random.SeedSequence) -> int:
     True
     """
     if rng is None:
-        return int(np.random.SeedSequence().entropy)
+        entropy = np.random.SeedSequence().entropy
+        assert isinstance(entropy, int)  # a fresh SeedSequence draws one int
+        return entropy
     if isinstance(rng, (int, np.integer)) and not isinstance(rng, (bool, np.bool_)):
         if int(rng) < 0:
             raise InputError(f"seed must be a non-negative integer, got {int(rng)}")
@@ -146,7 +148,7 @@ def render_elevation(
     crs = _check_crs(tree)
     if tree.n_peaks == 0:
         raise DivideTreeError("the Divide Tree has no peaks; nothing to render")
-    ext = tuple(float(v) for v in extent) if extent is not None else tree_extent(tree)
+    ext = as_extent(extent) if extent is not None else tree_extent(tree)
     grid = make_grid(ext, resolution_m, max_cells=max_cells)  # errors before any allocation
     pxy = tree.peaks[["x", "y"]].to_numpy(float)
     inside = (pxy[:, 0] >= ext[0]) & (pxy[:, 0] <= ext[2]) & (pxy[:, 1] >= ext[1]) & (pxy[:, 1] <= ext[3])
@@ -193,11 +195,11 @@ def render_elevation(
                             beta=params.texture_beta, largest_m=params.texture_largest_m, rng=rng) * weight
         del fade, weight
     del dist, mask
-    amp = params.noise_ratio * params.min_prominence_m
-    if amp > 0:
+    noise_amp = params.noise_ratio * params.min_prominence_m
+    if noise_amp > 0:
         zmin, zmax = float(z.min()), float(z.max())
         rough = (z - zmin) / max(zmax - zmin, 1e-6)
-        z += fractal_noise(z.shape, grid.res, amplitude=amp, roughness=rough, rng=rng) * (1.0 - uplift)
+        z += fractal_noise(z.shape, grid.res, amplitude=noise_amp, roughness=rough, rng=rng) * (1.0 - uplift)
         del rough
     timings["noise"] = time.perf_counter() - t0
 

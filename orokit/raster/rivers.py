@@ -194,9 +194,9 @@ def river_network(
     flowdist = np.zeros(n)
     seen = np.zeros(n, bool)
     heap: list[tuple[float, float, int]] = []
-    for v in np.flatnonzero(outlet):
-        heapq.heappush(heap, (float(min(bnd[v], base_elevation)), 0.0, int(v)))
-        seen[v] = True
+    for o in np.flatnonzero(outlet):
+        heapq.heappush(heap, (float(min(bnd[o], base_elevation)), 0.0, int(o)))
+        seen[o] = True
     order: list[int] = []
     while heap:
         key, dist, v = heapq.heappop(heap)

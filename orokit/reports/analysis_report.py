@@ -77,7 +77,7 @@ def analysis_rows(folders: list[PathLike], *, figures_dir: PathLike | None = Non
         if known and manifest[name].files_with_role("divide_tree"):
             ref = read_divide_tree_txt(dataset_path(name, role="divide_tree"), height=dem.shape[0])
             all_peaks = orokit.analyze(dem, min_prominence_m=0.0, isolation=False).peaks
-            row.update(compare_with_reference(all_peaks, ref, dem.shape))
+            row.update(compare_with_reference(all_peaks, ref, (dem.shape[0], dem.shape[1])))
         if figures_dir is not None:
             fig, ax = plt.subplots(figsize=(6.4, 5.2), dpi=100)
             plot_divide_tree(ax, dem, res, title=f"{name}: Divide Tree, prominence >= {row['eps_m']:g} m")

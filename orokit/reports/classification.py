@@ -19,7 +19,7 @@ import os
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -28,6 +28,9 @@ from orokit import __version__
 from orokit._typing import PathLike
 from orokit.sampling.feature_sets import SUMMARY_TITLES
 from orokit.sampling.histograms import FEATURE_TITLES, HistogramSpec
+
+if TYPE_CHECKING:  # pragma: no cover
+    from orokit.classify.train import ClassifierKind
 
 TITLES = {**FEATURE_TITLES, **SUMMARY_TITLES}
 
@@ -54,7 +57,7 @@ def table2(evals: Mapping[float, Mapping[str, Any]]) -> pd.DataFrame:
             col["All, median acc. (spatial hold-out)"] = 100 * e["spatial"].median_accuracy
         if "blocks" in e:
             col["All, mean acc. (spatial k-fold blocks)"] = 100 * e["blocks"].mean_accuracy
-        base = e.get("random") or e.get("spatial")
+        base = e["random"] if "random" in e else e["spatial"]
         for name, acc in base.per_feature.items():
             col[TITLES.get(name, name)] = 100 * acc
         if "spatial" in e and "random" in e:
@@ -76,7 +79,7 @@ def to_markdown(df: pd.DataFrame, *, floatfmt: str = ".1f") -> str:
         for v in row:
             if isinstance(v, (float, np.floating)):
                 cells.append(" - " if not np.isfinite(v) else
-                             (f" {int(v)} " if float(v).is_integer() and abs(v) >= 100 else f" {v:{floatfmt}} "))
+                             (f" {int(v)} " if float(v).is_integer() and abs(float(v)) >= 100 else f" {v:{floatfmt}} "))
             else:
                 cells.append(f" {v} ")
         lines.append(f"| {idx} |" + "|".join(cells) + "|")
@@ -256,7 +259,7 @@ def _readme(t2: pd.DataFrame, evals: Mapping[float, Mapping[str, Any]], meta: di
                      f"training disks > {b.params['buffer_m'] / 1000:g} km from the held-out block) "
                      f"**{100 * b.mean_accuracy:.1f} %** (spread over {len(b.accuracies)} runs: "
                      f"{100 * np.nanmin(b.accuracies):.1f}-{100 * np.nanmax(b.accuracies):.1f} %)")
-        base = e.get("random") or e.get("spatial")
+        base = e["random"] if "random" in e else e["spatial"]
         s.append(f"; {len(base.classes)} regions, {base.params['n_disks']} disks")
         if base.params.get("dropped_classes"):
             s.append(f"; dropped (< 2 disks): {', '.join(base.params['dropped_classes'])}")

@@ -31,7 +31,7 @@ def plot_classification_map(ax: Any, dem: Any, disks: Any, classes: list[str], *
     colours = {c: cmap(k % 20) for k, c in enumerate(classes)}
     colours["unknown"] = (0.3, 0.3, 0.3, 1.0)
     # least confident first, so confident disks are drawn on top
-    order = np.argsort(disks["confidence"].to_numpy(float)) if len(disks) else []
+    order = np.argsort(disks["confidence"].to_numpy(float)) if len(disks) else np.zeros(0, np.int64)
     for i in order:
         row = disks.iloc[int(i)]
         geom = row.geometry

@@ -223,7 +223,8 @@ def write_ranking_report(runs: list[dict], reals: dict[str, Any], out: Any) -> N
         for g in gens:
             run = next((r for r in runs if r["region"] == region and r["generator"] == g and r["seed"] == seed0), None)
             hs = Path(run["hillshade"]) if run else None
-            imgs[g] = np.asarray(Image.open(hs)) if run and not run.get("failed") and hs.exists() else None
+            ok = run is not None and hs is not None and not run.get("failed") and hs.exists()
+            imgs[g] = np.asarray(Image.open(hs)) if ok and hs is not None else None
         fig, axes = plt.subplots(1, len(gens) + 1, figsize=(3.2 * (len(gens) + 1), 3.4))
         if real is not None:
             plot_hillshade_row(np.atleast_1d(axes), real, imgs, title=region)

@@ -80,9 +80,9 @@ def plot_landforms(dems: dict[str, xr.DataArray], *, title: str = "", max_pixels
     stats = {label: _slope_relief(dem) for label, dem in dems.items()}
     rmax = max(float(np.quantile(r, 0.995)) for _, r in stats.values() if r.size) or 1.0
     for (label, (slope, rel)), colour in zip(stats.items(), _COLOURS):
-        ax_s.hist(slope, bins=np.linspace(0, 90, 91), weights=np.full(slope.size, 1 / max(slope.size, 1)),
+        ax_s.hist(slope, bins=np.linspace(0, 90, 91).tolist(), weights=np.full(slope.size, 1 / max(slope.size, 1)),
                   histtype="step", color=colour, label=label, lw=1.4)
-        ax_r.hist(rel, bins=np.linspace(0, rmax, 60), weights=np.full(rel.size, 1 / max(rel.size, 1)),
+        ax_r.hist(rel, bins=np.linspace(0, rmax, 60).tolist(), weights=np.full(rel.size, 1 / max(rel.size, 1)),
                   histtype="step", color=colour, label=label, lw=1.4)
     ax_s.set_xlabel("slope (degrees, central differences)")
     ax_s.set_ylabel("share of cells per 1-degree bin")

@@ -67,7 +67,7 @@ def blue_noise_points(width: float, height: float, spacing: float, *, rng: SeedL
     return pts[keep]
 
 
-def _subset(points: NDArray[np.float64], max_disks: int, rng: np.random.Generator) -> NDArray[np.float64]:
+def _subset(points: NDArray[np.float64], max_disks: int | None, rng: np.random.Generator) -> NDArray[np.float64]:
     if max_disks is not None and len(points) > max_disks:
         idx = np.sort(rng.choice(len(points), size=max_disks, replace=False))
         points = points[idx]

@@ -62,7 +62,7 @@ class Domain:
 
 
 def _parse_size(size_m: Any) -> tuple[float, float]:
-    if np.isscalar(size_m):
+    if isinstance(size_m, (int, float, np.integer, np.floating)):
         w = h = float(size_m)
     else:
         w, h = (float(v) for v in size_m)
@@ -101,6 +101,7 @@ def make_domain(
     if crs is None and center is None:
         return Domain(0.0, 0.0, w, h, None, shape)
     if crs is None:
+        assert center is not None  # the case without both returned above
         lon, lat = (float(v) for v in center)
         if center_crs is not None and CRS.from_user_input(center_crs) != CRS.from_epsg(4326):
             lon, lat = Transformer.from_crs(center_crs, "EPSG:4326", always_xy=True).transform(lon, lat)

@@ -210,7 +210,7 @@ def place_peaks(
                 keep = (forced[0] < e) & (forced[1] < e)
                 fa, fb = forced[0][keep], forced[1][keep]
             a, b = delaunay_mst(px[:e], py[:e], z[:e], rho=rho[:e],
-                                forced=None if fa is None else (fa, fb))
+                                forced=None if fa is None or fb is None else (fa, fb))
             sigma_m = 0.5 * np.sqrt(domain.width * domain.height / e)
             dens_r = ridge_density(px[:e], py[:e], a, b, domain, sigma_m)
             if void_weight > 0:

@@ -131,7 +131,7 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
 
     ``result.orometry`` is exactly the :class:`~orokit.topology.engine.Orometry` of the
     in-memory engine (same peaks, prominences, key saddles, parents, flags and ridge
-    saddles). With ``isolation_metric`` (a :class:`~orokit.metrics.isolation.GridMetric`),
+    saddles). With ``isolation_metric`` (a :class:`~orokit.metrics.isolation.KernelMetric`),
     each chunk also settles the isolation of its candidate peaks whose higher ground lies
     inside it (``result.chunk_isolation``), so the cross-chunk search reads few chunks.
     """

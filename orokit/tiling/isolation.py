@@ -16,7 +16,7 @@ import pandas as pd
 
 from orokit.metrics import _kernels as _mk
 from orokit.metrics._kernels import EARTH_RADIUS_M
-from orokit.metrics.isolation import GridMetric, finish_isolation
+from orokit.metrics.isolation import KernelMetric, finish_isolation
 
 logger = logging.getLogger(__name__)
 
@@ -25,7 +25,7 @@ __all__ = ["tiled_isolation", "chunk_isolation", "block_stats"]
 _BATCH = 4096
 
 
-def _chunk_bounds(rows, cols, rb, cb, metric: GridMetric) -> np.ndarray:
+def _chunk_bounds(rows, cols, rb, cb, metric: KernelMetric) -> np.ndarray:
     """Lower bound of the distance from each cell to each chunk (n x nchunks)."""
     r0, r1 = rb[:-1], rb[1:] - 1
     c0, c1 = cb[:-1], cb[1:] - 1
@@ -79,7 +79,7 @@ class _BlockCache:
 
 
 def chunk_isolation(core: np.ndarray, row0: int, col0: int, shape: tuple[int, int], keys: np.ndarray,
-                    metric: GridMetric) -> dict[str, np.ndarray]:
+                    metric: KernelMetric) -> dict[str, np.ndarray]:
     """Isolation of candidate peaks (global flat ``keys``) that their own chunk settles.
 
     Run inside the tile task while the chunk is in memory: a peak is *resolved* when the
@@ -124,7 +124,7 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
     import dask
 
     compute = compute or (lambda objs: dask.compute(*objs))
-    metric = GridMetric.from_grid(transform, crs)
+    metric = KernelMetric.from_grid(transform, crs)
     H, W = data.shape
     rows = np.asarray(rows, np.int64)
     cols = np.asarray(cols, np.int64)

@@ -71,11 +71,8 @@ class ChunkSummary:
     @classmethod
     def from_npz(cls, data) -> "ChunkSummary":
         m = data["meta"]
-        return cls(
-            tuple(int(v) for v in m[:4]), (int(m[4]), int(m[5])),
-            *(data[f] for f in _FIELDS),
-            n_maxima=int(m[6]),
-        )
+        arrays = {f: data[f] for f in _FIELDS}
+        return cls((int(m[0]), int(m[1]), int(m[2]), int(m[3])), (int(m[4]), int(m[5])), **arrays, n_maxima=int(m[6]))
 
 
 def _side_mask(keys: np.ndarray, region, shape) -> np.ndarray:
@@ -186,7 +183,8 @@ def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence_m: float) -
     kb = b.key[order_b]
     sa = np.flatnonzero(_side_mask(a.key, a.region, a.shape))
     ra, ca = a.key[sa] // W, a.key[sa] % W
-    sea, seb = [], []
+    sea_parts: list[np.ndarray] = []
+    seb_parts: list[np.ndarray] = []
     for dr, dc in _OFFSETS:
         nr, nc = ra + dr, ca + dc
         ok = (nr >= b.region[0]) & (nr < b.region[1]) & (nc >= b.region[2]) & (nc < b.region[3])
@@ -194,10 +192,10 @@ def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence_m: float) -
         pos = np.searchsorted(kb, nk)
         pos = np.minimum(pos, max(kb.size - 1, 0))
         hit = ok & (kb.size > 0) & (kb[pos] == nk) if kb.size else np.zeros_like(ok)
-        sea.append(sa[hit])
-        seb.append(order_b[pos[hit]])
-    sea = np.concatenate(sea) if sea else np.empty(0, np.int64)
-    seb = np.concatenate(seb) if seb else np.empty(0, np.int64)
+        sea_parts.append(sa[hit])
+        seb_parts.append(order_b[pos[hit]])
+    sea = np.concatenate(sea_parts) if sea_parts else np.empty(0, np.int64)
+    seb = np.concatenate(seb_parts) if seb_parts else np.empty(0, np.int64)
     za, zb = a.z[sea], b.z[seb]
     ka, kbb = a.key[sea], b.key[seb]
     a_lower = (za < zb) | ((za == zb) & (ka > kbb))

@@ -71,6 +71,7 @@ def engine_grid(z: Any, *, outside: str = "unknown", sea_level_m: float | None =
     g = -z
     pad = 0
     if outside == "sea":
+        assert sea is not None  # set above for outside == "sea"
         g = np.pad(g, 1, constant_values=-sea)
         pad = 1
     return g, sea, pad

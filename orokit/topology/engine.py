@@ -206,7 +206,7 @@ def finalize_graph(
     par[nonroot] = new_id[parent[kept][nonroot]]
     exact = ~touched[kept] & nonroot if outside == "unknown" else np.ones(kept.size, bool)
     return Orometry(
-        shape=tuple(shape),
+        shape=(int(shape[0]), int(shape[1])),
         n_maxima=int(n_maxima),
         peak_cell=node_key[kept],
         peak_z=node_z[kept],

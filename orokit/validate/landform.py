@@ -118,12 +118,13 @@ def wasserstein(qa: NDArray[np.float64], qb: NDArray[np.float64]) -> float:
     return float(np.mean(np.abs(np.asarray(qa) - np.asarray(qb))))
 
 
-def _gradient(z: NDArray[np.float64], dx: NDArray[np.float64], dy: float) -> tuple[NDArray, NDArray]:
+def _gradient(z: NDArray[np.float64], dx: NDArray[np.float64], dy: float
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """dz/dx (east) and dz/dy (north) by central differences (one-sided at the edges)."""
     if min(z.shape) < 2:
         raise InputError(f"landform statistics need at least 2 x 2 cells; got {z.shape}")
     dz_drow, dz_dcol = np.gradient(z)
-    return dz_dcol / dx[:, None], -dz_drow / dy
+    return np.asarray(dz_dcol / dx[:, None], float), np.asarray(-dz_drow / dy, float)
 
 
 def _laplacian(z: NDArray[np.float64], dx: NDArray[np.float64], dy: float) -> NDArray[np.float64]:
