@@ -311,7 +311,7 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
                                 labels: Sequence[str] | None = None, model_path: PathLike | None = None,
                                 model_radius_m: float | None = None, n_jobs: int = 2, progress: bool = False,
                                 z_units: str | None = None, cell_size_m: float | None = None,
-                                feature_set: str = "orometry", classifier: str = "et", separation: float = 0.5,
+                                feature_set: str = "orometry", classifier: ClassifierKind = "et", separation: float = 0.5,
                                 max_train: int = 80, block_runs: int = 0, block_m: float | None = None
                                 ) -> dict[str, Any]:
     """Features -> repeated training runs -> Table 2, figures and README for several radii.
