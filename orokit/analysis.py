@@ -262,9 +262,11 @@ def _dem_error(result, dem, core, transform, crs, *, sigma_m, k, corr_m, samples
     if not (np.isfinite(corr_m) and corr_m >= 0):
         raise InputError(f"the error correlation length must be a length >= 0 (metres), got {corr_m!r}")
     if seed is None:
-        seed = int(np.random.SeedSequence().entropy % 2**63)
-    dx, dy = CellMetric(transform, crs).cell_size_m(np.array([dem.shape[0] // 2]))
-    dx, dy = float(np.asarray(dx).ravel()[0]), float(np.asarray(dy).ravel()[0])
+        entropy = np.random.SeedSequence().entropy
+        assert isinstance(entropy, int)  # a fresh SeedSequence draws one int
+        seed = entropy % 2**63
+    cdx, cdy = CellMetric(transform, crs).cell_size_m(np.array([dem.shape[0] // 2]))
+    dx, dy = float(np.asarray(cdx).ravel()[0]), float(np.asarray(cdy).ravel()[0])
     corr = (corr_m / dy, corr_m / dx)
     z = np.ascontiguousarray(np.asarray(dem.values, dtype=np.float64))
     mc = monte_carlo(z, core.peak_row, core.peak_col, sigma_m=sigma_m, corr_cells=corr, radius_cells=corr,
