@@ -140,8 +140,9 @@ def _measure(dem_path: Path, tree, type_file: Path, real, model_path: Path | Non
 @click.argument("results", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="README.md of the ranking (README.csv and <region>.png hillshades beside it).")
+@click.option("--note", default=None, help="A paragraph added under the introduction (e.g. how the runs differ).")
 @overwrite_option("existing outputs")
-def generators_report(results, out, overwrite) -> None:
+def generators_report(results, out, note, overwrite) -> None:
     """Rank the generators from the result.json files of `orokit generators-run`."""
     from orokit.reports.generators import write_ranking_report
 
@@ -158,5 +159,5 @@ def generators_report(results, out, overwrite) -> None:
             reals[region] = _real_dem(region)
         except click.BadParameter:
             reals[region] = None
-    write_ranking_report(runs, reals, out)
+    write_ranking_report(runs, reals, out, note=note)
     click.echo(f"{len(runs)} runs ({sum(r['failed'] for r in runs)} failed) -> {out}")

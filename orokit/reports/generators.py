@@ -130,7 +130,7 @@ def _fmt(v: float, pct: bool) -> str:
     return f"{v:.3g}"
 
 
-def ranking_markdown(runs: list[dict]) -> str:
+def ranking_markdown(runs: list[dict], note: str | None = None) -> str:
     """The ranking README: mean rank, per-region tables (mean [min–max] over seeds), failures."""
     per_run, agg, mean_rank = ranking_tables(runs)
     seeds = sorted({r["seed"] for r in runs})
@@ -148,6 +148,7 @@ def ranking_markdown(runs: list[dict]) -> str:
              "halves (or the issue's floor), listed under each table; a run meets it when its distance is at "
              "most the target. Time is the wall "
              f"time of the render process (start-up and writing included); RSS its peak.{load}", "",
+             *([note, ""] if note else []),
              "## Mean rank (over every metric and region; 1 = best)", "", "| generator | mean rank |", "|---|---|"]
     for g, v in mean_rank.items():
         lines.append(f"| {g} | {v:.2f} |")
@@ -198,7 +199,7 @@ def plot_hillshade_row(axes: Any, real: Any, images: dict[str, np.ndarray | None
     return axes
 
 
-def write_ranking_report(runs: list[dict], reals: dict[str, Any], out: Any) -> None:
+def write_ranking_report(runs: list[dict], reals: dict[str, Any], out: Any, note: str | None = None) -> None:
     """Write README.md, README.csv (one row per run) and ``<region>.png`` (real + seed-0
     hillshade of every generator) into ``out``'s folder; README.md last."""
     from pathlib import Path
@@ -232,4 +233,4 @@ def write_ranking_report(runs: list[dict], reals: dict[str, Any], out: Any) -> N
         with atomic_path(out.parent / f"{region}.png") as tmp:
             fig.savefig(tmp, dpi=100, format="png")
         plt.close(fig)
-    write_text_atomic(out, ranking_markdown(runs))
+    write_text_atomic(out, ranking_markdown(runs, note))

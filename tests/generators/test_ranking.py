@@ -45,6 +45,7 @@ def test_mean_and_range_over_seeds():
     row = agg.loc[("alpha", "a")]
     assert (row[("wall_s", "mean")], row[("wall_s", "min")], row[("wall_s", "max")]) == (2.0, 1.0, 3.0)
     assert "2 [1–3]" in ranking_markdown(runs)
+    assert "Seeds 1 and 2 missing." in ranking_markdown(runs, note="Seeds 1 and 2 missing.")
 
 
 @pytest.fixture()
