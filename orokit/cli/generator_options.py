@@ -1,14 +1,15 @@
 """``--generator``, ``--param``, ``--exemplar`` and ``--list-generators`` (render, synthesize)."""
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import click
 
-__all__ = ["generator_options", "check_generator_inputs", "render_generator", "file_inputs", "file_sha256", "EXTRA_TAGS"]
+from orokit.io.hashing import sha256_file
+
+__all__ = ["generator_options", "check_generator_inputs", "render_generator", "file_inputs", "EXTRA_TAGS"]
 
 #: raster attrs written as COG tags besides those :func:`write_cog` always writes
 EXTRA_TAGS = ("generator_paper", "tree_sha256", "tree_file_sha256", "exemplar_sha256", "coarse_sha256",
@@ -40,26 +41,17 @@ def generator_options(f: Callable[..., Any]) -> Callable[..., Any]:
     return f
 
 
-def file_sha256(path: Path) -> str:
-    """sha256 of a file (recorded in the raster tags)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def exemplar_dem(exemplar: str):
     """The exemplar DEM (a file, else a manifest dataset) and the sha256 of its file."""
     from orokit.errors import DataError, InputError
     from orokit.io.dem import read_dem
 
     if Path(exemplar).is_file():
-        return read_dem(str(exemplar)), file_sha256(Path(exemplar))
+        return read_dem(str(exemplar)), sha256_file(Path(exemplar))
     from orokit.data import dataset_path, open_dataset_dem
 
     try:
-        return open_dataset_dem(exemplar), file_sha256(dataset_path(exemplar))
+        return open_dataset_dem(exemplar), sha256_file(dataset_path(exemplar))
     except (DataError, KeyError):
         raise InputError(f"exemplar {exemplar!r} is neither a DEM file nor a dataset of the manifest; "
                          "pass an existing DEM to --exemplar") from None
@@ -111,7 +103,7 @@ def file_inputs(params: Any) -> tuple[dict[str, Any], dict[str, str]]:
                 data[f.name] = pd.read_csv(path)
             except (ValueError, OSError) as exc:
                 raise InputError(f"--param {f.name}={value}: not a readable CSV file ({exc})") from None
-            hashes[f"{f.name}_sha256"] = file_sha256(path)
+            hashes[f"{f.name}_sha256"] = sha256_file(path)
     return data, hashes
 
 
@@ -128,7 +120,7 @@ def render_generator(tree, *, generator: str, params: Any, resolution_m: float, 
                          seed=seed, exemplar=ex, inputs=inputs)
     dem.attrs.update(hashes)
     if tree_path is not None and Path(tree_path).is_file():
-        dem.attrs["tree_file_sha256"] = file_sha256(Path(tree_path))
+        dem.attrs["tree_file_sha256"] = sha256_file(Path(tree_path))
     if ex_sha is not None:
         dem.attrs["exemplar_sha256"] = ex_sha
     return dem

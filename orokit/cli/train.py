@@ -54,7 +54,7 @@ def train(features_path, output, runs, feature_runs, split, buffer_radii, block_
     from orokit.classify.features import check_feature_table
     from orokit.classify.model import metadata_path, model_metadata, save_model
     from orokit.classify.train import evaluate, train_classifier
-    from orokit.data.fetch import sha256_file
+    from orokit.io.hashing import sha256_file
     from orokit.io.model_io import read_feature_table
 
     kinds = {"both": ["random", "spatial"], "all": ["random", "spatial", "blocks"]}.get(split, [split])

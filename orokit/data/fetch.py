@@ -14,7 +14,6 @@
 """
 from __future__ import annotations
 
-import hashlib
 import logging
 import os
 import shutil
@@ -27,6 +26,7 @@ from orokit._typing import PathLike
 from orokit.data.manifest import DataFile, Manifest, load_manifest
 from orokit.errors import DataError
 from orokit.io.atomic import atomic_path
+from orokit.io.hashing import sha256_file
 
 if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
@@ -83,15 +83,6 @@ def mirror_dir() -> Path | None:
     """The local mirror from ``$OROKIT_DATA_MIRROR`` (resolved), or None."""
     env = os.environ.get("OROKIT_DATA_MIRROR")
     return Path(env).expanduser().resolve() if env else None
-
-
-def sha256_file(path: PathLike) -> str:
-    """Lowercase hex sha256 of a file, read in 1 MiB blocks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(_CHUNK), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _copy(src: Path, dst: Path) -> None:

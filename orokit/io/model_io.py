@@ -27,7 +27,6 @@ JSON in the ``orokit`` schema metadata.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
 from typing import Any
@@ -38,6 +37,7 @@ import pandas as pd
 from orokit._typing import PathLike
 from orokit.errors import InputError, SchemaError
 from orokit.io.atomic import atomic_path, write_bytes_atomic
+from orokit.io.hashing import sha256_bytes
 
 __all__ = ["MODEL_FORMAT", "metadata_path", "save_model_file", "load_model_file", "write_feature_table",
            "read_feature_table", "write_disk_map"]
@@ -73,7 +73,7 @@ def save_model_file(pipeline: Any, metadata: dict[str, Any], path: PathLike) -> 
 
     # same model, same bytes: skops names arrays after memory addresses and stamps the clock
     blob = canonical_skops(sio.dumps({"pipeline": pipeline, "metadata": _canonical(md)}))
-    side = dict(md, sha256=hashlib.sha256(blob).hexdigest())
+    side = dict(md, sha256=sha256_bytes(blob))
     write_bytes_atomic(path, blob)
     write_bytes_atomic(metadata_path(path), json.dumps(side, indent=2, sort_keys=True).encode())
     return path
@@ -124,7 +124,7 @@ def load_model_file(path: PathLike, *, check_hash: bool = True) -> tuple[Any, di
         raise SchemaError(f"model {path} has format {side.get('format')!r} (orokit {side.get('orokit_version')}); "
                           f"this orokit reads {MODEL_FORMAT!r}: retrain with `orokit train`")
     blob = path.read_bytes()
-    digest = hashlib.sha256(blob).hexdigest()
+    digest = sha256_bytes(blob)
     if check_hash and side.get("sha256") != digest:
         raise InputError(f"model {path} does not match the sha256 in {mpath.name} (expected {side.get('sha256')}, "
                          f"got {digest}): corrupted or replaced file; train it again")

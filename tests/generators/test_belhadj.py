@@ -10,7 +10,7 @@ from orokit.generators import render_terrain
 from orokit.generators.base import tree_rivers
 from orokit.raster.rasterize import make_grid
 
-from .trees import small_tree
+from helpers.trees import small_tree
 
 SUBDIVISIONS = ("triangle-edge", "diamond-square")
 

@@ -8,7 +8,7 @@ from orokit.errors import InputError
 from orokit.generators import render_terrain
 from orokit.generators.guerin import GuerinParams, build_dictionary, sparse_codes, synthesize, weight_kernel
 
-from .trees import small_tree
+from helpers.trees import small_tree
 
 
 def fractal(n: int, seed: int, beta: float = 3.0) -> np.ndarray:

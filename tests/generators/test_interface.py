@@ -15,7 +15,7 @@ from orokit.generators.base import parse_params
 from orokit.generators.belhadj import BelhadjParams
 from orokit.io.dem import read_dem
 
-from .trees import collinear_tree, empty_tree, one_peak, small_tree
+from helpers.trees import collinear_tree, empty_tree, one_peak, small_tree
 
 #: fast parameters per generator for the tests
 FAST = {"argudo": {"erosion": False, "noise_ratio": 0.0}, "belhadj": {}, "rusnell": {"profile": "none"},

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from orokit.cli.main import cli
 from orokit.reports.generators import METRICS, ranking_markdown, ranking_tables
 
-from .trees import small_tree
+from helpers.trees import small_tree
 
 
 def _run(gen, seed, region="alpha", failed=False, **values):

@@ -14,7 +14,7 @@ from orokit.generators import render_terrain
 from orokit.generators import rusnell as R
 from orokit.raster.rasterize import make_grid
 
-from .trees import small_tree
+from helpers.trees import small_tree
 
 
 def grid_graph(w: np.ndarray) -> sp.csr_matrix:

@@ -14,26 +14,9 @@ from orokit.raster.skeleton import build_skeleton
 from orokit.topology.divide_tree import DivideTree
 from orokit.validate.roundtrip import compare_peaks
 
+from helpers.trees import small_tree
+
 FAST = RenderParams(lam=200.0, erosion_steps=2)
-
-
-def small_tree(crs=None) -> DivideTree:
-    """Five peaks in a 8 x 8 km square, hand made: A 1500 m is the highest."""
-    peaks = np.array([
-        [2000.0, 2000.0, 1500.0],  # 0 A
-        [6000.0, 2500.0, 1300.0],  # 1 B
-        [4000.0, 6000.0, 1400.0],  # 2 C
-        [1500.0, 6200.0, 1100.0],  # 3 D
-        [6500.0, 6500.0, 1000.0],  # 4 E
-    ])
-    saddles = np.array([
-        [4000.0, 2200.0, 1100.0],  # A-B
-        [3000.0, 4000.0, 1200.0],  # A-C
-        [2800.0, 6100.0, 950.0],   # C-D
-        [5300.0, 6300.0, 900.0],   # C-E
-    ])
-    edges = np.array([[0, 1, 0], [0, 2, 1], [2, 3, 2], [2, 4, 3]])
-    return DivideTree.from_arrays(peaks, saddles, edges, crs=crs, attrs={"extent": [0.0, 0.0, 8000.0, 8000.0]})
 
 
 @pytest.fixture(scope="module")
