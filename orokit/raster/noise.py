@@ -6,7 +6,7 @@ from scipy import ndimage
 
 from orokit._typing import SeedLike
 
-__all__ = ["fractal_noise", "falloff", "spectral_noise", "texture_spectrum"]
+__all__ = ["fractal_noise", "falloff", "remove_plane", "spectral_noise", "texture_spectrum"]
 
 
 def _octave(shape: tuple[int, int], cells_per_node: float, rng: np.random.Generator) -> np.ndarray:
@@ -71,6 +71,21 @@ def _highpass(k: np.ndarray, largest_m: float) -> np.ndarray:
     return 1.0 - np.exp(-(k * float(largest_m)) ** 4)
 
 
+def remove_plane(z: np.ndarray) -> np.ndarray:
+    """``z`` (finite) minus its least-squares plane ``a x + b y + c`` (x, y in cells), as float64.
+
+    >>> yy, xx = np.mgrid[0:4, 0:5]
+    >>> float(np.abs(remove_plane(2.0 * xx - yy + 7.0)).max()) < 1e-9
+    True
+    """
+    z = np.asarray(z, dtype=np.float64)
+    ny, nx = z.shape
+    yy, xx = np.mgrid[0:ny, 0:nx]
+    a = np.column_stack([xx.ravel(), yy.ravel(), np.ones(z.size)])
+    coef, *_ = np.linalg.lstsq(a, z.ravel(), rcond=None)
+    return z - (a @ coef).reshape(z.shape)
+
+
 def texture_spectrum(z: np.ndarray, res: float, *, largest_m: float = 1000.0,
                      fit_m: tuple[float, float] = (250.0, 1000.0)) -> tuple[float, float]:
     """``(rms, beta)`` of a DEM's texture: what :func:`spectral_noise` makes.
@@ -91,11 +106,8 @@ def texture_spectrum(z: np.ndarray, res: float, *, largest_m: float = 1000.0,
     if ok.sum() < 16:
         return 0.0, 3.0
     z = np.where(ok, z, z[ok].mean())
+    z = remove_plane(z)
     ny, nx = z.shape
-    yy, xx = np.mgrid[0:ny, 0:nx]
-    a = np.column_stack([xx.ravel(), yy.ravel(), np.ones(z.size)])
-    coef, *_ = np.linalg.lstsq(a, z.ravel(), rcond=None)
-    z = z - (a @ coef).reshape(z.shape)
     m = np.block([[z, z[:, ::-1]], [z[::-1, :], z[::-1, ::-1]]])
     ky = np.fft.fftfreq(m.shape[0], res)
     kx = np.fft.rfftfreq(m.shape[1], res)

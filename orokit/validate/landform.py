@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from orokit.errors import InputError
+from orokit.raster.noise import remove_plane
 from orokit.raster.shade import row_cell_sizes_m
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -166,11 +167,8 @@ def spectral_slope(z: NDArray[np.floating], cell_size_m: tuple[float, float], *,
     if not ok.any():
         return float("nan")
     z = np.where(ok, z, z[ok].mean())
+    z = remove_plane(z)
     ny, nx = z.shape
-    yy, xx = np.mgrid[0:ny, 0:nx]
-    a = np.column_stack([xx.ravel(), yy.ravel(), np.ones(z.size)])
-    coef, *_ = np.linalg.lstsq(a, z.ravel(), rcond=None)
-    z = z - (a @ coef).reshape(z.shape)
     z *= np.outer(np.hanning(ny), np.hanning(nx))
     power = np.abs(np.fft.rfft2(z)) ** 2
     dx, dy = cell_size_m
