@@ -51,7 +51,7 @@ def bench(generator: str, type_name: str, size_km: float, res: float, seed: int)
         from orokit.data import open_dataset_dem
 
         exemplar = open_dataset_dem(type_name)
-    render_terrain(tree, generator=generator, resolution_m=res * 10, seed=seed, exemplar=exemplar)  # warm caches
+    render_terrain(tree, generator=generator, cell_size_m=res * 10, seed=seed, exemplar=exemplar)  # warm caches
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
     grid = make_grid(tree_extent(tree), res)
     t0 = time.perf_counter()

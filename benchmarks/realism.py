@@ -70,7 +70,7 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
     out: dict = {"shape": [ny, nx], "cell_size_m": res, "real": real.summary, "tree_peaks": int(tree.n_peaks)}
 
     t0 = time.perf_counter()
-    ren = render_elevation(tree, resolution_m=res, extent=_extent(dem), erosion=erosion, params=params, rng=seed)
+    ren = render_elevation(tree, cell_size_m=res, extent=_extent(dem), erosion=erosion, params=params, rng=seed)
     t_render = time.perf_counter() - t0
     rs = landform_statistics(ren)
     rt = roundtrip(ren, tree, min_prominence_m=EPS).summary()
@@ -82,7 +82,7 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
     ttype = TerrainType.from_analysis(result, name=name).with_texture(*texture_spectrum(dem.values, res))
     t0 = time.perf_counter()
     ttree = synthesize_divide_tree(ttype, size_m=(nx * res, ny * res), rng=seed)
-    twin = render_elevation(ttree, resolution_m=res, extent=tree_extent(ttree), erosion=erosion,
+    twin = render_elevation(ttree, cell_size_m=res, extent=tree_extent(ttree), erosion=erosion,
                             params=dataclasses.replace(params, **texture_params(ttype)), rng=seed)
     t_twin = time.perf_counter() - t0
     ts = landform_statistics(twin)

@@ -32,9 +32,9 @@ def run(dem_name: str, size_km: float, res: float, erosion: bool, seed: int) -> 
     t0 = time.perf_counter()
     tree = synthesize_divide_tree(ttype, size_m=size_km * 1000.0, rng=seed)
     t_tree = time.perf_counter() - t0
-    render_elevation(tree, resolution_m=res * 10, erosion=erosion, rng=seed)  # warm numba caches
+    render_elevation(tree, cell_size_m=res * 10, erosion=erosion, rng=seed)  # warm numba caches
     t0 = time.perf_counter()
-    out = render_elevation(tree, resolution_m=res, extent=tree_extent(tree), erosion=erosion, rng=seed)
+    out = render_elevation(tree, cell_size_m=res, extent=tree_extent(tree), erosion=erosion, rng=seed)
     t_render = time.perf_counter() - t0
     rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
     t0 = time.perf_counter()

@@ -107,7 +107,7 @@ def file_inputs(params: Any) -> tuple[dict[str, Any], dict[str, str]]:
     return data, hashes
 
 
-def render_generator(tree, *, generator: str, params: Any, resolution_m: float, extent, seed: int | None,
+def render_generator(tree, *, generator: str, params: Any, cell_size_m: float, extent, seed: int | None,
                      tree_path: Path | None = None, exemplar: str | None = None):
     """Render with a registered generator; records the input files' hashes in the attrs."""
     from orokit.generators import render_terrain
@@ -116,7 +116,7 @@ def render_generator(tree, *, generator: str, params: Any, resolution_m: float, 
     if exemplar is not None:
         ex, ex_sha = exemplar_dem(exemplar)
     inputs, hashes = file_inputs(params)
-    dem = render_terrain(tree, generator=generator, params=params, resolution_m=resolution_m, extent=extent,
+    dem = render_terrain(tree, generator=generator, params=params, cell_size_m=cell_size_m, extent=extent,
                          seed=seed, exemplar=ex, inputs=inputs)
     dem.attrs.update(hashes)
     if tree_path is not None and Path(tree_path).is_file():

@@ -123,7 +123,7 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence_m,
         parsed = check_generator_inputs(generator, params, exemplar)
         t = read_tree(tree, cell_size_m=cell_size_m)
         t0 = time.perf_counter()
-        dem = render_generator(t, generator=generator, params=parsed, resolution_m=res, extent=extent, seed=seed,
+        dem = render_generator(t, generator=generator, params=parsed, cell_size_m=res, extent=extent, seed=seed,
                                tree_path=tree, exemplar=exemplar)
         write_outputs(dem, out, preview=preview, tin_path=None)
         click.echo(f"{dem.shape[1]} x {dem.shape[0]} cells at {res:g} m from {t.n_peaks} peaks with {generator} "
@@ -132,7 +132,7 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence_m,
     params = RenderParams(lam=lam, min_prominence_m=min_prominence_m)
     t = read_tree(tree, cell_size_m=cell_size_m)
     t0 = time.perf_counter()
-    dem, skel = render_elevation(t, resolution_m=res, extent=extent, erosion=erosion, params=params,
+    dem, skel = render_elevation(t, cell_size_m=res, extent=extent, erosion=erosion, params=params,
                                  return_skeleton=True, rng=seed)
     # staged: the old outputs are replaced only once every new one is written
     write_outputs(dem, stage.file(out), preview=None if preview is None else stage.file(preview),

@@ -188,7 +188,7 @@ def synthesize(type_file, size, resolution, like, cell_size_m, n_peaks, control_
     if bar is not None:
         bar.update(1)
     if parsed is None:
-        dem, skel = render_elevation(tree, resolution_m=res, extent=tree_extent(tree), erosion=erosion,
+        dem, skel = render_elevation(tree, cell_size_m=res, extent=tree_extent(tree), erosion=erosion,
                                      params=RenderParams(min_prominence_m=float(tree.attrs.get("min_prominence_m", 30.0)),
                                                          **texture_params(ttype)),
                                      return_skeleton=True, rng=seed)
@@ -196,14 +196,14 @@ def synthesize(type_file, size, resolution, like, cell_size_m, n_peaks, control_
         from orokit.cli.generator_options import render_generator
 
         skel = None
-        dem = render_generator(tree, generator=generator, params=parsed, resolution_m=res, extent=tree_extent(tree),
+        dem = render_generator(tree, generator=generator, params=parsed, cell_size_m=res, extent=tree_extent(tree),
                                seed=seed, exemplar=exemplar)
     if bar is not None:
         bar.update(1)
     # the new files go to a hidden folder beside OUTPUT and replace the old ones only when all
     # are written (the marker first removed, moved in last; the old ones not rewritten removed)
     new = stage.folder(outdir, marker=MARKER, stale=outputs + STALE_FILES)
-    extra = {"seed": seed, "types": [str(type_file)], "resolution_m": res, "erosion": bool(erosion),
+    extra = {"seed": seed, "types": [str(type_file)], "cell_size_m": res, "erosion": bool(erosion),
              "like": None if like is None else str(like),
              "generator": generator, "generator_parameters": json.loads(dem.attrs.get("parameters", "{}")),
              "control_elevation": None if control_elevation is None else str(control_elevation),

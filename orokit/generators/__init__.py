@@ -102,7 +102,7 @@ def render_terrain(
     tree,
     *,
     generator: str = "argudo",
-    resolution_m: float | None = None,
+    cell_size_m: float | None = None,
     extent: tuple[float, float, float, float] | None = None,
     grid=None,
     params: Any = None,
@@ -117,7 +117,7 @@ def render_terrain(
     ----------
     tree : DivideTree in a projected CRS or a local metric frame.
     generator : a name of :data:`GENERATORS`.
-    resolution_m, extent : output grid (default extent: the tree's domain), or ``grid``.
+    cell_size_m, extent : output grid (default extent: the tree's domain), or ``grid``.
     params : the backend's parameters dataclass, a dict or ``K=V`` strings (default: its paper's).
     rivers : a :class:`~orokit.raster.rivers.RiverNetwork` shared between backends
         (default :func:`orokit.generators.base.tree_rivers` on the grid).
@@ -147,10 +147,10 @@ def render_terrain(
         params = spec.params(params)
     tree_arrays(tree)  # empty or malformed trees fail here, with the same message for every backend
     if grid is None:
-        if resolution_m is None:
-            raise InputError("render_terrain needs resolution_m (or a grid)")
+        if cell_size_m is None:
+            raise InputError("render_terrain needs cell_size_m (or a grid)")
         ext = as_extent(extent) if extent is not None else tree_extent(tree)
-        grid = make_grid(ext, resolution_m)
+        grid = make_grid(ext, cell_size_m)
     seed = resolve_seed(seed)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
@@ -169,7 +169,7 @@ def render_terrain(
         "units": "m",
         "generator": spec.name,
         "generator_paper": spec.paper,
-        "parameters": json.dumps({**params_to_dict(params), "resolution_m": grid.res, "extent": list(grid.extent)}),
+        "parameters": json.dumps({**params_to_dict(params), "cell_size_m": grid.cell_size_m, "extent": list(grid.extent)}),
         "seed": seed,
         "orokit_version": __version__,
         "tree_sha256": tree_sha256(tree),

@@ -53,6 +53,6 @@ def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generat
     params = params or ArgudoParams()
     kw = {f.name: getattr(params, f.name) for f in dataclasses.fields(params) if f.name != "erosion"}
     rp = RenderParams(**kw)
-    da = _render.render_elevation(tree, resolution_m=grid.res, extent=grid.extent, erosion=params.erosion,
+    da = _render.render_elevation(tree, cell_size_m=grid.cell_size_m, extent=grid.extent, erosion=params.erosion,
                                   params=rp, rng=rng)
     return da

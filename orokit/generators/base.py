@@ -112,8 +112,8 @@ def as_dataarray(z: np.ndarray, grid: Grid, crs: Any, attrs: dict[str, Any] | No
     da = xr.DataArray(np.asarray(z, dtype=np.float32), dims=("y", "x"), coords={"y": y, "x": x}, name="elevation")
     if crs is not None:
         da = da.rio.write_crs(crs)
-    da = da.rio.write_transform(Affine(grid.res, 0.0, grid.x0, 0.0, -grid.res, grid.y0))
-    da.attrs.update({"units": "m", "local_grid": crs is None, "cell_size_m": (grid.res, grid.res)})
+    da = da.rio.write_transform(Affine(grid.cell_size_m, 0.0, grid.x0, 0.0, -grid.cell_size_m, grid.y0))
+    da.attrs.update({"units": "m", "local_grid": crs is None, "cell_size_m": (grid.cell_size_m, grid.cell_size_m)})
     da.attrs.update(attrs or {})
     return da
 

@@ -99,7 +99,7 @@ def tree_skeleton(tree, rivers: RiverNetwork | None, grid: Grid) -> tuple[np.nda
     """
     a = tree_arrays(tree)
     z = np.full((grid.ny, grid.nx), -np.inf)
-    step = 0.5 * grid.res
+    step = 0.5 * grid.cell_size_m
     if a.edges.size:
         pk = np.concatenate([a.edges[:, 0], a.edges[:, 1]])
         sd = np.concatenate([a.edges[:, 2], a.edges[:, 2]])

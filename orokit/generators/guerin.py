@@ -439,14 +439,14 @@ def render(tree, rivers, grid: Grid, rng: np.random.Generator, params: GuerinPar
         raise InputError("generator guerin needs an exemplar DEM to build its dictionary (CLI: --exemplar DEM)")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    ex, h = _exemplar_at(exemplar, grid.res)
-    h = max(h, grid.res)
+    ex, h = _exemplar_at(exemplar, grid.cell_size_m)
+    h = max(h, grid.cell_size_m)
     d = build_dictionary(ex, params, rng)
     timings["dictionary"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     x0, y0, x1, y1 = grid.extent
     f = params.factor
-    same = abs(h - grid.res) <= 1e-9 * h
+    same = abs(h - grid.cell_size_m) <= 1e-9 * h
     ny_h = grid.ny if same else max(int(np.ceil((y1 - y0) / h - 1e-9)), 1)
     nx_h = grid.nx if same else max(int(np.ceil((x1 - x0) / h - 1e-9)), 1)
     cgrid = make_grid((x0, y1 - f * h * int(np.ceil(ny_h / f)), x0 + f * h * int(np.ceil(nx_h / f)), y1), f * h)

@@ -111,7 +111,7 @@ def sub_plates(peak_xy: np.ndarray, grid: Grid) -> Plates:
     has = count > 0
     vel = np.zeros((n, 2))
     vel[has] = peak_xy[has] - np.column_stack([cx[has], cy[has]]) / count[has, None]
-    return Plates(label, count * grid.res**2, vel)
+    return Plates(label, count * grid.cell_size_m**2, vel)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -259,7 +259,7 @@ def watershed_map(rivers: RiverNetwork | None, grid: Grid, *, river_slope: float
             from orokit.generators.belhadj import _densify
 
             xy, h = _densify(rivers.xy[e[:, 0]], rivers.xy[e[:, 1]], river_slope * dist[e[:, 0]],
-                             river_slope * dist[e[:, 1]], 0.5 * grid.res)
+                             river_slope * dist[e[:, 1]], 0.5 * grid.cell_size_m)
             row, col, ok = grid.cell_of(xy)
             np.minimum.at(h0, (row[ok], col[ok]), h[ok])
     src = np.isfinite(h0)
@@ -267,7 +267,7 @@ def watershed_map(rivers: RiverNetwork | None, grid: Grid, *, river_slope: float
         src[0, :] = src[-1, :] = src[:, 0] = src[:, -1] = True
         h0[src] = 0.0
     gi, gj = np.nonzero(src)
-    w = np.full((grid.ny, grid.nx, 4), hill_slope * grid.res)
+    w = np.full((grid.ny, grid.nx, 4), hill_slope * grid.cell_size_m)
     w[:, :, 1] *= math.sqrt(2.0)
     w[:, :, 3] *= math.sqrt(2.0)
     stamp = np.full((grid.ny, grid.nx), -1, np.int32)
@@ -310,10 +310,10 @@ def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generat
     plates = merge_plates(sub_plates(a.peaks[ok, :2], grid), t1=params.t1, t2=params.t2)
     t["plates"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    vel = velocity_map(plates, grid.res, params.blur_m)
-    pad = int(math.ceil(float(np.abs(vel).max()) / grid.res)) + 2
+    vel = velocity_map(plates, grid.cell_size_m, params.blur_m)
+    pad = int(math.ceil(float(np.abs(vel).max()) / grid.cell_size_m)) + 2
     noise = fbm((grid.ny + 2 * pad, grid.nx + 2 * pad), params.fbm_beta, rng)
-    folds = fold_map(noise, pad, vel, grid.res)
+    folds = fold_map(noise, pad, vel, grid.cell_size_m)
     from scipy.spatial import cKDTree
 
     x, y = grid.centres()
@@ -324,7 +324,7 @@ def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generat
     t["folds"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     g, river = watershed_map(rivers, grid, river_slope=params.river_slope, hill_slope=params.hill_slope)
-    dist = ndimage.distance_transform_edt(~river, sampling=grid.res)
+    dist = ndimage.distance_transform_edt(~river, sampling=grid.cell_size_m)
     m = np.clip(dist / params.mask_m, 0.0, 1.0)
     top = float(a.peaks[:, 2].max())
     # the sea: the rivers' outlets (the tree's lowest point minus the river margin)
@@ -339,8 +339,8 @@ def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generat
         from orokit.raster.erosion import erode_multiscale
 
         t0 = time.perf_counter()
-        h = erode_multiscale(h.astype(np.float32), grid.res, np.zeros(h.shape, np.float32),
-                             scales_m=(max(100.0, grid.res),), steps=(3,), k_dt=0.02, max_nodes=4_000_000)
+        h = erode_multiscale(h.astype(np.float32), grid.cell_size_m, np.zeros(h.shape, np.float32),
+                             scales_m=(max(100.0, grid.cell_size_m),), steps=(3,), k_dt=0.02, max_nodes=4_000_000)
         t["erosion"] = time.perf_counter() - t0
     logger.info("michel: %d sub-plates -> %d plates", int(ok.sum()), plates.n)
     return as_dataarray(np.asarray(h, np.float32), grid, crs, {"timings": t, "cell_counts": {"plates": plates.n}})

@@ -214,7 +214,7 @@ def features(tree, grid: Grid) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]
     for pa, pb, sd in a.edges:
         for p in (pa, pb):
             p0, p1 = a.peaks[p], a.saddles[sd]
-            n = max(int(math.ceil(math.hypot(*(p1[:2] - p0[:2])) / (0.5 * grid.res))), 1) + 1
+            n = max(int(math.ceil(math.hypot(*(p1[:2] - p0[:2])) / (0.5 * grid.cell_size_m))), 1) + 1
             t = np.linspace(0.0, 1.0, n)
             xy = p0[None, :2] + t[:, None] * (p1[None, :2] - p0[None, :2])
             half[p].append((xy, p0[2] + t * (p1[2] - p0[2])))
@@ -277,7 +277,7 @@ def river_cells(rivers, grid: Grid) -> np.ndarray:
     if not e.size:
         return mask
     p0, p1 = rivers.xy[e[:, 0]], rivers.xy[e[:, 1]]
-    n = np.maximum(np.ceil(np.hypot(*(p1 - p0).T) / (0.5 * grid.res)).astype(np.int64), 1) + 1
+    n = np.maximum(np.ceil(np.hypot(*(p1 - p0).T) / (0.5 * grid.cell_size_m)).astype(np.int64), 1) + 1
     seg = np.repeat(np.arange(e.shape[0]), n)
     t = (np.arange(seg.size) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
     row, col, ok = grid.cell_of(p0[seg] + t[:, None] * (p1[seg] - p0[seg]))
@@ -372,7 +372,7 @@ def render(tree, rivers, grid: Grid, rng: np.random.Generator, params: RusnellPa
         table = np.ones(2)
     timings["profile"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    w = edge_weights(grid.ny, grid.nx, params.mu_w, params.r, rng, cell_m=grid.res)
+    w = edge_weights(grid.ny, grid.nx, params.mu_w, params.r, rng, cell_m=grid.cell_size_m)
     ny, nx = grid.ny, grid.nx
     stop = river_cells(rivers, grid) if params.water else np.zeros((0, 0), np.uint8)
     stamp = np.full((ny, nx), -1, np.int32)

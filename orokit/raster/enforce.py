@@ -60,7 +60,7 @@ def enforce_orometry(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, label:
     if nodes.shape[0] > n:
         nxv, nyv = _saddle_normals(skel)
         s = nodes[n:]
-        _kernels.carve_saddles(z, float(grid.x0), float(grid.y0), float(grid.res),
+        _kernels.carve_saddles(z, float(grid.x0), float(grid.y0), float(grid.cell_size_m),
                                np.ascontiguousarray(s[:, 0]), np.ascontiguousarray(s[:, 1]),
                                np.ascontiguousarray(s[:, 2]), nxv, nyv, float(trench_m), float(drop_m),
                                label if label is not None else np.full(z.shape, -1, np.int32))

@@ -19,28 +19,28 @@ MAX_CELLS = 100_000_000
 
 @dataclass(frozen=True)
 class Grid:
-    """A north-up grid: top-left corner ``(x0, y0)``, square cells ``res`` metres."""
+    """A north-up grid: top-left corner ``(x0, y0)``, square cells ``cell_size_m`` metres."""
 
     x0: float
     y0: float
-    res: float
+    cell_size_m: float
     ny: int
     nx: int
 
     @property
     def extent(self) -> tuple[float, float, float, float]:
-        return (self.x0, self.y0 - self.ny * self.res, self.x0 + self.nx * self.res, self.y0)
+        return (self.x0, self.y0 - self.ny * self.cell_size_m, self.x0 + self.nx * self.cell_size_m, self.y0)
 
     def centres(self) -> tuple[np.ndarray, np.ndarray]:
         """Cell-centre x (nx,) and y (ny,) coordinates."""
-        x = self.x0 + (np.arange(self.nx) + 0.5) * self.res
-        y = self.y0 - (np.arange(self.ny) + 0.5) * self.res
+        x = self.x0 + (np.arange(self.nx) + 0.5) * self.cell_size_m
+        y = self.y0 - (np.arange(self.ny) + 0.5) * self.cell_size_m
         return x, y
 
     def cell_of(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Row, col of points and a mask of those inside the grid."""
-        col = np.floor((xy[:, 0] - self.x0) / self.res).astype(np.int64)
-        row = np.floor((self.y0 - xy[:, 1]) / self.res).astype(np.int64)
+        col = np.floor((xy[:, 0] - self.x0) / self.cell_size_m).astype(np.int64)
+        row = np.floor((self.y0 - xy[:, 1]) / self.cell_size_m).astype(np.int64)
         ok = (row >= 0) & (row < self.ny) & (col >= 0) & (col < self.nx)
         return row, col, ok
 
@@ -56,18 +56,18 @@ def as_extent(extent: Any) -> tuple[float, float, float, float]:
     return values[0], values[1], values[2], values[3]
 
 
-def make_grid(extent: tuple[float, float, float, float], resolution_m: float, *, max_cells: int = MAX_CELLS) -> Grid:
-    """Grid covering ``extent = (xmin, ymin, xmax, ymax)`` with cells of ``resolution_m``.
+def make_grid(extent: tuple[float, float, float, float], cell_size_m: float, *, max_cells: int = MAX_CELLS) -> Grid:
+    """Grid covering ``extent = (xmin, ymin, xmax, ymax)`` with cells of ``cell_size_m``.
 
     Raises :class:`InputError` before anything is allocated when the resolution is not a
     positive finite number, the extent is empty, or the grid would exceed ``max_cells``.
     """
     try:
-        res = float(resolution_m)
+        res = float(cell_size_m)
     except (TypeError, ValueError):
-        raise InputError(f"resolution must be a number of metres, got {resolution_m!r}") from None
+        raise InputError(f"resolution must be a number of metres, got {cell_size_m!r}") from None
     if not math.isfinite(res) or res <= 0:
-        raise InputError(f"resolution must be a positive finite number of metres, got {resolution_m!r}")
+        raise InputError(f"resolution must be a positive finite number of metres, got {cell_size_m!r}")
     xmin, ymin, xmax, ymax = (float(v) for v in extent)
     if not all(math.isfinite(v) for v in (xmin, ymin, xmax, ymax)) or xmax <= xmin or ymax <= ymin:
         raise InputError(f"extent must be finite (xmin, ymin, xmax, ymax) with xmax > xmin and ymax > ymin, got {extent!r}")
@@ -92,7 +92,7 @@ def rasterize_tin(tin: TIN, grid: Grid) -> np.ndarray:
     return _kernels.rasterize_triangles(
         np.ascontiguousarray(tin.xy[:, 0]), np.ascontiguousarray(tin.xy[:, 1]),
         np.ascontiguousarray(tin.z), np.ascontiguousarray(tin.triangles),
-        float(grid.x0), float(grid.y0), float(grid.res), int(grid.ny), int(grid.nx),
+        float(grid.x0), float(grid.y0), float(grid.cell_size_m), int(grid.ny), int(grid.nx),
     )
 
 

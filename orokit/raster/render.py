@@ -94,7 +94,7 @@ def _check_crs(tree) -> Any:
 def render_elevation(
     tree,
     *,
-    resolution_m: float,
+    cell_size_m: float,
     extent: tuple[float, float, float, float] | None = None,
     erosion: bool = True,
     params: RenderParams | None = None,
@@ -107,7 +107,7 @@ def render_elevation(
     Parameters
     ----------
     tree : DivideTree in a projected CRS or a local metric frame (x, y, elevation in metres).
-    resolution_m : cell size of the output in metres.
+    cell_size_m : cell size of the output in metres.
     extent : ``(xmin, ymin, xmax, ymax)`` in the tree's CRS; default :func:`tree_extent`.
     erosion : run the multi-scale constrained erosion.
     params : :class:`RenderParams` (lambda, noise, erosion...).
@@ -149,7 +149,7 @@ def render_elevation(
     if tree.n_peaks == 0:
         raise DivideTreeError("the Divide Tree has no peaks; nothing to render")
     ext = as_extent(extent) if extent is not None else tree_extent(tree)
-    grid = make_grid(ext, resolution_m, max_cells=max_cells)  # errors before any allocation
+    grid = make_grid(ext, cell_size_m, max_cells=max_cells)  # errors before any allocation
     pxy = tree.peaks[["x", "y"]].to_numpy(float)
     inside = (pxy[:, 0] >= ext[0]) & (pxy[:, 0] <= ext[2]) & (pxy[:, 1] >= ext[1]) & (pxy[:, 1] <= ext[3])
     if not inside.any():
@@ -162,12 +162,12 @@ def render_elevation(
         warnings.warn(f"{int((~inside).sum())} of {inside.size} peaks lie outside the extent and are cut off",
                       OrokitWarning, stacklevel=2)
 
-    skel = build_skeleton(tree, extent=ext, params=params, saddle_clearance_m=1.5 * grid.res, rng=rng)
+    skel = build_skeleton(tree, extent=ext, params=params, saddle_clearance_m=1.5 * grid.cell_size_m, rng=rng)
     timings = dict(skel.timings)
 
     t0 = time.perf_counter()
     z = rasterize_tin(skel.tin, grid)
-    rxy, rz, _, rorig = densify(skel.ridges, 0.5 * grid.res, origin=True)
+    rxy, rz, _, rorig = densify(skel.ridges, 0.5 * grid.cell_size_m, origin=True)
     burn_max(z, grid, rxy, rz)
     label = np.full(z.shape, -1, np.int32)  # saddle of the ridge of every burnt cell
     row, col, ok = grid.cell_of(rxy)
@@ -184,14 +184,14 @@ def render_elevation(
     mask = np.ones(z.shape, bool)
     row, col, ok = grid.cell_of(nodes[:, :2])
     mask[row[ok], col[ok]] = False
-    dist = ndimage.distance_transform_edt(mask, sampling=grid.res).astype(np.float32)
+    dist = ndimage.distance_transform_edt(mask, sampling=grid.cell_size_m).astype(np.float32)
     uplift = falloff(dist / np.float32(params.uplift_radius))
     if params.texture_rms_m * params.texture_gain > 0:
         # texture where the skeleton is steep (real valley floors and glaciers are smooth),
         # faded near peaks and saddles; mean amplitude = gain x the type's texture RMS
-        fade = 1.0 - falloff(dist / np.float32(max(params.texture_clearance_m, grid.res)))
-        weight = _slope_weight(z, grid.res, params.texture_largest_m, params.texture_slope_power) * fade
-        z += spectral_noise(z.shape, grid.res, rms=params.texture_gain * params.texture_rms_m,
+        fade = 1.0 - falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
+        weight = _slope_weight(z, grid.cell_size_m, params.texture_largest_m, params.texture_slope_power) * fade
+        z += spectral_noise(z.shape, grid.cell_size_m, rms=params.texture_gain * params.texture_rms_m,
                             beta=params.texture_beta, largest_m=params.texture_largest_m, rng=rng) * weight
         del fade, weight
     del dist, mask
@@ -199,13 +199,13 @@ def render_elevation(
     if noise_amp > 0:
         zmin, zmax = float(z.min()), float(z.max())
         rough = (z - zmin) / max(zmax - zmin, 1e-6)
-        z += fractal_noise(z.shape, grid.res, amplitude=noise_amp, roughness=rough, rng=rng) * (1.0 - uplift)
+        z += fractal_noise(z.shape, grid.cell_size_m, amplitude=noise_amp, roughness=rough, rng=rng) * (1.0 - uplift)
         del rough
     timings["noise"] = time.perf_counter() - t0
 
     if erosion:
         t0 = time.perf_counter()
-        z = erode_multiscale(z, grid.res, uplift, scales_m=params.erosion_scales,
+        z = erode_multiscale(z, grid.cell_size_m, uplift, scales_m=params.erosion_scales,
                              steps=params.erosion_steps, k_dt=params.erosion_k_dt,
                              max_nodes=params.erosion_max_nodes)
         timings["erosion"] = time.perf_counter() - t0
@@ -220,18 +220,18 @@ def render_elevation(
 
     if crs is not None:
         da = da.rio.write_crs(crs)
-    da = da.rio.write_transform(Affine(grid.res, 0.0, grid.x0, 0.0, -grid.res, grid.y0))
+    da = da.rio.write_transform(Affine(grid.cell_size_m, 0.0, grid.x0, 0.0, -grid.cell_size_m, grid.y0))
     da.attrs.update({
         "units": "m",
         "generator": "orokit.raster.render_elevation (Argudo et al. 2019, section 6)",
         "orokit_version": __version__,
-        "parameters": json.dumps({**params.to_dict(), "resolution_m": grid.res, "extent": list(ext),
+        "parameters": json.dumps({**params.to_dict(), "cell_size_m": grid.cell_size_m, "extent": list(ext),
                                   "erosion": bool(erosion)}),
         "seed": seed,
         "local_grid": crs is None,
-        "cell_size_m": (grid.res, grid.res),
+        "cell_size_m": (grid.cell_size_m, grid.cell_size_m),
         "n_tree_peaks": int(tree.n_peaks),
         "timings": json.dumps({k: round(v, 3) for k, v in timings.items()}),
     })
-    logger.info("rendered %d x %d at %g m in %.2f s", grid.nx, grid.ny, grid.res, sum(timings.values()))
+    logger.info("rendered %d x %d at %g m in %.2f s", grid.nx, grid.ny, grid.cell_size_m, sum(timings.values()))
     return (da, skel) if return_skeleton else da

@@ -164,9 +164,9 @@ def test_mdi_then_md_leaves_smaller_skeleton_edge_gradients_than_md(tree_raster,
 
 def test_same_seed_same_raster_and_different_seed_differs():
     tree = small_tree()
-    a = render_terrain(tree, generator="belhadj", resolution_m=100.0, seed=11)
-    b = render_terrain(tree, generator="belhadj", resolution_m=100.0, seed=11)
-    c = render_terrain(tree, generator="belhadj", resolution_m=100.0, seed=12)
+    a = render_terrain(tree, generator="belhadj", cell_size_m=100.0, seed=11)
+    b = render_terrain(tree, generator="belhadj", cell_size_m=100.0, seed=11)
+    c = render_terrain(tree, generator="belhadj", cell_size_m=100.0, seed=12)
     assert a.values.tobytes() == b.values.tobytes()
     assert a.values.tobytes() != c.values.tobytes()
     assert a.attrs["seed"] == 11 and a.attrs["generator"] == "belhadj"
@@ -174,7 +174,7 @@ def test_same_seed_same_raster_and_different_seed_differs():
 
 def test_padding_keeps_the_grid_and_crops():
     tree = small_tree()
-    dem = render_terrain(tree, generator="belhadj", resolution_m=100.0, extent=(0.0, 0.0, 8000.0, 6000.0), seed=1)
+    dem = render_terrain(tree, generator="belhadj", cell_size_m=100.0, extent=(0.0, 0.0, 8000.0, 6000.0), seed=1)
     assert dem.shape == (60, 80)
     assert np.isfinite(dem.values).all()
     assert dem.rio.transform().a == 100.0

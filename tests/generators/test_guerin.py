@@ -151,7 +151,7 @@ def test_render_from_a_tree_follows_the_coarse_relief():
     import xarray as xr
 
     exemplar = xr.DataArray(ex, dims=("y", "x"), attrs={"cell_size_m": 50.0})
-    dem = render_terrain(tree, generator="guerin", resolution_m=50.0, exemplar=exemplar, seed=0,
+    dem = render_terrain(tree, generator="guerin", cell_size_m=50.0, exemplar=exemplar, seed=0,
                          params={"radius": 8, "factor": 4})
     assert dem.shape == (160, 160) and np.isfinite(dem.values).all()
     z = dem.values
@@ -160,7 +160,7 @@ def test_render_from_a_tree_follows_the_coarse_relief():
           enumerate(tree.peaks[["x", "y"]].to_numpy())}
     # the highest peak's area stays higher than the lowest peak's (coarse relief survives amplification)
     assert at[0] > at[4]
-    again = render_terrain(tree, generator="guerin", resolution_m=50.0, exemplar=exemplar, seed=0,
+    again = render_terrain(tree, generator="guerin", cell_size_m=50.0, exemplar=exemplar, seed=0,
                            params={"radius": 8, "factor": 4})
     assert again.values.tobytes() == dem.values.tobytes()
 
@@ -180,15 +180,15 @@ def test_missing_or_useless_exemplar_is_refused():
     import xarray as xr
 
     with pytest.raises(InputError, match="needs an exemplar"):
-        render_terrain(small_tree(), generator="guerin", resolution_m=100.0, seed=0)
+        render_terrain(small_tree(), generator="guerin", cell_size_m=100.0, seed=0)
     tiny = xr.DataArray(np.ones((10, 10)), dims=("y", "x"), attrs={"cell_size_m": 100.0})
     with pytest.raises(InputError, match="smaller than one patch"):
-        render_terrain(small_tree(), generator="guerin", resolution_m=100.0, seed=0, exemplar=tiny)
+        render_terrain(small_tree(), generator="guerin", cell_size_m=100.0, seed=0, exemplar=tiny)
     flat = xr.DataArray(np.full((80, 80), 5.0), dims=("y", "x"), attrs={"cell_size_m": 100.0})
     with pytest.raises(InputError, match="no usable patch"):
-        render_terrain(small_tree(), generator="guerin", resolution_m=100.0, seed=0, exemplar=flat)
+        render_terrain(small_tree(), generator="guerin", cell_size_m=100.0, seed=0, exemplar=flat)
     with pytest.raises(InputError, match="caller reads"):
-        render_terrain(small_tree(), generator="guerin", resolution_m=100.0, seed=0, exemplar=flat,
+        render_terrain(small_tree(), generator="guerin", cell_size_m=100.0, seed=0, exemplar=flat,
                        params=["coarse=x.tif"])
 
 

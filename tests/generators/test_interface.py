@@ -61,13 +61,13 @@ def test_params_parse_and_refuse():
 @pytest.mark.parametrize("name", sorted(GENERATORS))
 def test_empty_tree_is_refused(name):
     with pytest.raises(DivideTreeError, match="no peaks"):
-        render_terrain(empty_tree(), generator=name, resolution_m=100.0, seed=0, **kw(name))
+        render_terrain(empty_tree(), generator=name, cell_size_m=100.0, seed=0, **kw(name))
 
 
 @pytest.mark.parametrize("name", sorted(GENERATORS))
 def test_zero_size_domain_is_refused(name):
     with pytest.raises(InputError, match="extent"):
-        render_terrain(small_tree(), generator=name, resolution_m=100.0, extent=(0.0, 0.0, 0.0, 8000.0),
+        render_terrain(small_tree(), generator=name, cell_size_m=100.0, extent=(0.0, 0.0, 0.0, 8000.0),
                        seed=0, **kw(name))
 
 
@@ -75,10 +75,10 @@ def test_zero_size_domain_is_refused(name):
 @pytest.mark.parametrize("make", [one_peak, collinear_tree], ids=["one-peak", "collinear"])
 def test_degenerate_trees_render_with_the_tree_heights(name, make):
     tree = make()
-    dem = render_terrain(tree, generator=name, resolution_m=100.0, seed=0, **kw(name))
+    dem = render_terrain(tree, generator=name, cell_size_m=100.0, seed=0, **kw(name))
     z = dem.values
     assert np.isfinite(z).all()
-    again = render_terrain(tree, generator=name, resolution_m=100.0, seed=0, **kw(name))
+    again = render_terrain(tree, generator=name, cell_size_m=100.0, seed=0, **kw(name))
     assert again.values.tobytes() == z.tobytes()  # same seed, same bytes
     if name == "michel":  # uses the peak positions only (the paper's vector map): no height to check
         return
@@ -95,19 +95,19 @@ def test_geographic_tree_is_refused():
     from orokit.errors import CRSError
 
     with pytest.raises(CRSError, match="geographic"):
-        render_terrain(small_tree(crs="EPSG:4326"), generator="belhadj", resolution_m=100.0, seed=0)
+        render_terrain(small_tree(crs="EPSG:4326"), generator="belhadj", cell_size_m=100.0, seed=0)
 
 
 def test_attrs_record_generator_parameters_seed_and_tree_hash():
     tree = small_tree(crs="EPSG:32633")
-    dem = render_terrain(tree, generator="belhadj", resolution_m=100.0, params=["hurst=0.8"], seed=5)
+    dem = render_terrain(tree, generator="belhadj", cell_size_m=100.0, params=["hurst=0.8"], seed=5)
     assert dem.attrs["generator"] == "belhadj" and dem.attrs["seed"] == 5 and dem.attrs["units"] == "m"
     p = json.loads(dem.attrs["parameters"])
-    assert p["hurst"] == 0.8 and p["resolution_m"] == 100.0 and p["extent"] == [0.0, 0.0, 8000.0, 8000.0]
+    assert p["hurst"] == 0.8 and p["cell_size_m"] == 100.0 and p["extent"] == [0.0, 0.0, 8000.0, 8000.0]
     assert dem.rio.crs.to_epsg() == 32633
     moved = small_tree(crs="EPSG:32633")
     moved.peaks.loc[0, "elevation"] += 1.0
-    other = render_terrain(moved, generator="belhadj", resolution_m=100.0, params=["hurst=0.8"], seed=5)
+    other = render_terrain(moved, generator="belhadj", cell_size_m=100.0, params=["hurst=0.8"], seed=5)
     assert other.attrs["tree_sha256"] != dem.attrs["tree_sha256"]
 
 
@@ -178,7 +178,7 @@ def test_roundtrip_on_a_belhadj_raster_finds_the_kept_summit():
     from orokit.validate.roundtrip import roundtrip
 
     tree = small_tree()
-    dem = render_terrain(tree, generator="belhadj", resolution_m=50.0, seed=0,
+    dem = render_terrain(tree, generator="belhadj", cell_size_m=50.0, seed=0,
                          params={"displacement_m_per_cell": 0.0})
     z = dem.values
     assert float(np.nanmax(z)) == 1500.0
@@ -194,7 +194,7 @@ def test_roundtrip_on_a_belhadj_raster_finds_the_kept_summit():
     far = [np.hypot(*(tp - p).T).min() > rt.peaks.distance_tol_m for p in res.peaks[["x", "y"]].to_numpy()]
     assert s["extra_peaks"] == int(np.sum(far))
     # with a large displacement the summit moves: the same check fails (the test can fail)
-    rough = render_terrain(tree, generator="belhadj", resolution_m=50.0, seed=0,
+    rough = render_terrain(tree, generator="belhadj", cell_size_m=50.0, seed=0,
                            params={"displacement_m_per_cell": 200.0})
     assert float(np.nanmax(rough.values)) > 1500.0
 

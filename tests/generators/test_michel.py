@@ -106,7 +106,7 @@ def test_out_of_range_parameters_are_refused(bad):
 
 def test_render_scales_to_the_tree_relief():
     tree = small_tree()
-    dem = render_terrain(tree, generator="michel", resolution_m=100.0, params={"erosion": False}, seed=2)
+    dem = render_terrain(tree, generator="michel", cell_size_m=100.0, params={"erosion": False}, seed=2)
     z = dem.values
     assert np.isfinite(z).all() and z.max() <= 1500.0 + 1e-3
     assert z.max() - z.min() > 300.0

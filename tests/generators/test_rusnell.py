@@ -140,9 +140,9 @@ def test_presets_are_table_1():
 def test_render_without_exemplar_needs_profile_none():
     tree = small_tree()
     with pytest.raises(InputError, match="exemplar"):
-        render_terrain(tree, generator="rusnell", resolution_m=200.0, seed=0)
-    a = render_terrain(tree, generator="rusnell", resolution_m=200.0, params={"profile": "none"}, seed=0)
-    b = render_terrain(tree, generator="rusnell", resolution_m=200.0, params={"profile": "none"}, seed=0)
+        render_terrain(tree, generator="rusnell", cell_size_m=200.0, seed=0)
+    a = render_terrain(tree, generator="rusnell", cell_size_m=200.0, params={"profile": "none"}, seed=0)
+    b = render_terrain(tree, generator="rusnell", cell_size_m=200.0, params={"profile": "none"}, seed=0)
     assert a.values.tobytes() == b.values.tobytes()
     z = a.values
     grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 200.0)
@@ -160,7 +160,7 @@ def test_render_with_an_exemplar_profile():
     bumps = sum(h * np.exp(-((x[None, :] - cx) ** 2 + (y[:, None] - cy) ** 2) / 6e5)
                 for cx, cy, h in ((2000, 2000, 600), (6000, 5000, 500), (3000, 6500, 400)))
     ex = as_dataarray(300 + bumps, grid, None)
-    dem = render_terrain(tree, generator="rusnell", resolution_m=100.0, exemplar=ex, seed=1)
+    dem = render_terrain(tree, generator="rusnell", cell_size_m=100.0, exemplar=ex, seed=1)
     assert np.isfinite(dem.values).all() and dem.values.max() <= 1500.0 + 1e-3
 
 
@@ -195,14 +195,14 @@ def test_secondary_paths_descend_to_a_generator():
 
 def test_render_with_secondary_ridges_and_water():
     tree = small_tree()
-    base = render_terrain(tree, generator="rusnell", resolution_m=100.0, seed=0, params={"profile": "none"})
-    sec = render_terrain(tree, generator="rusnell", resolution_m=100.0, seed=0,
+    base = render_terrain(tree, generator="rusnell", cell_size_m=100.0, seed=0, params={"profile": "none"})
+    sec = render_terrain(tree, generator="rusnell", cell_size_m=100.0, seed=0,
                          params={"profile": "none", "secondary": 30})
     assert not np.array_equal(base.values, sec.values)
-    again = render_terrain(tree, generator="rusnell", resolution_m=100.0, seed=0,
+    again = render_terrain(tree, generator="rusnell", cell_size_m=100.0, seed=0,
                            params={"profile": "none", "secondary": 30})
     assert again.values.tobytes() == sec.values.tobytes()
-    wet = render_terrain(tree, generator="rusnell", resolution_m=100.0, seed=0,
+    wet = render_terrain(tree, generator="rusnell", cell_size_m=100.0, seed=0,
                          params={"profile": "none", "water": True})
     assert not np.array_equal(base.values, wet.values)
 
@@ -226,7 +226,7 @@ def test_generators_table_replaces_the_tree():
         with pytest.raises(InputError, match=msg):
             R.file_features(bad, grid)
     with pytest.raises(InputError, match="caller reads"):
-        render_terrain(small_tree(), generator="rusnell", resolution_m=100.0, seed=0,
+        render_terrain(small_tree(), generator="rusnell", cell_size_m=100.0, seed=0,
                        params={"profile": "none", "generators": "g.csv"})
 
 

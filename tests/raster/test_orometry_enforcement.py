@@ -78,7 +78,7 @@ def test_saddle_in_the_cell_of_its_peak_keeps_the_peak():
     """A key saddle 58 m from its peak (same 100 m cell) must not overwrite the peak."""
     tree = DivideTree.from_arrays([[2000.0, 2000.0, 900.0], [4060.0, 2050.0, 700.0]],
                                   [[4010.0, 2020.0, 600.0]], [[0, 1, 0]], attrs={"extent": [0, 0, 6000, 4000]})
-    dem = render_elevation(tree, resolution_m=100.0, erosion=False, rng=0)
+    dem = render_elevation(tree, cell_size_m=100.0, erosion=False, rng=0)
     res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
     comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=200.0)
     assert comp.recovered_share == 1.0

@@ -65,7 +65,7 @@ def test_render_of_a_real_tree_has_real_slopes_and_relief(everest):
 
     dem, tree = everest
     cell = abs(float(dem.rio.transform().a))
-    out = render_elevation(tree, resolution_m=cell, extent=_extent(dem), erosion=True, rng=0)
+    out = render_elevation(tree, cell_size_m=cell, extent=_extent(dem), erosion=True, rng=0)
     table = compare_landforms(dem, out)
     for stat in ("slope_deg", "relief_1km", "hypsometry", "flat_share"):
         assert table.loc[stat, "ok"], table

@@ -22,7 +22,7 @@ FAST = RenderParams(lam=200.0, erosion_steps=2)
 @pytest.fixture(scope="module")
 def rendered():
     tree = small_tree()
-    dem, skel = render_elevation(tree, resolution_m=50.0, erosion=False, params=FAST, return_skeleton=True, rng=7)
+    dem, skel = render_elevation(tree, cell_size_m=50.0, erosion=False, params=FAST, return_skeleton=True, rng=7)
     return tree, dem, skel
 
 
@@ -84,7 +84,7 @@ def test_resolution_independence():
     tree = small_tree()
     proms = []
     for res in (100.0, 40.0):
-        dem = render_elevation(tree, resolution_m=res, erosion=False, params=FAST, rng=3)
+        dem = render_elevation(tree, cell_size_m=res, erosion=False, params=FAST, rng=3)
         r = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
         comp = compare_peaks(tree, r.peaks, min_prominence_m=30.0, distance_tol_m=2 * res)
         assert comp.recovered_share == 1.0
@@ -95,17 +95,17 @@ def test_resolution_independence():
 
 def test_same_seed_same_raster_other_seed_differs():
     tree = small_tree()
-    a = render_elevation(tree, resolution_m=100.0, erosion=False, params=FAST, rng=11).values
-    b = render_elevation(tree, resolution_m=100.0, erosion=False, params=FAST, rng=11).values
-    c = render_elevation(tree, resolution_m=100.0, erosion=False, params=FAST, rng=12).values
+    a = render_elevation(tree, cell_size_m=100.0, erosion=False, params=FAST, rng=11).values
+    b = render_elevation(tree, cell_size_m=100.0, erosion=False, params=FAST, rng=11).values
+    c = render_elevation(tree, cell_size_m=100.0, erosion=False, params=FAST, rng=12).values
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)
 
 
 def test_erosion_keeps_peaks_and_saddles_and_lowers_valleys():
     tree = small_tree()
-    plain = render_elevation(tree, resolution_m=50.0, erosion=False, params=FAST, rng=5).values
-    eroded = render_elevation(tree, resolution_m=50.0, erosion=True, params=FAST, rng=5).values
+    plain = render_elevation(tree, cell_size_m=50.0, erosion=False, params=FAST, rng=5).values
+    eroded = render_elevation(tree, cell_size_m=50.0, erosion=True, params=FAST, rng=5).values
     for frame in (tree.peaks, tree.saddles):
         col = np.floor(frame["x"].to_numpy() / 50.0).astype(int)
         row = np.floor((8000.0 - frame["y"].to_numpy()) / 50.0).astype(int)
@@ -116,12 +116,12 @@ def test_erosion_keeps_peaks_and_saddles_and_lowers_valleys():
 def test_single_peak_and_collinear_trees_render():
     one = DivideTree.from_arrays([[1000.0, 1000.0, 500.0]], np.empty((0, 3)), np.empty((0, 3)),
                                  attrs={"extent": [0, 0, 2000, 2000]})
-    dem = render_elevation(one, resolution_m=50.0, erosion=False, params=FAST, rng=0)
+    dem = render_elevation(one, cell_size_m=50.0, erosion=False, params=FAST, rng=0)
     assert float(dem.max()) == pytest.approx(500.0, abs=0.01)
     line = DivideTree.from_arrays([[1000.0, 1000.0, 500.0], [2000.0, 1000.0, 450.0], [3000.0, 1000.0, 480.0]],
                                   [[1500.0, 1000.0, 400.0], [2500.0, 1000.0, 420.0]], [[0, 1, 0], [1, 2, 1]],
                                   attrs={"extent": [0, 0, 4000, 2000]})
-    dem = render_elevation(line, resolution_m=50.0, erosion=False, params=FAST, rng=0)
+    dem = render_elevation(line, cell_size_m=50.0, erosion=False, params=FAST, rng=0)
     r = orokit.analyze(dem, min_prominence_m=20.0, isolation=False)
     assert compare_peaks(line, r.peaks, min_prominence_m=20.0, distance_tol_m=100.0).recovered_share == 1.0
 
@@ -129,24 +129,24 @@ def test_single_peak_and_collinear_trees_render():
 @pytest.mark.parametrize("res", [0.0, -30.0, float("nan"), float("inf")])
 def test_bad_resolution(res):
     with pytest.raises(InputError, match="resolution"):
-        render_elevation(small_tree(), resolution_m=res, erosion=False)
+        render_elevation(small_tree(), cell_size_m=res, erosion=False)
 
 
 def test_enormous_raster_refused_before_allocating():
     with pytest.raises(InputError, match="exceeds the limit"):
-        render_elevation(small_tree(), resolution_m=0.01, erosion=False)
+        render_elevation(small_tree(), cell_size_m=0.01, erosion=False)
     with pytest.raises(InputError, match="coarser than the extent"):
-        render_elevation(small_tree(), resolution_m=1e6, erosion=False)
+        render_elevation(small_tree(), cell_size_m=1e6, erosion=False)
 
 
 def test_tree_outside_extent_and_bad_trees():
     with pytest.raises(InputError, match="no peak"):
-        render_elevation(small_tree(), resolution_m=100.0, extent=(1e6, 1e6, 1.01e6, 1.01e6), erosion=False)
+        render_elevation(small_tree(), cell_size_m=100.0, extent=(1e6, 1e6, 1.01e6, 1.01e6), erosion=False)
     empty = DivideTree.from_arrays(np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3)))
     with pytest.raises(DivideTreeError):
-        render_elevation(empty, resolution_m=100.0, extent=(0, 0, 1000, 1000), erosion=False)
+        render_elevation(empty, cell_size_m=100.0, extent=(0, 0, 1000, 1000), erosion=False)
     with pytest.raises(CRSError, match="geographic"):
-        render_elevation(small_tree(crs="EPSG:4326"), resolution_m=100.0, erosion=False)
+        render_elevation(small_tree(crs="EPSG:4326"), cell_size_m=100.0, erosion=False)
 
 
 def test_skeleton_tin_keeps_ridge_segments(rendered):
@@ -196,8 +196,8 @@ def test_texture_adds_short_wavelength_relief_and_keeps_the_orometry():
     from orokit.raster.noise import texture_spectrum
 
     tree = small_tree()
-    plain = render_elevation(tree, resolution_m=50.0, erosion=False, params=FAST, rng=3)
-    rough = render_elevation(tree, resolution_m=50.0, erosion=False, rng=3,
+    plain = render_elevation(tree, cell_size_m=50.0, erosion=False, params=FAST, rng=3)
+    rough = render_elevation(tree, cell_size_m=50.0, erosion=False, rng=3,
                              params=RenderParams(lam=200.0, erosion_steps=2, texture_rms_m=40.0, texture_beta=4.0,
                                                  texture_gain=1.0))
     r0, _ = texture_spectrum(plain.values, 50.0)

@@ -29,7 +29,7 @@ def two_peaks(crs=None, x0: float = 0.0, y0: float = 0.0) -> DivideTree:
 
 def test_cog_without_crs_reads_back_as_metres_on_its_grid(tmp_path):
     tree = two_peaks()
-    dem = render_elevation(tree, resolution_m=50.0, erosion=False, params=FAST, rng=1)
+    dem = render_elevation(tree, cell_size_m=50.0, erosion=False, params=FAST, rng=1)
     path = tmp_path / "dem.tif"
     write_cog(dem, path)
     back = read_dem(str(path))  # no z_units, no cell_size_m
@@ -47,7 +47,7 @@ def test_cog_without_crs_reads_back_as_metres_on_its_grid(tmp_path):
 
 def test_cog_keeps_the_tree_crs_and_declares_metres(tmp_path):
     tree = two_peaks(crs="EPSG:32633", x0=500_000.0, y0=4_000_000.0)
-    dem = render_elevation(tree, resolution_m=100.0, erosion=False, params=FAST, rng=2)
+    dem = render_elevation(tree, cell_size_m=100.0, erosion=False, params=FAST, rng=2)
     write_cog(dem, tmp_path / "dem.tif")
     back = read_dem(str(tmp_path / "dem.tif"))
     assert back.rio.crs.to_epsg() == 32633 and not back.attrs["local_grid"]
@@ -57,7 +57,7 @@ def test_cog_keeps_the_tree_crs_and_declares_metres(tmp_path):
 
 def test_cli_analyze_reads_a_rendered_raster(tmp_path):
     tree = two_peaks()
-    write_cog(render_elevation(tree, resolution_m=50.0, erosion=False, params=FAST, rng=3), tmp_path / "dem.tif")
+    write_cog(render_elevation(tree, cell_size_m=50.0, erosion=False, params=FAST, rng=3), tmp_path / "dem.tif")
     r = CliRunner().invoke(cli, ["analyze", str(tmp_path / "dem.tif"), "-o", str(tmp_path / "a"),
                                  "--min-prominence", "30"])
     assert r.exit_code == 0, r.output
@@ -66,7 +66,7 @@ def test_cli_analyze_reads_a_rendered_raster(tmp_path):
 
 def test_seed_is_recorded_and_replays_the_raster():
     tree = two_peaks()
-    kw = dict(resolution_m=100.0, erosion=False, params=FAST)
+    kw = dict(cell_size_m=100.0, erosion=False, params=FAST)
     fresh = render_elevation(tree, **kw, rng=None)
     seed = fresh.attrs["seed"]
     assert isinstance(seed, int) and seed >= 0
@@ -130,7 +130,7 @@ def test_basins_come_from_the_engine_kernels(monkeypatch):
         return real(z, label)
 
     monkeypatch.setattr(engine_kernels, "ascent_labels", counting)
-    dem = render_elevation(two_peaks(), resolution_m=100.0, erosion=False, params=FAST, rng=4)
+    dem = render_elevation(two_peaks(), cell_size_m=100.0, erosion=False, params=FAST, rng=4)
     assert calls and calls[0] == dem.size
 
 
@@ -150,7 +150,7 @@ def test_hillshade_preview_uses_the_shared_hillshade(tmp_path, monkeypatch):
         return real(dem, **kw)
 
     monkeypatch.setattr(raster_io, "hillshade", counting)
-    dem = render_elevation(two_peaks(), resolution_m=50.0, erosion=False, params=FAST, rng=4)
+    dem = render_elevation(two_peaks(), cell_size_m=50.0, erosion=False, params=FAST, rng=4)
     dem[:5, :5] = np.nan
     write_hillshade_png(dem, tmp_path / "hs.png", max_size=30)
     img = np.asarray(Image.open(tmp_path / "hs.png"))

@@ -40,7 +40,7 @@ def rendered_folder(tmp_path_factory):
     out = tmp_path_factory.mktemp("twin")
     write_divide_tree_gpkg(tree, out / "dividetree.gpkg")
     ext = (x0, y0 - 30000.0, x0 + 30000.0, y0)
-    dem = render_elevation(tree, resolution_m=100.0, extent=ext, erosion=False,
+    dem = render_elevation(tree, cell_size_m=100.0, extent=ext, erosion=False,
                            params=RenderParams(erosion_steps=1), rng=0)
     write_cog(dem, out / "dem.tif")
     return out, tree
@@ -135,7 +135,7 @@ def test_synthesize_like_takes_the_size_and_cell_size_of_a_dem(rendered_folder, 
     with rasterio.open(out / "dem.tif") as src:
         assert src.res == (100.0, 100.0) and (src.width, src.height) == (300, 300)
     meta = json.loads((out / "synthesis.json").read_text())
-    assert meta["like"] == str(folder / "dem.tif") and meta["resolution_m"] == 100.0
+    assert meta["like"] == str(folder / "dem.tif") and meta["cell_size_m"] == 100.0
     r = CliRunner().invoke(cli, ["synthesize", "--type", str(type_file), "--like", "no-such-dataset", "-o",
                                  str(tmp_path / "x"), "--no-progress"])
     assert r.exit_code != 0 and "--like" in r.output
@@ -178,7 +178,7 @@ def test_roundtrip_report_landform_tables_and_figures(rendered_folder, tmp_path)
     shutil.copytree(folder, twin)
     with rasterio.open(folder / "dem.tif") as ds:
         b = ds.bounds
-    real = render_elevation(tree, resolution_m=100.0, extent=(b.left, b.bottom, b.right, b.top), erosion=False,
+    real = render_elevation(tree, cell_size_m=100.0, extent=(b.left, b.bottom, b.right, b.top), erosion=False,
                             params=RenderParams(erosion_steps=1), rng=9)
     write_cog(real, tmp_path / "real.tif")
     meta = json.loads((twin / "synthesis.json").read_text()) if (twin / "synthesis.json").is_file() else {}

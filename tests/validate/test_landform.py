@@ -173,7 +173,7 @@ def test_validate_prints_and_records_the_landform_table(tmp_path, make_dem):
 
     tree = DivideTree.from_arrays([[1000.0, 1000.0, 600.0], [3000.0, 1000.0, 550.0]], [[2000.0, 1000.0, 450.0]],
                                   [[0, 1, 0]], attrs={"extent": [0.0, 0.0, 4000.0, 2000.0]})
-    dem = render_elevation(tree, resolution_m=50.0, erosion=False, rng=1)
+    dem = render_elevation(tree, cell_size_m=50.0, erosion=False, rng=1)
     write_cog(dem, tmp_path / "dem.tif")
     write_divide_tree_gpkg(tree, tmp_path / "tree.gpkg")
     z = 500 + 60 * _fbm((40, 80), 50.0, 2.5, seed=2)

@@ -150,7 +150,7 @@ def test_model_zero_options_are_kept(monkeypatch):
                         lambda model, feats, **kw: SimpleNamespace(label="x", disks=pd.DataFrame({"predicted": ["x"]})))
     tree = DivideTree.from_arrays([[1000.0, 1000.0, 600.0], [3000.0, 1000.0, 550.0]], [[2000.0, 1000.0, 450.0]],
                                   [[0, 1, 0]], attrs={"extent": [0.0, 0.0, 4000.0, 2000.0]})
-    dem = render_elevation(tree, resolution_m=100.0, erosion=False, rng=0)
+    dem = render_elevation(tree, cell_size_m=100.0, erosion=False, rng=0)
     model = SimpleNamespace(radius_m=1000.0, feature_set=None,
                             metadata={"min_prominence_m": 0.0, "min_peaks": 0, "relative_elevation": None})
     roundtrip(dem, tree, min_prominence_m=30.0, model=model)

@@ -42,7 +42,7 @@ def test_roundtrip_of_rendered_tree():
     from orokit.raster.render import render_elevation
 
     tree = two_peak_tree()
-    dem = render_elevation(tree, resolution_m=50.0, erosion=False, params=RenderParams(erosion_steps=1), rng=1)
+    dem = render_elevation(tree, cell_size_m=50.0, erosion=False, params=RenderParams(erosion_steps=1), rng=1)
     rt = roundtrip(dem, tree, min_prominence_m=30.0)
     s = rt.summary()
     assert s["recovered_share"] == 1.0 and s["extra_peaks"] == 0
@@ -103,7 +103,7 @@ def test_real_tree_round_trip(real_data):
     dem = read_dem(real_data("alaska"), z_units=ds.z_units, cell_size_m=cell)
     res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
     ny, nx = dem.shape
-    out = render_elevation(res.tree, resolution_m=cell, extent=(0.0, -ny * cell, nx * cell, 0.0),
+    out = render_elevation(res.tree, cell_size_m=cell, extent=(0.0, -ny * cell, nx * cell, 0.0),
                            erosion=True, rng=0)
     s = roundtrip(out, res.tree, min_prominence_m=30.0).summary()
     assert s["recovered_share"] >= 0.95
