@@ -11,7 +11,8 @@ are the render's); prints time per stage and peak RSS, records them with the mac
 ``reports/benchmarks/generators.json`` (one entry per generator).
 
 ``figures``: Belhadj 2007 Figs. 3, 5 and 6 on a synthesized tree's skeleton (ridges + rivers):
-MD alone, the cells MDI fills, MDI + MD; written to ``reports/generators/belhadj/``.
+MD alone, the cells MDI fills, MDI + MD, and the paper's own particle skeleton
+(``skeleton=particles``, Figs. 1b/2); written to ``reports/generators/belhadj/``.
 """
 from __future__ import annotations
 
@@ -121,6 +122,26 @@ def figures(type_name: str, size_km: float, res: float, seed: int, out: Path) ->
     fig.savefig(out / "md_vs_mdi_md_zoom.png", dpi=110)
     plt.close(fig)
     written.append(out / "md_vs_mdi_md_zoom.png")
+    # the paper's own skeleton (skeleton=particles, §2): Fig. 1b (blended ridges + kept rivers), Fig. 2, result
+    levels = np.concatenate([tree.peaks["elevation"].to_numpy(), tree.saddles["elevation"].to_numpy()])
+    pp = B.BelhadjParams(skeleton="particles")
+    sk = B.particle_skeleton(grid, top=float(levels.max()), base=float(levels.min()), params=pp,
+                             rng=np.random.default_rng(seed))
+    pfull, pst = B.interpolate(sk.z, sk.state, params=pp, rng=np.random.default_rng(seed))
+    fig, axes = plt.subplots(1, 3, figsize=(15, 5.4))
+    axes[0].imshow(sk.blended, cmap="terrain", interpolation="nearest")
+    rr, cc = np.nonzero(sk.river)
+    axes[0].plot(cc, rr, ",", color="blue")
+    axes[0].set_title(f"Fig. 1b: {pp.ridge_pairs} ridge pairs blended, {int(sk.river_kept.sum())} of "
+                      f"{pp.river_particles} river particles kept", fontsize=9)
+    axes[0].set_xticks([])
+    axes[0].set_yticks([])
+    plot_belhadj_stage(axes[1], sk.z, sk.state, cell_size_m=res, kind="skeleton", title="Fig. 2: particle skeleton")
+    plot_belhadj_stage(axes[2], pfull, pst, cell_size_m=res, kind="terrain", title="MDI then MD on it")
+    fig.tight_layout()
+    fig.savefig(out / "particles.png", dpi=90)
+    plt.close(fig)
+    written.append(out / "particles.png")
     return written
 
 

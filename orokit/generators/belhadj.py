@@ -3,7 +3,8 @@
 F. Belhadj, *Terrain modeling: a constrained fractal model*, AFRIGRAPH 2007
 (doi:10.1145/1294685.1294717). From a Divide Tree, the skeleton is its ridges (elevation
 linear from each peak to its saddle) and the rivers of :func:`orokit.generators.base.tree_rivers`;
-the paper's particle skeleton is not implemented (see ``skeleton``).
+``skeleton=particles`` builds the paper's own skeleton instead (§2: ridge particle pairs on fBm
+paths, river particles that merge on contact; only the tree's elevation range is used).
 """
 from __future__ import annotations
 
@@ -17,15 +18,18 @@ import xarray as xr
 
 from orokit.errors import InputError
 from orokit.generators import _belhadj_kernels as _k
+from orokit.generators import _belhadj_particles as _p
 from orokit.generators.base import as_dataarray, check_crs, tree_arrays
 from orokit.raster.rasterize import Grid
 from orokit.raster.rivers import RiverNetwork
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["BelhadjParams", "render", "tree_skeleton", "interpolate", "padded_size"]
+__all__ = ["BelhadjParams", "ParticleSkeleton", "render", "tree_skeleton", "particle_skeleton", "interpolate",
+           "padded_size"]
 
 _SUBDIVISIONS = ("triangle-edge", "diamond-square")
+_SKELETONS = ("tree", "particles")
 #: kernel mode of each subdivision
 MODE = {"diamond-square": 0, "triangle-edge": 1}
 
@@ -44,8 +48,16 @@ class BelhadjParams:
         below 1 give rougher small scales and smoother large ones (orokit option).
     mdi : run MDI before MD (the paper); ``False`` is plain MD on the skeleton (Fig. 3).
     rivers : burn the rivers into the skeleton (the paper's RIVER cells).
-    skeleton : ``tree`` (ridges of the Divide Tree + rivers). The paper's own particle
-        skeleton is not implemented in orokit.
+    skeleton : ``tree`` (ridges of the Divide Tree + its rivers) or ``particles`` (the
+        paper's §2: ridge particle pairs and river particles; from the tree only its highest
+        peak and lowest point are used, as the top altitude and the base).
+    ridge_pairs : number of ridge particle pairs (``particles``; the paper gives none).
+    ridge_roughness : std of a ridge path's sideways fBm offset, as a fraction of the
+        altitude Gaussian's sigma (``width / 4``).
+    ridge_hurst : Hurst exponent of that fBm path (0 < H < 1).
+    river_particles : number of river particles dropped beside random ridge cells.
+    gravity : acceleration of a river particle per unit slope (cells per step^2).
+    friction : share of its velocity a river particle loses per step (0 < friction < 1).
     """
 
     subdivision: str = field(default="triangle-edge", metadata={"choices": _SUBDIVISIONS})
@@ -53,7 +65,13 @@ class BelhadjParams:
     hurst: float = 1.0
     mdi: bool = True
     rivers: bool = True
-    skeleton: str = field(default="tree", metadata={"choices": ("tree",)})
+    skeleton: str = field(default="tree", metadata={"choices": _SKELETONS})
+    ridge_pairs: int = 12
+    ridge_roughness: float = 0.25
+    ridge_hurst: float = 0.7
+    river_particles: int = 200
+    gravity: float = 1.0
+    friction: float = 0.2
 
     def __post_init__(self) -> None:
         if self.subdivision not in _SUBDIVISIONS:
@@ -62,9 +80,20 @@ class BelhadjParams:
             raise InputError(f"displacement_m_per_cell must be a finite number >= 0, got {self.displacement_m_per_cell!r}")
         if not (0.0 < self.hurst <= 2.0):
             raise InputError(f"hurst must be in (0, 2], got {self.hurst!r}")
-        if self.skeleton != "tree":
-            raise InputError(f"skeleton={self.skeleton!r}: only 'tree' is implemented "
-                             "(the paper's particle skeleton is not available in orokit)")
+        if self.skeleton not in _SKELETONS:
+            raise InputError(f"skeleton={self.skeleton!r} is not one of {', '.join(_SKELETONS)}")
+        if not (1 <= self.ridge_pairs <= 10_000):
+            raise InputError(f"ridge_pairs must be in [1, 10000], got {self.ridge_pairs!r}")
+        if not (0 <= self.river_particles <= 100_000):
+            raise InputError(f"river_particles must be in [0, 100000], got {self.river_particles!r}")
+        if not (0.0 <= self.ridge_roughness <= 10.0):
+            raise InputError(f"ridge_roughness must be in [0, 10], got {self.ridge_roughness!r}")
+        if not (0.0 < self.ridge_hurst < 1.0):
+            raise InputError(f"ridge_hurst must be in (0, 1), got {self.ridge_hurst!r}")
+        if not (self.gravity > 0 and np.isfinite(self.gravity)):
+            raise InputError(f"gravity must be a finite number > 0, got {self.gravity!r}")
+        if not (0.0 < self.friction < 1.0):
+            raise InputError(f"friction must be in (0, 1), got {self.friction!r}")
 
 
 def padded_size(ny: int, nx: int) -> int:
@@ -126,6 +155,132 @@ def tree_skeleton(tree, rivers: RiverNetwork | None, grid: Grid) -> tuple[np.nda
     return z, state
 
 
+@dataclass(frozen=True)
+class ParticleSkeleton:
+    """The paper's §2 skeleton on a grid.
+
+    z, state : skeleton DEM (NaN at NULL cells) and its state (1 on RIDGE/RIVER cells).
+    blended : the ridges blended by the cross Gaussian (the terrain the rivers run on).
+    ridge_owner : pair index of every ridge route cell (-1 elsewhere).
+    ridge_stop : per particle (2 per pair) why it stopped (``_belhadj_particles.STOP_*``).
+    river_fate, river_joins : per river particle its fate (``RIVER_*``) and the particle it
+        joined (-1); ``river_kept`` marks those that exit the map, directly or through the
+        particles they joined.
+    river : True on the kept river cells.
+    """
+
+    z: np.ndarray
+    state: np.ndarray
+    blended: np.ndarray
+    ridge_owner: np.ndarray
+    ridge_stop: np.ndarray
+    river_fate: np.ndarray
+    river_joins: np.ndarray
+    river_kept: np.ndarray
+    river: np.ndarray
+
+
+def _fbm_path(n: int, hurst: float, rng: np.random.Generator) -> np.ndarray:
+    """1-D fBm of ``n`` samples by spectral synthesis (power ~ 1/f^(2H+1)), 0 at the start, unit std."""
+    if n < 2:
+        return np.zeros(max(n, 0))
+    f = np.fft.rfftfreq(2 * n)
+    amp = np.zeros_like(f)
+    amp[1:] = f[1:] ** (-(2.0 * hurst + 1.0) / 2.0)
+    spec = amp * (rng.normal(size=f.size) + 1j * rng.normal(size=f.size))
+    x = np.fft.irfft(spec, n=2 * n)[:n]
+    x = x - x[0]
+    sd = float(x.std())
+    return x / sd if sd > 0 else x
+
+
+def particle_skeleton(grid: Grid, *, top: float, base: float, params: BelhadjParams,
+                      rng: np.random.Generator) -> ParticleSkeleton:
+    """Belhadj 2007 §2 skeleton: ridge particle pairs, then river particles (pure).
+
+    Notes
+    -----
+    1. Ridges: ``ridge_pairs`` couples start at a uniform random cell with opposite random
+       headings; the first couple at altitude ``top``, the others at
+       ``base + (top - base) U[0.5, 1]``. A particle advances one cell per step, sideways by
+       an fBm path (std ``ridge_roughness x sigma``); its altitude is
+       ``base + (y0 - base) exp(-s^2 / 2 sigma^2)`` at the covered distance ``s``, sigma =
+       width / 4 (width = the grid's larger side). It stops at the border, below 1 % of its
+       relief, or on reaching another couple's route. Route cells are RIDGE cells.
+    2. Blend: every cell takes its nearest route cell's altitude times the cross Gaussian
+       ``exp(-d^2 / 2 sigma'^2)``, sigma' = sigma / 4 (above ``base``).
+    3. Rivers: ``river_particles`` particles start two cells from random ridge cells and
+       roll on the blend (:func:`_belhadj_particles.river_particles`); those that exit the
+       map are kept, with every particle that joined one of them (up to the junction).
+       River cells take the running minimum of the blend along their path.
+    """
+    ny, nx = grid.ny, grid.nx
+    width = float(max(ny, nx))  # cells
+    sigma = width / 4.0
+    n_steps = int(np.ceil(4.0 * sigma)) + 2
+    owner = np.full((ny, nx), -1, np.int64)
+    buf = 4 * n_steps + 8
+    rr, cc, alt = np.empty(buf, np.int64), np.empty(buf, np.int64), np.empty(buf)
+    zr = np.full((ny, nx), np.nan)
+    stops = np.empty(2 * params.ridge_pairs, np.int64)
+    relief = max(top - base, 0.0)
+    for k in range(params.ridge_pairs):
+        r0, c0 = rng.uniform(0, ny), rng.uniform(0, nx)
+        theta = rng.uniform(0.0, 2.0 * np.pi)
+        y0 = top if k == 0 else base + relief * rng.uniform(0.5, 1.0)
+        if owner[int(r0), int(c0)] >= 0:  # starts on a route: nothing to draw
+            stops[2 * k: 2 * k + 2] = _p.STOP_COLLISION
+            continue
+        owner[int(r0), int(c0)] = k
+        zr[int(r0), int(c0)] = y0
+        for side in range(2):
+            lat = params.ridge_roughness * sigma * _fbm_path(n_steps, params.ridge_hurst, rng)
+            n, why = _p.ridge_route(owner, k, r0, c0, theta + side * np.pi, lat, 1.0, sigma, y0, base, 0.01,
+                                    rr, cc, alt)
+            zr[rr[:n], cc[:n]] = np.fmax(zr[rr[:n], cc[:n]], alt[:n])
+            stops[2 * k + side] = why
+    ridge = owner >= 0
+    from scipy import ndimage
+
+    d, (ii, jj) = ndimage.distance_transform_edt(~ridge, return_indices=True)
+    blended = base + (zr[ii, jj] - base) * np.exp(-0.5 * (d / (sigma / 4.0)) ** 2)
+    # rivers
+    n_riv = params.river_particles
+    ri, rj = np.nonzero(ridge)
+    fate = np.full(n_riv, _p.RIVER_STATIC, np.int64)
+    joins = np.full(n_riv, -1, np.int64)
+    river = np.zeros((ny, nx), bool)
+    zv = np.full((ny, nx), np.inf)
+    kept = np.zeros(n_riv, bool)
+    if n_riv and ri.size:
+        pick = rng.integers(0, ri.size, n_riv)
+        ang = rng.uniform(0.0, 2.0 * np.pi, n_riv)
+        rs = np.clip(ri[pick] + 0.5 + 2.0 * np.sin(ang), 0.0, ny - 1e-6)
+        cs = np.clip(rj[pick] + 0.5 + 2.0 * np.cos(ang), 0.0, nx - 1e-6)
+        max_steps = 4 * (ny + nx)
+        rowner = np.full((ny, nx), -1, np.int64)
+        path_r = np.zeros((n_riv, max_steps + 1), np.int64)
+        path_c = np.zeros((n_riv, max_steps + 1), np.int64)
+        path_n = np.zeros(n_riv, np.int64)
+        mass = np.zeros(n_riv)
+        _p.river_particles(blended / grid.res, rs, cs, np.ones(n_riv), params.gravity, params.friction, max_steps,
+                           0.01, 50, rowner, path_r, path_c, path_n, fate, joins, mass)
+        for p in range(n_riv):  # kept: exits, or joins (transitively) one that exits
+            q, seen = p, 0
+            while fate[q] == _p.RIVER_JOINED and seen <= n_riv:
+                q, seen = int(joins[q]), seen + 1
+            kept[p] = fate[q] == _p.RIVER_EXIT
+        for q in np.flatnonzero(kept).tolist():
+            m = int(path_n[q]) - (1 if fate[q] == _p.RIVER_JOINED else 0)  # the junction cell is the other's
+            r, c = path_r[q, :m], path_c[q, :m]
+            bed = np.minimum.accumulate(blended[r, c])
+            np.minimum.at(zv, (r, c), bed)
+        river = np.isfinite(zv) & ~ridge
+    z = np.where(ridge, zr, np.where(river, zv, np.nan)).astype(np.float32)
+    state = np.where(ridge | river, _k.KNOWN, _k.NULL).astype(np.uint8)
+    return ParticleSkeleton(z, state, blended.astype(np.float32), owner, stops, fate, joins, kept, river)
+
+
 def interpolate(z: np.ndarray, state: np.ndarray, *, params: BelhadjParams, rng: np.random.Generator,
                 timings: dict[str, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Fill the NULL cells of a skeleton DEM: MDI (optional) then MD, on the padded grid.
@@ -169,7 +324,9 @@ def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generat
     Notes
     -----
     1. Skeleton (:func:`tree_skeleton`): ridge cells linear from peak to saddle, river
-       cells from the rivers' bed elevations; every other cell is NULL.
+       cells from the rivers' bed elevations; every other cell is NULL. With
+       ``skeleton=particles``, the paper's own (:func:`particle_skeleton`) between the tree's
+       lowest and highest elevations.
     2. MDI (:func:`interpolate`): from the finest subdivision level up, each NULL parent
        of known cells takes the mean of its known children plus
        ``displacement_m_per_cell * mean distance^hurst * U[-1, 1]``; the filled cells
@@ -184,7 +341,13 @@ def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generat
     crs = check_crs(tree)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    z, state = tree_skeleton(tree, rivers if params.rivers else None, grid)
+    if params.skeleton == "particles":
+        a = tree_arrays(tree)
+        levels = np.concatenate([a.peaks[:, 2], a.saddles[:, 2]])
+        sk = particle_skeleton(grid, top=float(levels.max()), base=float(levels.min()), params=params, rng=rng)
+        z, state = sk.z, sk.state
+    else:
+        z, state = tree_skeleton(tree, rivers if params.rivers else None, grid)
     timings["skeleton"] = time.perf_counter() - t0
     out, st = interpolate(z, state, params=params, rng=rng, timings=timings)
     counts = {"skeleton": int((st == _k.KNOWN).sum()), "mdi": int((st == _k.MDI).sum()),

@@ -11,6 +11,7 @@ __all__ = ["plot_belhadj_stage", "shade"]
 
 def shade(z: np.ndarray, cell_size_m: float) -> np.ndarray:
     """Grey hillshade in [0, 1] of an elevation array (light from the north-west)."""
+    import rioxarray  # noqa: F401 - registers the .rio accessor
     import xarray as xr
     from affine import Affine
 

@@ -181,9 +181,94 @@ def test_padding_keeps_the_grid_and_crops():
 
 
 @pytest.mark.parametrize("bad", [{"hurst": 0.0}, {"hurst": 3.0}, {"displacement_m_per_cell": -1.0},
-                                 {"subdivision": "square-square"}, {"skeleton": "particles"}])
+                                 {"subdivision": "square-square"}, {"skeleton": "voronoi"},
+                                 {"ridge_pairs": 0}, {"ridge_hurst": 1.0}, {"friction": 1.0}, {"gravity": 0.0},
+                                 {"river_particles": -1}])
 def test_out_of_range_parameters_are_refused(bad):
     from orokit.errors import InputError
 
     with pytest.raises(InputError):
         B.BelhadjParams(**bad)
+
+
+# ----------------------------------------------------------------------------- particle skeleton (§2)
+from orokit.generators import _belhadj_particles as P  # noqa: E402
+
+
+def test_ridge_particle_altitude_is_a_gaussian_of_the_distance_walked():
+    owner = np.full((200, 300), -1, np.int64)
+    n_steps = 400
+    rr, cc, alt = np.empty(4 * n_steps, np.int64), np.empty(4 * n_steps, np.int64), np.empty(4 * n_steps)
+    sigma, y0, base = 150.0, 2000.0, 500.0
+    owner[100, 20] = 0  # the start cell (particle_skeleton marks it)
+    # straight path (no sideways fBm) heading east from (100.5, 20.5)
+    n, why = P.ridge_route(owner, 0, 100.5, 20.5, 0.0, np.zeros(n_steps), 1.0, sigma, y0, base, 0.01, rr, cc, alt)
+    assert why == P.STOP_BORDER and n > 250
+    assert (rr[:n] == 100).all()
+    # the altitude at the cell entered at distance s (cell edge: s = col - 20.5) is the Gaussian
+    s = cc[:n] - 20.5
+    np.testing.assert_allclose(alt[:n], base + (y0 - base) * np.exp(-0.5 * (s / sigma) ** 2), atol=1e-6)
+    assert (np.diff(alt[:n]) < 0).all()
+    # a second particle heading north-west stops before entering route 0
+    n2, why2 = P.ridge_route(owner, 1, 150.5, 150.5, np.pi / 2, np.zeros(n_steps), 1.0, sigma, y0, base, 0.01,
+                             rr, cc, alt)
+    assert why2 == P.STOP_COLLISION and (rr[:n2] > 100).all()
+    # a short sigma stops on the altitude floor
+    owner[:] = -1
+    n3, why3 = P.ridge_route(owner, 0, 100.5, 150.5, 0.0, np.zeros(n_steps), 1.0, 10.0, y0, base, 0.01, rr, cc, alt)
+    assert why3 == P.STOP_ALTITUDE and alt[:n3].min() >= base + 0.01 * (y0 - base)
+
+
+@pytest.fixture(scope="module")
+def particles():
+    grid = make_grid((0.0, 0.0, 12000.0, 9000.0), 50.0)
+    p = B.BelhadjParams(skeleton="particles", ridge_pairs=6, river_particles=150)
+    sk = B.particle_skeleton(grid, top=2500.0, base=300.0, params=p, rng=np.random.default_rng(4))
+    return grid, p, sk
+
+
+def test_ridge_pairs_leave_one_point_in_opposite_directions(particles):
+    grid, p, sk = particles
+    ridge = sk.ridge_owner >= 0
+    assert ridge.sum() > 200
+    assert set(np.unique(sk.ridge_owner[ridge])) <= set(range(p.ridge_pairs))
+    # the first pair starts at the top altitude; every ridge cell is within [base, top]
+    assert sk.z[ridge].max() == np.float32(2500.0)
+    assert sk.z[ridge].min() >= 300.0
+    # each route stopped for one of the paper's reasons
+    assert set(sk.ridge_stop) <= {P.STOP_BORDER, P.STOP_ALTITUDE, P.STOP_COLLISION}
+
+
+def test_only_rivers_that_exit_the_map_are_kept(particles):
+    grid, p, sk = particles
+    fate, joins, kept = sk.river_fate, sk.river_joins, sk.river_kept
+    assert (fate == P.RIVER_EXIT).sum() > 0 and kept.sum() < kept.size  # some exit, some are dropped
+    for q in range(kept.size):
+        r, seen = q, 0
+        while fate[r] == P.RIVER_JOINED and seen <= kept.size:
+            r, seen = joins[r], seen + 1
+        assert kept[q] == (fate[r] == P.RIVER_EXIT)
+    assert not kept[fate == P.RIVER_STATIC].any()
+    river = sk.river
+    assert river.sum() > 50 and not (river & (sk.ridge_owner >= 0)).any()
+    # beds lie on or below the blended ridges, never above the ridge top
+    assert (sk.z[river] <= sk.blended[river] + 1e-3).all()
+    # a river reaches the border
+    border = np.zeros_like(river)
+    border[[0, -1], :] = border[:, [0, -1]] = True
+    assert (river & border).any()
+    assert ((sk.state == K.KNOWN) == (river | (sk.ridge_owner >= 0))).all()
+
+
+def test_particle_skeleton_render_keeps_it_and_repeats_with_the_seed():
+    tree = small_tree()
+    prm = ["skeleton=particles", "ridge_pairs=4", "river_particles=60"]
+    a = render_terrain(tree, generator="belhadj", resolution_m=100.0, params=prm, seed=2)
+    b = render_terrain(tree, generator="belhadj", resolution_m=100.0, params=prm, seed=2)
+    assert a.values.tobytes() == b.values.tobytes()
+    grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 100.0)
+    sk = B.particle_skeleton(grid, top=1500.0, base=900.0, params=B.BelhadjParams(
+        skeleton="particles", ridge_pairs=4, river_particles=60), rng=np.random.default_rng(2))
+    known = sk.state == K.KNOWN
+    np.testing.assert_array_equal(a.values[known].view(np.uint32), sk.z[known].view(np.uint32))
+    assert np.isfinite(a.values).all()
