@@ -263,7 +263,7 @@ def particle_skeleton(grid: Grid, *, top: float, base: float, params: BelhadjPar
         path_c = np.zeros((n_riv, max_steps + 1), np.int64)
         path_n = np.zeros(n_riv, np.int64)
         mass = np.zeros(n_riv)
-        _p.river_particles(blended / grid.res, rs, cs, np.ones(n_riv), params.gravity, params.friction, max_steps,
+        _p.river_particles(blended / grid.cell_size_m, rs, cs, np.ones(n_riv), params.gravity, params.friction, max_steps,
                            0.01, 50, rowner, path_r, path_c, path_n, fate, joins, mass)
         for p in range(n_riv):  # kept: exits, or joins (transitively) one that exits
             q, seen = p, 0

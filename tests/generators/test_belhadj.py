@@ -263,8 +263,8 @@ def test_only_rivers_that_exit_the_map_are_kept(particles):
 def test_particle_skeleton_render_keeps_it_and_repeats_with_the_seed():
     tree = small_tree()
     prm = ["skeleton=particles", "ridge_pairs=4", "river_particles=60"]
-    a = render_terrain(tree, generator="belhadj", resolution_m=100.0, params=prm, seed=2)
-    b = render_terrain(tree, generator="belhadj", resolution_m=100.0, params=prm, seed=2)
+    a = render_terrain(tree, generator="belhadj", cell_size_m=100.0, params=prm, seed=2)
+    b = render_terrain(tree, generator="belhadj", cell_size_m=100.0, params=prm, seed=2)
     assert a.values.tobytes() == b.values.tobytes()
     grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 100.0)
     sk = B.particle_skeleton(grid, top=1500.0, base=900.0, params=B.BelhadjParams(
