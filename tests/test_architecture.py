@@ -33,7 +33,6 @@ FILE_MODULES = {"np", "numpy", "json", "pickle", "joblib", "rasterio", "Image", 
 
 #: algorithm modules that still open files, and who moves that IO to orokit/io
 KNOWN_FILE_ACCESS = {
-    "classify/peaklist.py": "issue 12 (classify): peak-list readers -> io",
 }
 
 

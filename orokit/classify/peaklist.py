@@ -25,7 +25,6 @@ list that is missing from it gets ``missing_isolation_m`` (default 500 m, the mi
 """
 from __future__ import annotations
 
-import json
 import logging
 import warnings
 from pathlib import Path
@@ -101,74 +100,39 @@ def peak_geometry(peaks: pd.DataFrame, *, crs: Any = None) -> gpd.GeoDataFrame:
     return gpd.GeoDataFrame(out, geometry=gpd.points_from_xy(x, y), crs=crs)
 
 
-def _read_numeric(path: Path, ncols: int, what: str) -> pd.DataFrame:
-    try:
-        df = pd.read_csv(path, header=None, comment="#", sep=",", skipinitialspace=True)
-        if df.shape[1] == 1:
-            df = pd.read_csv(path, header=None, comment="#", sep=r"\s+")
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot parse {what} file {path}: {exc}") from exc
-    if df.shape[1] < ncols:
-        raise InputError(f"{what} file {path} has {df.shape[1]} columns per line, expected {ncols} "
-                         f"(Kirmse & de Ferranti layout)")
-    df = df.iloc[:, :ncols]
-    num = df.apply(pd.to_numeric, errors="coerce")
-    bad = num.isna().any(axis=1)
-    if bad.iloc[:1].all() and len(df) > 1:  # a header line
-        num, bad = num.iloc[1:], bad.iloc[1:]
-    if bad.any():
-        i = int(np.flatnonzero(bad.to_numpy())[0])
-        raise InputError(f"{what} file {path}: line {i + 1} is not numeric: {df.iloc[i].tolist()}")
-    return num.astype(float).reset_index(drop=True)
-
-
-def read_kirmse_peaks(prominence_path: PathLike, isolation_path: PathLike | None = None, *,
-                      z_units: str = "ft", missing_isolation_m: float | None = 500.0) -> gpd.GeoDataFrame:
-    """Read Kirmse & de Ferranti prominence (and isolation) lists into a normalized table.
+def normalize_kirmse(prominence: pd.DataFrame, isolation: pd.DataFrame | None = None, *, z_units: str = "ft",
+                     missing_isolation_m: float | None = 500.0, source: str = "") -> gpd.GeoDataFrame:
+    """Normalized peak table of Kirmse & de Ferranti lists as read by :mod:`orokit.io.kirmse_io`.
 
     Parameters
     ----------
-    prominence_path : path
-        ``lat,lon,elevation,saddle_lat,saddle_lon,prominence`` per line.
-    isolation_path : path, optional
-        ``lat,lon,elevation,ilp_lat,ilp_lon,isolation_km`` per line; joined to the
-        prominence list on the peak position (rounded to 1e-5 degree).
+    prominence : DataFrame
+        ``read_kirmse_peaks`` output (lat, lon, elevation, saddle_lat, saddle_lon, prominence).
+    isolation : DataFrame, optional
+        ``read_kirmse_isolation`` output, joined on the peak position (rounded to 1e-5 degree).
     z_units : {"ft", "m"}
-        Units of elevation and prominence in the files (the published lists use feet).
+        Units of elevation and prominence in the lists (the published lists use feet).
     missing_isolation_m : float or None
-        Isolation given to peaks missing from the isolation list (None: unknown,
-        which the features count as >= R). Without an isolation file every isolation
-        is unknown and a warning is issued.
-
-    Returns
-    -------
-    GeoDataFrame
-        Normalized peak table in EPSG:4326.
+        Isolation given to peaks missing from the isolation list (None: unknown, which the
+        features count as >= R). Without an isolation list every isolation is unknown and a
+        warning is issued.
+    source : str
+        Name of the prominence list, for messages and ``attrs``.
     """
     if z_units not in _UNITS:
         raise UnitsError(f"z_units must be one of {sorted(_UNITS)}, got {z_units!r}")
     f = _UNITS[z_units]
-    prom = _read_numeric(Path(prominence_path), 6, "prominence")
-    prom.columns = ["lat", "lon", "elevation", "saddle_lat", "saddle_lon", "prominence"]
-    lat_ok = prom["lat"].between(-90, 90) & prom["saddle_lat"].between(-90, 90)
-    if not lat_ok.all():
-        raise InputError(f"{prominence_path}: latitudes outside [-90, 90] (first bad line "
-                         f"{int(np.flatnonzero(~lat_ok.to_numpy())[0]) + 1}); is the column order lat,lon,...?")
     peaks = pd.DataFrame({
-        "x": prom["lon"], "y": prom["lat"], "elevation": prom["elevation"] * f,
-        "prominence": prom["prominence"] * f, "saddle_x": prom["saddle_lon"], "saddle_y": prom["saddle_lat"],
+        "x": prominence["lon"].to_numpy(float), "y": prominence["lat"].to_numpy(float),
+        "elevation": prominence["elevation"].to_numpy(float) * f,
+        "prominence": prominence["prominence"].to_numpy(float) * f,
+        "saddle_x": prominence["saddle_lon"].to_numpy(float), "saddle_y": prominence["saddle_lat"].to_numpy(float),
     })
-    # the highest peak of a landmass has no key saddle; Kirmse writes the peak itself or zeros
-    nosad = ((peaks["saddle_x"] == peaks["x"]) & (peaks["saddle_y"] == peaks["y"])) | (
-        (peaks["saddle_x"] == 0) & (peaks["saddle_y"] == 0))
-    peaks.loc[nosad, ["saddle_x", "saddle_y"]] = np.nan
-    if isolation_path is not None:
-        iso = _read_numeric(Path(isolation_path), 6, "isolation")
-        iso.columns = ["lat", "lon", "elevation", "ilp_lat", "ilp_lon", "isolation_km"]
+    if isolation is not None:
         key = lambda a, b: list(zip(np.round(a.to_numpy(), 5), np.round(b.to_numpy(), 5)))  # noqa: E731
-        table = pd.DataFrame({"ilp_lon": iso["ilp_lon"].to_numpy(), "ilp_lat": iso["ilp_lat"].to_numpy(),
-                              "iso": iso["isolation_km"].to_numpy() * 1000.0},
-                             index=pd.MultiIndex.from_tuples(key(iso["lat"], iso["lon"])))
+        table = pd.DataFrame({"ilp_lon": isolation["ilp_lon"].to_numpy(), "ilp_lat": isolation["ilp_lat"].to_numpy(),
+                              "iso": isolation["isolation_km"].to_numpy() * 1000.0},
+                             index=pd.MultiIndex.from_tuples(key(isolation["lat"], isolation["lon"])))
         table = table[~table.index.duplicated()]
         joined = table.reindex(pd.MultiIndex.from_tuples(key(peaks["y"], peaks["x"])))
         peaks["isolation_x"] = joined["ilp_lon"].to_numpy()
@@ -180,27 +144,27 @@ def read_kirmse_peaks(prominence_path: PathLike, isolation_path: PathLike | None
         peaks["isolation"] = isol
         logger.info("isolation list: %d of %d peaks matched", len(peaks) - n_missing, len(peaks))
     else:
-        warnings.warn(f"no isolation list given with {prominence_path}: isolation features will count every "
-                      f"peak as isolated beyond R; pass the isolation file (CLI: --isolation)", OrokitWarning,
-                      stacklevel=2)
+        warnings.warn(f"no isolation list given with {source or 'the prominence list'}: isolation features will "
+                      f"count every peak as isolated beyond R; pass the isolation file (CLI: --isolation)",
+                      OrokitWarning, stacklevel=3)
     out = peak_geometry(peaks, crs="EPSG:4326")
-    out.attrs.update({"source": str(prominence_path), "format": "kirmse", "z_units_in": z_units})
+    out.attrs.update({"source": source, "format": "kirmse", "z_units_in": z_units})
     return out
 
 
-def _looks_like_kirmse(path: Path) -> bool:
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        for line in fh:
-            s = line.strip()
-            if not s or s.startswith("#"):
-                continue
-            parts = [p for p in s.replace(",", " ").split() if p]
-            try:
-                [float(p) for p in parts]
-            except ValueError:
-                return False
-            return len(parts) >= 6
-    return False
+def read_kirmse_peaks(prominence_path: PathLike, isolation_path: PathLike | None = None, *,
+                      z_units: str = "ft", missing_isolation_m: float | None = 500.0) -> gpd.GeoDataFrame:
+    """Read Kirmse & de Ferranti prominence (and isolation) lists into a normalized table
+    (EPSG:4326); see :func:`normalize_kirmse` for the parameters."""
+    from orokit.io.kirmse_io import read_kirmse_isolation
+    from orokit.io.kirmse_io import read_kirmse_peaks as read_list
+
+    if z_units not in _UNITS:
+        raise UnitsError(f"z_units must be one of {sorted(_UNITS)}, got {z_units!r}")
+    prom = read_list(prominence_path)
+    iso = read_kirmse_isolation(isolation_path) if isolation_path is not None else None
+    return normalize_kirmse(prom, iso, z_units=z_units, missing_isolation_m=missing_isolation_m,
+                            source=str(prominence_path))
 
 
 def read_peaks(source: PathLike, *, crs: Any = None, z_units: str | None = None,
@@ -220,37 +184,17 @@ def read_peaks(source: PathLike, *, crs: Any = None, z_units: str | None = None,
     isolation : path, optional
         Kirmse isolation list to join to a Kirmse prominence list.
     """
+    from orokit.io.kirmse_io import is_kirmse_list
+    from orokit.io.peak_lists import read_peak_table
+
     p = Path(source)
     if not p.exists():
         raise InputError(f"peak list {p} does not exist")
-    attrs: dict[str, Any] = {"source": str(p)}
-    if p.is_dir():
-        if not (p / "peaks.parquet").exists():
-            raise InputError(f"{p} is a folder without peaks.parquet; pass an `orokit analyze` output folder")
-        if (p / "analysis.json").exists():
-            attrs["analysis"] = json.loads((p / "analysis.json").read_text())
-        p = p / "peaks.parquet"
-    suffix = p.suffix.lower()
-    if suffix == ".parquet":
-        try:
-            df = gpd.read_parquet(p)
-        except (ValueError, KeyError):
-            df = pd.read_parquet(p)
-    elif suffix in (".gpkg", ".shp", ".geojson", ".fgb"):
-        import pyogrio
-
-        layers = [name for name, _ in pyogrio.list_layers(p)]
-        df = gpd.read_file(p, layer="peaks" if "peaks" in layers else layers[0])
-    elif suffix in (".csv", ".txt", ".tsv", ".xyz") or suffix == "":
-        if _looks_like_kirmse(p):
-            out = read_kirmse_peaks(p, isolation, z_units=z_units or "ft")
-            return out
-        df = pd.read_csv(p)
-    else:
-        raise InputError(f"unsupported peak list format {p.suffix!r} ({p}); use .parquet, .gpkg, .csv or a "
-                         f"Kirmse .txt list")
+    if p.is_file() and p.suffix.lower() in (".csv", ".txt", ".tsv", ".xyz", "") and is_kirmse_list(p):
+        return read_kirmse_peaks(p, isolation, z_units=z_units or "ft")
+    df = read_peak_table(p)
     if z_units not in (None, "m"):
         raise UnitsError(f"orokit peak tables are in metres; got z_units={z_units!r} for {p}")
     out = peak_geometry(df, crs=crs)
-    out.attrs.update(attrs)
+    out.attrs.update(df.attrs)
     return out

@@ -7,6 +7,8 @@
   ``lat,lng,col_lat,col_lng,elevation,prominence``), then the prominence parent's
   ``lat,lng,prominence`` and the line parent's ``lat,lng,elevation``, after a ``#``
   comment and a ``Command line:`` line.
+- **Isolation list** (Kirmse & de Ferranti's published lists): ``lat,lng,elevation,
+  ilp_lat,ilp_lng,isolation_km`` (ILP: the isolation limit point).
 - **Divide tree** (``.dvt``): ``#`` comments, a coordinate-system line (``G,min_lat,
   min_lng,samples_per_deg_lat,samples_per_deg_lng,max_lat,max_lng`` or ``U,zone,min_x,
   min_y,max_x,max_y,metres_per_sample``), then ``P,id,x,y,elevation`` (ids from 1),
@@ -30,7 +32,8 @@ from orokit.errors import DivideTreeError, InputError
 from orokit.io.atomic import write_text_atomic
 from orokit.topology.divide_tree import DivideTree
 
-__all__ = ["KIRMSE_PEAK_COLUMNS", "KIRMSE_PARENT_COLUMNS", "read_kirmse_peaks", "write_kirmse_peaks", "kirmse_columns",
+__all__ = ["KIRMSE_PEAK_COLUMNS", "KIRMSE_PARENT_COLUMNS", "KIRMSE_ISOLATION_COLUMNS", "read_kirmse_peaks",
+           "read_kirmse_isolation", "is_kirmse_list", "write_kirmse_peaks", "kirmse_columns",
            "read_kirmse_tree", "write_kirmse_tree"]
 
 #: columns of a ``results.txt`` peak list
@@ -39,48 +42,97 @@ KIRMSE_PEAK_COLUMNS = ["lat", "lon", "elevation", "saddle_lat", "saddle_lon", "p
 KIRMSE_PARENT_COLUMNS = ["lat", "lon", "saddle_lat", "saddle_lon", "elevation", "prominence",
                          "prominence_parent_lat", "prominence_parent_lon", "prominence_parent_prominence",
                          "line_parent_lat", "line_parent_lon", "line_parent_elevation"]
+#: columns of an isolation list (Kirmse & de Ferranti's published lists)
+KIRMSE_ISOLATION_COLUMNS = ["lat", "lon", "elevation", "ilp_lat", "ilp_lon", "isolation_km"]
 
 
 def _numbers(path: Path, lineno: int, fields: list[str]) -> list[float]:
     try:
         values = [float(f) for f in fields]
     except ValueError:
-        raise InputError(f"{path}:{lineno}: expected numbers separated by commas, got {','.join(fields)!r}; "
+        raise InputError(f"{path}:{lineno}: line {lineno} is not numbers separated by commas: {','.join(fields)!r}; "
                          "is this a Kirmse results.txt / compute_parents file?") from None
     if not all(np.isfinite(values)):
         raise InputError(f"{path}:{lineno}: non-finite value in {','.join(fields)!r}")
     return values
 
 
-def read_kirmse_peaks(path: str | Path) -> pd.DataFrame:
-    """Peak list of Kirmse's ``results.txt`` (6 fields) or ``compute_parents`` (12 fields).
-
-    Returns a DataFrame with :data:`KIRMSE_PEAK_COLUMNS` (plus the parents' columns of
-    :data:`KIRMSE_PARENT_COLUMNS` for a ``compute_parents`` file); ``saddle_lat`` and
-    ``saddle_lon`` are NaN where the file writes ``0,0`` (a landmass high point).
-    """
-    path = Path(path)
+def _read_lines(path: Path, widths: tuple[int, ...], what: str) -> tuple[list[list[float]], int | None]:
+    """Numeric comma-separated lines of ``path`` (``#`` and ``Command line:`` lines skipped)."""
     try:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read the Kirmse peak list {path}: {exc}") from None
+        raise InputError(f"cannot read the Kirmse {what} {path}: {exc}") from None
     rows, width = [], None
     for lineno, line in enumerate(text.splitlines(), 1):
         line = line.strip()
         if not line or line.startswith("#") or line.startswith("Command line:"):
             continue
         fields = line.split(",")
-        if len(fields) not in (6, 12) or (width is not None and len(fields) != width):
-            want = "6 (results.txt) or 12 (compute_parents)" if width is None else str(width)
-            raise InputError(f"{path}:{lineno}: {len(fields)} fields, expected {want}")
+        if len(fields) not in widths or (width is not None and len(fields) != width):
+            want = " or ".join(str(w) for w in widths) if width is None else str(width)
+            raise InputError(f"{path}:{lineno}: {len(fields)} fields (columns), expected {want} (Kirmse {what} layout)")
         width = len(fields)
         rows.append(_numbers(path, lineno, fields))
+    return rows, width
+
+
+def _check_latitudes(path: Path, frame: pd.DataFrame, columns: list[str]) -> None:
+    for c in columns:
+        bad = ~frame[c].between(-90, 90) & frame[c].notna()
+        if bad.any():
+            raise InputError(f"{path}: {c} outside [-90, 90] on data line {int(np.flatnonzero(bad.to_numpy())[0]) + 1}; "
+                             "Kirmse lists give latitude first (lat,lon,...)")
+
+
+def read_kirmse_peaks(path: str | Path) -> pd.DataFrame:
+    """Peak list of Kirmse's ``results.txt`` (6 fields) or ``compute_parents`` (12 fields).
+
+    Returns a DataFrame with :data:`KIRMSE_PEAK_COLUMNS` (plus the parents' columns of
+    :data:`KIRMSE_PARENT_COLUMNS` for a ``compute_parents`` file), in the file's units;
+    ``saddle_lat`` and ``saddle_lon`` are NaN where the file writes ``0,0`` or the peak
+    itself (a landmass high point).
+    """
+    path = Path(path)
+    rows, width = _read_lines(path, (6, 12), "peak list")
     cols = KIRMSE_PARENT_COLUMNS if width == 12 else KIRMSE_PEAK_COLUMNS
     frame = pd.DataFrame(rows, columns=cols, dtype=float) if rows else pd.DataFrame(columns=cols, dtype=float)
     frame = frame[KIRMSE_PEAK_COLUMNS + [c for c in cols if c not in KIRMSE_PEAK_COLUMNS]]
-    none = (frame["saddle_lat"] == 0) & (frame["saddle_lon"] == 0)
+    none = ((frame["saddle_lat"] == 0) & (frame["saddle_lon"] == 0)) | (
+        (frame["saddle_lat"] == frame["lat"]) & (frame["saddle_lon"] == frame["lon"]))
     frame.loc[none, ["saddle_lat", "saddle_lon"]] = np.nan
+    _check_latitudes(path, frame, ["lat", "saddle_lat"])
     return frame
+
+
+def read_kirmse_isolation(path: str | Path) -> pd.DataFrame:
+    """Isolation list of Kirmse & de Ferranti: ``lat,lon,elevation,ilp_lat,ilp_lon,isolation_km``.
+
+    Returns a DataFrame with :data:`KIRMSE_ISOLATION_COLUMNS` in the file's units
+    (isolation in km).
+    """
+    path = Path(path)
+    rows, _ = _read_lines(path, (6,), "isolation list")
+    cols = KIRMSE_ISOLATION_COLUMNS
+    frame = pd.DataFrame(rows, columns=cols, dtype=float) if rows else pd.DataFrame(columns=cols, dtype=float)
+    _check_latitudes(path, frame, ["lat", "ilp_lat"])
+    return frame
+
+
+def is_kirmse_list(path: str | Path) -> bool:
+    """True when the first data line of ``path`` is 6 or 12 comma-separated numbers."""
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for line in fh:
+            s = line.strip()
+            if not s or s.startswith("#") or s.startswith("Command line:"):
+                continue
+            fields = s.split(",")
+            try:
+                [float(f) for f in fields]
+            except ValueError:
+                return False
+            return len(fields) in (6, 12)
+    return False
 
 
 def write_kirmse_peaks(peaks: pd.DataFrame, path: str | Path) -> None:

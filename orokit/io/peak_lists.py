@@ -1,4 +1,6 @@
-"""One reader for every peak list :command:`orokit compare` accepts.
+"""Peak-list readers: every list :command:`orokit compare` accepts, and orokit tables.
+
+:func:`read_peak_list`:
 
 An orokit analysis folder (or its ``peaks.parquet`` / ``peaks.csv``), a Divide Tree
 (``.gpkg``, reference ``.txt``, Kirmse ``.dvt``: prominences and parents from the tree
@@ -17,8 +19,9 @@ import pandas as pd
 
 from orokit._typing import PathLike
 from orokit.errors import InputError
+from orokit.io.kirmse_io import is_kirmse_list, read_kirmse_peaks
 
-__all__ = ["PEAK_LIST_COLUMNS", "read_peak_list"]
+__all__ = ["PEAK_LIST_COLUMNS", "read_peak_list", "read_peak_table"]
 
 PEAK_LIST_COLUMNS = ["lat", "lon", "row", "col", "x", "y", "elevation", "prominence", "line_parent",
                      "prominence_parent"]
@@ -33,16 +36,6 @@ def _frame(**cols) -> pd.DataFrame:
             v = np.full(n, -1 if c.endswith("parent") else np.nan)
         out[c] = np.asarray(v, dtype=np.int64 if c.endswith("parent") else np.float64)
     return pd.DataFrame(out)
-
-
-def _is_kirmse_list(p: Path) -> bool:
-    with open(p, errors="replace") as fh:
-        for line in fh:
-            s = line.strip()
-            if not s or s.startswith("#") or s.startswith("Command line:"):
-                continue
-            return s.count(",") in (5, 11)
-    return False
 
 
 def _from_tree(tree) -> pd.DataFrame:
@@ -98,8 +91,7 @@ def read_peak_list(path: PathLike, *, cell_size_m: float | None = None, z_units:
         frame = _from_tree(tree)
         frame["row"], frame["col"] = frame["y"], frame["x"]  # sample offsets, y southwards
         return frame
-    if suffix == ".txt" and _is_kirmse_list(p):
-        from orokit.io.kirmse_io import read_kirmse_peaks
+    if suffix == ".txt" and is_kirmse_list(p):
 
         k = read_kirmse_peaks(p)
         frame = _frame(lat=k["lat"], lon=k["lon"], elevation=k["elevation"], prominence=k["prominence"])
@@ -119,3 +111,45 @@ def read_peak_list(path: PathLike, *, cell_size_m: float | None = None, z_units:
         return _from_tree(read_divide_tree(p, cell_size_m=cell_size_m, z_units=z_units))
     raise InputError(f"{p}: unknown peak list format {suffix or '(no suffix)'!r}; expected an analysis folder, "
                      "peaks.parquet/.csv, a Divide Tree (.gpkg, .txt, .dvt) or a Kirmse results.txt")
+
+
+def read_peak_table(source: PathLike) -> pd.DataFrame:
+    """An orokit peaks table as stored: analysis folder, ``.parquet``, ``.gpkg`` (layer
+    ``peaks``) / other vector file, or ``.csv`` with a header.
+
+    ``attrs["source"]`` names the file; an analysis folder adds ``attrs["analysis"]``
+    (its ``analysis.json``). Kirmse lists are read by :mod:`orokit.io.kirmse_io`.
+    """
+    import json
+
+    import geopandas as gpd
+
+    p = Path(source)
+    if not p.exists():
+        raise InputError(f"peak list {p} does not exist")
+    attrs: dict = {"source": str(p)}
+    if p.is_dir():
+        if not (p / "peaks.parquet").exists():
+            raise InputError(f"{p} is a folder without peaks.parquet; pass an `orokit analyze` output folder")
+        if (p / "analysis.json").exists():
+            attrs["analysis"] = json.loads((p / "analysis.json").read_text())
+        p = p / "peaks.parquet"
+    suffix = p.suffix.lower()
+    df: pd.DataFrame
+    if suffix == ".parquet":
+        try:
+            df = gpd.read_parquet(p)
+        except (ValueError, KeyError):
+            df = pd.read_parquet(p)
+    elif suffix in (".gpkg", ".shp", ".geojson", ".fgb"):
+        import pyogrio
+
+        layers = [name for name, _ in pyogrio.list_layers(p)]
+        df = gpd.read_file(p, layer="peaks" if "peaks" in layers else layers[0])
+    elif suffix in (".csv", ".txt", ".tsv", ".xyz") or suffix == "":
+        df = pd.read_csv(p)
+    else:
+        raise InputError(f"unsupported peak list format {p.suffix!r} ({p}); use .parquet, .gpkg, .csv or a "
+                         f"Kirmse .txt list")
+    df.attrs.update(attrs)
+    return df
