@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from orokit._typing import PathLike
 from orokit.errors import DivideTreeError, InputError
 from orokit.io.atomic import write_text_atomic
 from orokit.topology.divide_tree import DivideTree
@@ -85,7 +86,7 @@ def _check_latitudes(path: Path, frame: pd.DataFrame, columns: list[str]) -> Non
                              "Kirmse lists give latitude first (lat,lon,...)")
 
 
-def read_kirmse_peaks(path: str | Path) -> pd.DataFrame:
+def read_kirmse_peaks(path: PathLike) -> pd.DataFrame:
     """Peak list of Kirmse's ``results.txt`` (6 fields) or ``compute_parents`` (12 fields).
 
     Returns a DataFrame with :data:`KIRMSE_PEAK_COLUMNS` (plus the parents' columns of
@@ -105,7 +106,7 @@ def read_kirmse_peaks(path: str | Path) -> pd.DataFrame:
     return frame
 
 
-def read_kirmse_isolation(path: str | Path) -> pd.DataFrame:
+def read_kirmse_isolation(path: PathLike) -> pd.DataFrame:
     """Isolation list of Kirmse & de Ferranti: ``lat,lon,elevation,ilp_lat,ilp_lon,isolation_km``.
 
     Returns a DataFrame with :data:`KIRMSE_ISOLATION_COLUMNS` in the file's units
@@ -119,7 +120,7 @@ def read_kirmse_isolation(path: str | Path) -> pd.DataFrame:
     return frame
 
 
-def is_kirmse_list(path: str | Path) -> bool:
+def is_kirmse_list(path: PathLike) -> bool:
     """True when the first data line of ``path`` is 6 or 12 comma-separated numbers."""
     with open(path, encoding="utf-8", errors="replace") as fh:
         for line in fh:
@@ -135,7 +136,7 @@ def is_kirmse_list(path: str | Path) -> bool:
     return False
 
 
-def write_kirmse_peaks(peaks: pd.DataFrame, path: str | Path) -> None:
+def write_kirmse_peaks(peaks: pd.DataFrame, path: PathLike) -> None:
     """Write a peak list in Kirmse's ``results.txt`` format (atomically).
 
     ``peaks`` needs :data:`KIRMSE_PEAK_COLUMNS` (NaN saddle = none, written ``0,0``);
@@ -194,7 +195,7 @@ def _coordinate_system(path: Path, lineno: int, line: str) -> dict[str, Any]:
     raise InputError(f"{path}:{lineno}: not a Kirmse coordinate-system line (G,... or U,...): {line!r}")
 
 
-def read_kirmse_tree(path: str | Path) -> DivideTree:
+def read_kirmse_tree(path: PathLike) -> DivideTree:
     """Divide Tree of a Kirmse ``.dvt`` file (runoffs are ignored with their edges).
 
     Peaks and saddles get ``x``/``y`` = the file's sample offsets (y grows
@@ -273,7 +274,7 @@ def _latlon(cs: dict[str, Any], x: np.ndarray, y: np.ndarray) -> tuple[np.ndarra
     return np.asarray(lat), np.asarray(lon)
 
 
-def write_kirmse_tree(tree: DivideTree, path: str | Path, *, coordinate_system: str | None = None) -> None:
+def write_kirmse_tree(tree: DivideTree, path: PathLike, *, coordinate_system: str | None = None) -> None:
     """Write ``tree`` as a Kirmse ``.dvt`` file (atomically).
 
     ``x``/``y`` of peaks and saddles must be integer sample offsets of
