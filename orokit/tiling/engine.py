@@ -71,10 +71,43 @@ def get_compute(scheduler: Any = None):
 _ISO_FIELDS = ("key", "best", "cand", "nan")
 
 
+class _Window:
+    """One chunk and its one-cell halo, as a small dask array read inside its own task.
+
+    It is opaque to the outer graph (dask does not look inside it), so no chunk task
+    shares a source block with another: each reads its core and the eight thin halo
+    strips (dask fuses the slices into the source's reads) and frees them when done,
+    instead of every source block waiting in memory for its neighbours' halos.
+    """
+
+    def __init__(self, data, r0: int, r1: int, c0: int, c1: int):
+        H, W = data.shape
+        self.pad = ((int(r0 == 0), int(r1 == H)), (int(c0 == 0), int(c1 == W)))
+        self.array = data[max(r0 - 1, 0):min(r1 + 1, H), max(c0 - 1, 0):min(c1 + 1, W)]
+
+    def read(self) -> np.ndarray:
+        block = np.asarray(self.array.compute(scheduler="sync"), dtype=np.float64)
+        return np.pad(block, self.pad, constant_values=np.nan) if any(sum(self.pad, ())) else block
+
+
+#: a task's output: (summary, settled isolation or None, {(i, j): (chunk maximum, has NaN)})
+_Part = tuple
+
+
 def _load_summary(path: str) -> tuple[ChunkSummary, dict | None]:
     data = read_chunk(path)
     iso = {f: data[f"iso_{f}"] for f in _ISO_FIELDS} if "iso_key" in data else None
     return ChunkSummary.from_npz(data), iso
+
+
+def _load_task(path: str, window: _Window, ij: tuple[int, int]) -> _Part:
+    data = read_chunk(path)
+    iso = {f: data[f"iso_{f}"] for f in _ISO_FIELDS} if "iso_key" in data else None
+    if "stats" in data:
+        stats = (float(data["stats"][0]), float(data["stats"][1]))
+    else:  # written before the statistics were stored: read the chunk once more
+        stats = block_stats(window.read()[1:-1, 1:-1])
+    return ChunkSummary.from_npz(data), iso, {ij: stats}
 
 
 def _corrupt_chunk(path: str) -> bool:
@@ -87,29 +120,47 @@ def _corrupt_chunk(path: str) -> bool:
         return True
 
 
-def _tile_task(block: np.ndarray, row0: int, col0: int, shape, min_prominence_m: float,
-               path: str | None, metric) -> tuple[ChunkSummary, dict | None]:
-    block = np.asarray(block, dtype=np.float64)
+def _tile_task(window: _Window, ij: tuple[int, int], row0: int, col0: int, shape, min_prominence_m: float,
+               path: str | None, metric) -> _Part:
+    block = window.read()
+    core = np.ascontiguousarray(block[1:-1, 1:-1])
+    stats = block_stats(core)
     summary = chunk_summary(block, row0, col0, shape, min_prominence_m)
+    del block
     iso = None
     if metric is not None:
-        iso = chunk_isolation(np.ascontiguousarray(block[1:-1, 1:-1]), row0, col0, shape,
-                              summary.key[summary.ismax], metric)
+        iso = chunk_isolation(core, row0, col0, shape, summary.key[summary.ismax], metric)
     if path is not None:
         extra = {} if iso is None else {f"iso_{f}": v for f, v in iso.items()}
-        write_chunk(path, {**summary.to_npz(), **extra})
-    return summary, iso
+        write_chunk(path, {**summary.to_npz(), **extra, "stats": np.array(stats, np.float64)})
+    return summary, iso, {ij: stats}
 
 
-def _merge_iso(parts: list) -> dict | None:
+def _merge_iso(parts: list, keep: np.ndarray | None = None) -> dict | None:
+    """Settled isolation of several parts in one, only for the peaks in ``keep`` (global cells)."""
     parts = [p for p in parts if p is not None]
     if not parts:
         return None
     width = max(p["cand"].shape[1] for p in parts)
     out = {f: np.concatenate([p[f] for p in parts]) for f in ("key", "best", "nan")}
     out["cand"] = np.concatenate([np.pad(p["cand"], ((0, 0), (0, width - p["cand"].shape[1])), constant_values=-1)
-                                  for p in parts]) if parts else np.empty((0, 0), np.int64)
+                                  for p in parts])
+    if keep is not None:
+        sel = np.isin(out["key"], keep)
+        out = {f: v[sel] for f, v in out.items()}
     return out
+
+
+def _merge_task(a: _Part, b: _Part, min_prominence_m: float) -> _Part:
+    """Merged summary of two parts; settled isolation kept only for peaks still in it."""
+    s = merge_summaries(a[0], b[0], min_prominence_m)
+    iso = _merge_iso([a[1], b[1]], keep=s.key[s.ismax])
+    return s, iso, {**a[2], **b[2]}
+
+
+def _finalize_task(root: _Part, min_prominence_m: float, outside: str, nby: int, nbx: int) -> tuple:
+    stats = np.array([[root[2][i, j] for j in range(nbx)] for i in range(nby)], dtype=float)
+    return finalize_summary(root[0], min_prominence_m=min_prominence_m, outside=outside), root[1], stats
 
 
 def _checkpoint_dir(checkpoint, data, min_prominence_m: float) -> Path | None:
@@ -136,36 +187,37 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
     inside it (``result.chunk_isolation``), so the cross-chunk search reads few chunks.
     """
     import dask
-    import dask.array as da
 
     if data.ndim != 2:
         raise TilingError(f"expected a 2-D array, got shape {data.shape}")
     if not np.issubdtype(data.dtype, np.floating):
         data = data.astype(np.float64)
     H, W = data.shape
-    padded = da.overlap.overlap(data, depth={0: 1, 1: 1}, boundary={0: np.nan, 1: np.nan})
-    blocks = padded.to_delayed()
     rb = np.concatenate([[0], np.cumsum(data.chunks[0])]).astype(int)
     cb = np.concatenate([[0], np.cumsum(data.chunks[1])]).astype(int)
+    nby, nbx = len(rb) - 1, len(cb) - 1
     ckpt = _checkpoint_dir(checkpoint, data, min_prominence_m)
     tiles = {}
-    isos = {}
     reused = 0
-    for i in range(len(rb) - 1):
-        for j in range(len(cb) - 1):
+    for i in range(nby):
+        for j in range(nbx):
             path = None if ckpt is None else str(chunk_path(ckpt, i, j))
+            window = _Window(data, int(rb[i]), int(rb[i + 1]), int(cb[j]), int(cb[j + 1]))
             if path is not None and Path(path).exists() and not _corrupt_chunk(path):
-                task = dask.delayed(_load_summary, nout=2)(path, dask_key_name=f"orokit-load-{i}-{j}-{_h(path)}")
+                tiles[i, j] = dask.delayed(_load_task)(path, window, (i, j),
+                                                       dask_key_name=f"orokit-load-{i}-{j}-{_h(path)}")
                 reused += 1
             else:
-                task = dask.delayed(_tile_task, nout=2)(
-                    blocks[i, j], int(rb[i]), int(cb[j]), (H, W), float(min_prominence_m), path, isolation_metric,
+                tiles[i, j] = dask.delayed(_tile_task)(
+                    window, (i, j), int(rb[i]), int(cb[j]), (H, W), float(min_prominence_m), path, isolation_metric,
                     dask_key_name=f"orokit-tile-{i}-{j}-{data.name}-{min_prominence_m}-{isolation_metric is not None}",
                 )
-            tiles[i, j], isos[i, j] = task[0], task[1]
     if reused:
         logger.info("reusing %d chunk summaries from %s", reused, ckpt)
 
+    # one tree: every chunk's output is consumed by exactly one merge, so the scheduler
+    # frees each pair as soon as it is merged (a depth-first order holds about log2(chunks)
+    # summaries); settled isolation and chunk statistics travel up with the summaries
     def reduce(i0, i1, j0, j1):
         if i1 - i0 == 1 and j1 - j0 == 1:
             return tiles[i0, j0]
@@ -175,27 +227,22 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
         else:
             m = (j0 + j1) // 2
             a, b = reduce(i0, i1, j0, m), reduce(i0, i1, m, j1)
-        return dask.delayed(merge_summaries)(
+        return dask.delayed(_merge_task)(
             a, b, float(min_prominence_m), dask_key_name=f"orokit-merge-{i0}-{i1}-{j0}-{j1}-{data.name}"
         )
 
-    root = reduce(0, len(rb) - 1, 0, len(cb) - 1)
-    final = dask.delayed(finalize_summary)(root, min_prominence_m=float(min_prominence_m), outside=outside)
-    # per-chunk maximum and "has NaN" for the isolation search, from the same reads
-    raw = data.to_delayed()
-    stats = dask.delayed(np.array)(
-        [[dask.delayed(block_stats)(raw[i, j]) for j in range(len(cb) - 1)] for i in range(len(rb) - 1)]
-    )
-    iso = dask.delayed(_merge_iso)(list(isos.values()))
+    root = reduce(0, nby, 0, nbx)
+    final = dask.delayed(_finalize_task)(root, float(min_prominence_m), outside, nby, nbx,
+                                         dask_key_name=f"orokit-final-{data.name}-{min_prominence_m}-{outside}")
     compute = get_compute(scheduler)
-    logger.info("tiled analysis of %dx%d cells in %d chunks", H, W, (len(rb) - 1) * (len(cb) - 1))
+    logger.info("tiled analysis of %dx%d cells in %d chunks", H, W, nby * nbx)
     if progress and (scheduler is None or isinstance(scheduler, str) and "://" not in scheduler):
         from dask.diagnostics import ProgressBar
 
         with ProgressBar():
-            result, st, iso = compute([final, stats, iso])
+            ((result, iso, st),) = compute([final])
     else:
-        result, st, iso = compute([final, stats, iso])
+        ((result, iso, st),) = compute([final])
     return TiledOrometry(orometry=result, chunk_stats=st, chunk_isolation=iso)
 
 

@@ -48,14 +48,16 @@ class _BlockCache:
     processed chunk by chunk in raster order, so neighbouring chunks are usually still
     here). The NaN pyramid of a chunk is built only when a search asks for it."""
 
-    def __init__(self, blocks, nbx: int, compute, budget_bytes: int = 256 * 2**20):
+    def __init__(self, blocks, nbx: int, compute, has_nan: np.ndarray, budget_bytes: int = 256 * 2**20):
         self.blocks, self.nbx, self.compute, self.budget = blocks, nbx, compute, budget_bytes
+        self.has_nan = has_nan
         self.entries: dict[int, dict] = {}
         self.loads = 0
 
     @staticmethod
     def _size(e: dict) -> int:
-        return sum(a.nbytes for part in (e["pyr"], e.get("nan") or ()) for a in part)
+        raw = e["raw"].nbytes if e.get("raw") is not None else 0
+        return raw + sum(a.nbytes for part in (e["pyr"], e.get("nan") or ()) for a in part)
 
     def get_many(self, ks, *, nan: bool = False) -> list[dict]:
         """Per chunk: {"shape", "pyr": block pyramid, and with ``nan`` "nan": NaN pyramid}."""
@@ -65,13 +67,16 @@ class _BlockCache:
             self.loads += len(missing)
             for k, a in zip(missing, arrays):
                 a = np.ascontiguousarray(a)
-                self.entries[k] = {"shape": a.shape, "pyr": _mk.block_pyramid(a), "raw": a}
+                # the raw chunk is kept only for a NaN pyramid, which only chunks with NaN need
+                self.entries[k] = {"shape": a.shape, "pyr": _mk.block_pyramid(a),
+                                   "raw": a if self.has_nan[k] else None}
         out = []
         for k in ks:
             e = self.entries.pop(k)
             self.entries[k] = e  # most recent last
             if nan and "nan" not in e:
                 e["nan"] = _mk.nan_pyramid(e["raw"])
+                e["raw"] = None
             out.append(e)
         while len(self.entries) > len(ks) and sum(self._size(e) for e in self.entries.values()) > self.budget:
             self.entries.pop(next(iter(self.entries)))
@@ -144,7 +149,7 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
     cand = np.full((n, metric.ncand), -1, np.int64)
     ncand = np.zeros(n, np.int64)
     edge = _mk.outside_distance(rows, cols, H, W, *metric.args())
-    cache = _BlockCache(blocks, nbx, compute)
+    cache = _BlockCache(blocks, nbx, compute, cnan)
     todo = np.ones(n, bool)
     if known is not None and known["key"].size:
         order_k = np.argsort(known["key"])
