@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import pytest
-from classify_synth import make_peaks
+from helpers.classify_synth import make_peaks
 
 
 @pytest.fixture

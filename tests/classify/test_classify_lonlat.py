@@ -28,7 +28,7 @@ _CACHE: dict[str, pd.DataFrame] = {}
 
 def _metric_feats() -> pd.DataFrame:
     if "feats" not in _CACHE:
-        from classify_synth import make_peaks
+        from helpers.classify_synth import make_peaks
 
         tables = []
         for k, (name, kw) in enumerate(STYLES.items()):

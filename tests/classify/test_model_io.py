@@ -26,7 +26,7 @@ STYLES = {"rolling": dict(prom_scale=60.0, saddle_scale_m=700.0), "alpine": dict
 
 
 def _feats(feature_set=None):
-    from classify_synth import make_peaks
+    from helpers.classify_synth import make_peaks
 
     tables = []
     for k, (name, kw) in enumerate(STYLES.items()):

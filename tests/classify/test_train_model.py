@@ -26,7 +26,7 @@ STYLES = {"rolling": dict(prom_scale=60.0, saddle_scale_m=700.0), "alpine": dict
 
 @pytest.fixture(scope="module")
 def feats():
-    from classify_synth import make_peaks
+    from helpers.classify_synth import make_peaks
 
     tables = []
     for k, (name, kw) in enumerate(STYLES.items()):
@@ -109,7 +109,7 @@ def test_model_from_other_version(feats, tmp_path):
 
 
 def test_cli_features_train_classify(tmp_path):
-    from classify_synth import make_peaks
+    from helpers.classify_synth import make_peaks
 
     region = tmp_path / "region.gpkg"
     import geopandas as gpd

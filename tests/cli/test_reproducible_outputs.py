@@ -2,20 +2,18 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 from click.testing import CliRunner
 
 from orokit.cli.main import cli
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "classify"))
 
 
 def _features(tmp_path: Path) -> Path:
     import geopandas as gpd
     import shapely
-    from classify_synth import make_peaks
+    from helpers.classify_synth import make_peaks
 
     region = tmp_path / "region.gpkg"
     gpd.GeoDataFrame(geometry=[shapely.box(0, -60_000, 60_000, 0)], crs="EPSG:32633").to_file(region)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _orometry_oracles import distinct_grids, flat_domain_cells, grids, make_dem, n_domains
+from helpers.orometry_oracles import distinct_grids, flat_domain_cells, grids, make_dem, n_domains
 from hypothesis import given, settings
 from hypothesis import strategies as st
 

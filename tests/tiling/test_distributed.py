@@ -11,7 +11,7 @@ import pytest
 
 import orokit
 
-from _ridges import ridge_set
+from helpers.ridges import ridge_set
 
 pytestmark = pytest.mark.cluster
 

@@ -12,7 +12,7 @@ from orokit.analysis import write_analysis
 from orokit.tiling.summary import chunk_summary, finalize_summary, merge_summaries
 from orokit.topology.engine import orometry
 
-from _ridges import orometry_ridges, ridge_set
+from helpers.ridges import orometry_ridges, ridge_set
 
 FIELDS = ["peak_cell", "peak_z", "prominence", "key_saddle_cell", "parent", "prominence_exact"]
 

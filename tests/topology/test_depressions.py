@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _orometry_oracles import grids, make_dem, persistence_pairs
+from helpers.orometry_oracles import grids, make_dem, persistence_pairs
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import ndimage

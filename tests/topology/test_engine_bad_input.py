@@ -5,7 +5,7 @@ import time
 
 import numpy as np
 import pytest
-from _orometry_oracles import brute_prominence, make_dem
+from helpers.orometry_oracles import brute_prominence, make_dem
 
 import orokit
 from orokit.errors import InputError

@@ -2,13 +2,13 @@
 
 Peaks, key-saddle elevations, prominences, parents, roots and the ``prominence_exact``
 flag of ``orokit.analyze`` are compared with :func:`brute_prominence`, which floods the
-superlevel sets level by level (see ``_orometry_oracles.py`` for the conventions).
+superlevel sets level by level (see ``helpers/orometry_oracles.py`` for the conventions).
 """
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from _orometry_oracles import brute_prominence, flat_domain_cells, grids, make_dem, n_domains
+from helpers.orometry_oracles import brute_prominence, flat_domain_cells, grids, make_dem, n_domains
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 

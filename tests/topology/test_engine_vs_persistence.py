@@ -8,7 +8,7 @@ saddle elevation) of the non-root peaks; the essential classes are the roots, on
 from __future__ import annotations
 
 import numpy as np
-from _orometry_oracles import flat_domain_cells, grids, make_dem, persistence_pairs
+from helpers.orometry_oracles import flat_domain_cells, grids, make_dem, persistence_pairs
 from hypothesis import given, settings
 from hypothesis import strategies as st
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _orometry_oracles import brute_isolation, grids, make_dem
+from helpers.orometry_oracles import brute_isolation, grids, make_dem
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -109,3 +109,23 @@ def test_isolation_geographic_vs_projected():
             continue
         assert a == pytest.approx(b, abs=tol), f"isolation geographic {a:.1f} m vs projected {b:.1f} m"
         assert pg["lon"].iloc[i] == pytest.approx(pg["x"].iloc[i])
+
+
+@pytest.mark.parametrize("chunks", [None, 8])
+def test_isolation_in_metres_on_a_foot_based_crs(chunks):
+    """EPSG:2227 counts in US survey feet: a grid of 30 ft cells there and one of the same
+    cells in metres (EPSG:32633) give the same isolation in metres, in memory and by chunks."""
+    rng = np.random.default_rng(3)
+    z = rng.integers(0, 40, size=(19, 23)).astype(np.float32)
+    ft = 1200.0 / 3937.0
+    feet = orokit.analyze(make_dem(z, res=(30.0, 30.0), crs="EPSG:2227", x0=6_000_000.0, y0=2_000_000.0),
+                          min_prominence_m=0, isolation=True, chunks=chunks).peaks
+    metres = orokit.analyze(make_dem(z, res=(30.0 * ft, 30.0 * ft)), min_prominence_m=0, isolation=True,
+                            chunks=chunks).peaks
+    key = ["row", "col"]
+    a, b = feet.set_index(key).sort_index(), metres.set_index(key).sort_index()
+    assert a.index.equals(b.index) and len(a) > 5
+    np.testing.assert_allclose(a["isolation"], b["isolation"], rtol=1e-9)
+    finite = a["isolation"].dropna()
+    assert finite.min() >= 30.0 * ft * (1 - 1e-9)  # metres, not feet: a neighbour is 9.14 m away
+    np.testing.assert_array_equal(a["isolation_row"], b["isolation_row"])

@@ -1,14 +1,14 @@
 """Line and prominence parents of ``DivideTree.parents`` on hypothesis-drawn trees.
 
 Properties from the definitions (issue 16) and agreement with an independent
-brute-force walk (``_parent_oracle``), including ties of peak and saddle elevations,
+brute-force walk (``helpers.parent_oracle``), including ties of peak and saddle elevations,
 monkey saddles (one saddle serving several ridges) and forests.
 """
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from _parent_oracle import brute_parents, tree_path
+from helpers.parent_oracle import brute_parents, tree_path
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _orometry_oracles import persistence_pairs
+from helpers.orometry_oracles import persistence_pairs
 
 import orokit
 from orokit.io.dem import read_dem

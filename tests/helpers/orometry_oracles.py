@@ -19,8 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import xarray as xr
 from scipy import ndimage
+from helpers.dems import build_dem
 
 EIGHT = np.ones((3, 3), dtype=bool)
 
@@ -43,35 +43,9 @@ class OraclePeak:
 
 
 def make_dem(z, *, res=(10.0, 10.0), crs: str | None = "EPSG:32633", x0: float = 500000.0, y0: float = 5000000.0):
-    """A DataArray as ``read_dem`` returns it (dims y, x; metres; cell centres).
-
-    ``res`` is (dx, dy) in CRS units. ``crs=None`` gives a local grid (origin at the
-    north-west corner, as read_dem does for rasters without CRS).
-    """
-    import rioxarray  # noqa: F401  (registers .rio)
-    from affine import Affine
-    from pyproj import CRS
-
-    from orokit.geodesy import cell_size_key
-
-    z = np.asarray(z)
-    h, w = z.shape
-    dx, dy = res
-    if crs is None:
-        x0 = y0 = 0.0
-    transform = Affine(dx, 0.0, x0, 0.0, -dy, y0)
-    x = x0 + dx * (np.arange(w) + 0.5)
-    y = y0 - dy * (np.arange(h) + 0.5)
-    da = xr.DataArray(
-        z,
-        dims=("y", "x"),
-        coords={"y": y, "x": x},
-        name="elevation",
-        attrs={"units": "m", "local_grid": crs is None, cell_size_key(crs is not None and CRS.from_user_input(crs).is_geographic): (float(dx), float(dy))},
-    )
-    if crs is not None:
-        da = da.rio.write_crs(crs)
-    return da.rio.write_transform(transform)
+    """:func:`helpers.dems.build_dem` with 10 m cells and the corner ``(x0, y0)``
+    (``crs=None``: a local grid with its corner at the origin)."""
+    return build_dem(np.asarray(z), res=res, crs=crs, origin=None if crs is None else (x0, y0))
 
 
 def plateau_peaks(z: np.ndarray) -> list[OraclePeak]:
