@@ -46,7 +46,8 @@ def _table(df) -> dict:
     return {k: {c: (bool(v) if c == "ok" else float(v)) for c, v in row.items()} for k, row in df.iterrows()}
 
 
-def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, params=None, model=None) -> dict:
+def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, params=None, model=None,
+               synthesis=None, render_real: bool = True) -> dict:
     import orokit
     from orokit.data import open_dataset_dem
     from orokit.raster.params import RenderParams
@@ -69,19 +70,21 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
     tree = result.tree
     out: dict = {"shape": [ny, nx], "cell_size_m": res, "real": real.summary, "tree_peaks": int(tree.n_peaks)}
 
-    t0 = time.perf_counter()
-    ren = render_elevation(tree, cell_size_m=res, extent=_extent(dem), erosion=erosion, params=params, rng=seed)
-    t_render = time.perf_counter() - t0
-    rs = landform_statistics(ren)
-    rt = roundtrip(ren, tree, min_prominence_m=EPS).summary()
-    out["render"] = {"time_s": t_render, "summary": rs.summary,
-                     "landform": _table(compare_landforms(real, rs, halves=halves)),
-                     "recovered": rt.get("recovered_share"), "extra": rt.get("extra_share")}
+    ren = None
+    if render_real:
+        t0 = time.perf_counter()
+        ren = render_elevation(tree, cell_size_m=res, extent=_extent(dem), erosion=erosion, params=params, rng=seed)
+        t_render = time.perf_counter() - t0
+        rs = landform_statistics(ren)
+        rt = roundtrip(ren, tree, min_prominence_m=EPS).summary()
+        out["render"] = {"time_s": t_render, "summary": rs.summary,
+                         "landform": _table(compare_landforms(real, rs, halves=halves)),
+                         "recovered": rt.get("recovered_share"), "extra": rt.get("extra_share")}
 
     # the type as `orokit type` makes it from the DEM: orometry + the DEM's texture
     ttype = TerrainType.from_analysis(result, name=name).with_texture(*texture_spectrum(dem.values, res))
     t0 = time.perf_counter()
-    ttree = synthesize_divide_tree(ttype, size_m=(nx * res, ny * res), rng=seed)
+    ttree = synthesize_divide_tree(ttype, size_m=(nx * res, ny * res), params=synthesis, rng=seed)
     twin = render_elevation(ttree, cell_size_m=res, extent=tree_extent(ttree), erosion=erosion,
                             params=dataclasses.replace(params, **texture_params(ttype)), rng=seed)
     t_twin = time.perf_counter() - t0
@@ -94,11 +97,12 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
                    "disk_accuracy": rt2.get("disk_accuracy"), "n_disks": rt2.get("n_disks"),
                    "vote": rt2.get("predicted")}
     if figures is not None:
-        _figure(figures / f"{name}.png", name, dem, ren, twin)
+        panels = {"real DEM": dem, "render of its real tree": ren, "free twin": twin}
+        _figure(figures / f"{name}.png", name, {k: v for k, v in panels.items() if v is not None})
     return out
 
 
-def _figure(path: Path, name: str, real, ren, twin) -> None:
+def _figure(path: Path, name: str, panels: dict) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -107,7 +111,7 @@ def _figure(path: Path, name: str, real, ren, twin) -> None:
     from orokit.reports.landform import plot_landforms
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig = plot_landforms({"real DEM": real, "render of its real tree": ren, "free twin": twin}, title=name)
+    fig = plot_landforms(panels, title=name)
     fig.savefig(path, dpi=150)
     plt.close(fig)
 
@@ -118,6 +122,8 @@ def _markdown(results: dict) -> str:
     stats = list(FLOORS) + ["relief_5km", "drainage_share", "drainage_density"]
     lines = []
     for kind in ("render", "twin"):
+        if not any(kind in r for r in results.values()):
+            continue
         lines.append(f"\n### {kind}: distance / target (x = over target)\n")
         lines.append("| region | group | " + " | ".join(stats) + " | recovered | extra | s |")
         lines.append("|---|---|" + "---:|" * (len(stats) + 3))
@@ -158,12 +164,30 @@ def _reclassification(results: dict, real_accuracy: Path) -> dict:
     return {"met": met, "known": known, "markdown": md}
 
 
+def _synthesis_params(pairs: list[str]):
+    """SynthesisParams from ``NAME=VALUE`` strings (values parsed as JSON, else kept as text)."""
+    from orokit.synthesis.tree import SynthesisParams
+
+    kw = {}
+    for pair in pairs:
+        key, _, val = pair.partition("=")
+        try:
+            kw[key] = json.loads(val)
+        except json.JSONDecodeError:
+            kw[key] = val
+    return SynthesisParams(**kw)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--regions", default=None, help="comma-separated dataset names (default: the group)")
     ap.add_argument("--group", choices=("tune", "hold", "all"), default="all")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-erosion", dest="erosion", action="store_false")
+    ap.add_argument("--twin-only", dest="render_real", action="store_false",
+                    help="skip the render of the real tree (synthesis experiments); never recorded")
+    ap.add_argument("--synthesis", action="append", default=[], metavar="NAME=VALUE",
+                    help="a SynthesisParams field for the twins (repeatable), e.g. void_weight=1.0")
     ap.add_argument("--figures", type=Path, default=None, help="write real / render / twin hillshades here")
     ap.add_argument("--no-record", dest="record", action="store_false",
                     help="do not write reports/benchmarks/realism.json")
@@ -182,9 +206,11 @@ def main(argv: list[str] | None = None) -> int:
         from orokit.classify.model import load_model
 
         model = load_model(a.model)
+    synthesis = _synthesis_params(a.synthesis)
     for name in names:
         t0 = time.perf_counter()
-        r = run_region(name, seed=a.seed, erosion=a.erosion, figures=a.figures, model=model)
+        r = run_region(name, seed=a.seed, erosion=a.erosion, figures=a.figures, model=model, synthesis=synthesis,
+                       render_real=a.render_real)
         r["group"] = "tune" if name in TUNE else "hold" if name in HOLD else "other"
         r["load_average_1_5_15"] = list(os.getloadavg())
         results[name] = r
@@ -194,12 +220,12 @@ def main(argv: list[str] | None = None) -> int:
     if recl:
         md += "\n\n" + recl["markdown"]
     print(md)
-    doc = {"seed": a.seed, "erosion": a.erosion, "eps_m": EPS, "tune": list(TUNE), "hold": list(HOLD),
+    doc = {"seed": a.seed, "erosion": a.erosion, "eps_m": EPS, "synthesis": synthesis.to_dict(), "tune": list(TUNE), "hold": list(HOLD),
            "model": None if model is None else str(a.model.name), "regions": results,
            "reclassification": recl, "table_markdown": md}
     if a.json is not None:
         a.json.write_text(json.dumps(doc, indent=1, default=float))
-    if a.record and not a.regions:
+    if a.record and not a.regions and a.render_real:
         from _record import record
 
         print(f"recorded {record('realism', doc)}", file=sys.stderr)

@@ -96,6 +96,30 @@ def _bin(v, edges, open_last):
 
 
 @njit(cache=True)
+def _disk_gain(qx, qy, cx0, cy0, cstep, cnx, cny, covered, radius, mark):
+    """Uncovered disk centres within ``radius`` of (qx, qy); with ``mark`` they become covered."""
+    if cnx == 0 or cny == 0:
+        return 0
+    i0 = max(0, int(math.ceil((qx - radius - cx0) / cstep)))
+    i1 = min(cnx - 1, int(math.floor((qx + radius - cx0) / cstep)))
+    j0 = max(0, int(math.ceil((qy - radius - cy0) / cstep)))
+    j1 = min(cny - 1, int(math.floor((qy + radius - cy0) / cstep)))
+    r2 = radius * radius
+    g = 0
+    for j in range(j0, j1 + 1):
+        dy = cy0 + j * cstep - qy
+        for i in range(i0, i1 + 1):
+            if covered[j * cnx + i]:
+                continue
+            dx = cx0 + i * cstep - qx
+            if dx * dx + dy * dy <= r2:
+                g += 1
+                if mark:
+                    covered[j * cnx + i] = True
+    return g
+
+
+@njit(cache=True)
 def throw_darts(
     px, py, n_start, n_end,
     fixed, fx, fy,
@@ -105,6 +129,7 @@ def throw_darts(
     dir_edges, dir_ne, dir_target, dir_have,
     head, nxt, gx0, gy0, gcell, gnx, gny,
     floor_w,
+    cx0, cy0, cstep, cnx, cny, covered, n_covered, cover_target, radius, disk_w,
 ):
     """Place peaks ``n_start..n_end-1`` (sorted by decreasing elevation) by dart throwing.
 
@@ -115,11 +140,20 @@ def throw_darts(
     plus ``floor_w`` times the target). All already placed peaks are higher, so the
     nearest placed peak is the isolation target. ``dist_have``/``dir_have`` and the
     grid hash (``head``/``nxt``) are updated in place. Fixed peaks go to ``fx, fy``.
+
+    Per-disk target (``disk_w > 0``): disk centres on a grid (``cx0, cy0, cstep, cnx,
+    cny``) are *covered* once a peak lies within ``radius``; after peak ``k`` the number of
+    covered centres should be ``cover_target[k]``. Each candidate's weight is multiplied by
+    ``exp(-disk_w |gain - demand| / A)``, gain = centres it would cover, demand = target
+    minus covered (at least 0), A = centres per disk. ``covered`` and ``n_covered[0]`` are
+    updated in place.
     Returns per placed peak the isolation distance (NaN for the first).
     """
     m = cand_x.shape[1]
     iso = np.full(n_end - n_start, np.nan)
     w = np.empty(m)
+    n_centres = cnx * cny
+    per_disk = math.pi * radius * radius / (cstep * cstep) if cstep > 0 else 1.0
     for k in range(n_start, n_end):
         r = k - n_start
         t = ptype[k]
@@ -133,6 +167,8 @@ def throw_darts(
             total = 0.0
             best_base = -1.0
             best_c = 0
+            use_disks = disk_w > 0 and n_covered[0] < n_centres
+            demand = max(cover_target[k] - n_covered[0], 0.0)
             for c in range(m):
                 qx = cand_x[r, c]
                 qy = cand_y[r, c]
@@ -155,6 +191,9 @@ def throw_darts(
                     if b2 >= 0:
                         f2 = max(dir_target[t, b2] - dir_have[t, b2], 0.0) + floor_w * dir_target[t, b2]
                     wc = wc * f1 * f2
+                if use_disks:
+                    gain = _disk_gain(qx, qy, cx0, cy0, cstep, cnx, cny, covered, radius, False)
+                    wc = wc * math.exp(-disk_w * abs(gain - demand) / per_disk)
                 w[c] = wc
                 total += wc
             if total > 0:
@@ -186,6 +225,8 @@ def throw_darts(
             b2 = _bin(ang, dir_edges[t, : dir_ne[t]], False)
             if b2 >= 0:
                 dir_have[t, b2] += 1.0
+        if n_covered[0] < n_centres:
+            n_covered[0] += _disk_gain(qx, qy, cx0, cy0, cstep, cnx, cny, covered, radius, True)
         ci, cj = _cell_of(qx, qy, gx0, gy0, gcell, gnx, gny)
         cell = cj * gnx + ci
         nxt[k] = head[cell]

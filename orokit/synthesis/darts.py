@@ -119,6 +119,8 @@ def place_peaks(
     floor_w: float = 0.05,
     forced: tuple[np.ndarray, np.ndarray] | None = None,
     void_weight: float = 0.0,
+    disks: list | None = None,
+    disk_weight: float = 0.0,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Positions of peaks sorted by decreasing elevation ``z``.
@@ -132,10 +134,14 @@ def place_peaks(
     rho : per-peak ridge exponent (for the ridges diffused between passes).
     void_weight : weight of :func:`void_density` beside the ridge density between passes
         (0: the paper's ridge density only).
+    disks, disk_weight : per type, the ``disks`` record of its terrain type
+        (:mod:`orokit.synthesis.disks`) and the strength of the per-disk target: the share of
+        disk centres holding one of the highest peaks follows the type's ``top_rank``
+        distribution (0, or a type without the record: off).
 
     Returns
     -------
-    x, y, info (``passes``: rank ranges).
+    x, y, info (``passes``: rank ranges; ``disk_centres``: centres used by the per-disk target).
     """
     from orokit.synthesis.ridges import delaunay_mst
 
@@ -176,6 +182,7 @@ def place_peaks(
     head = np.full(gnx * gny, -1, np.int64)
     nxt = np.full(n, -1, np.int64)
     u = rng.random(n)
+    cover = _coverage_setup(disks, disk_weight, ptype, n_types, domain)
     density = controls.density.copy()
     type_masks = [controls.type_index == t for t in range(n_types)]
     passes = pass_bounds(n, n_passes)
@@ -202,7 +209,7 @@ def place_peaks(
         _kernels.throw_darts(
             px, py, s, e, fixed, fx, fy, cand_x, cand_y, cand_w, ptype.astype(np.int64), u,
             de, ne_d, dopen, dt, dh, ae, ne_a, at, ah, head, nxt,
-            domain.x0, domain.y0, gcell, gnx, gny, floor_w,
+            domain.x0, domain.y0, gcell, gnx, gny, floor_w, *cover,
         )
         if p_i + 1 < len(passes):
             fa = fb = None
@@ -218,4 +225,28 @@ def place_peaks(
                 dens_r /= max(1.0, float(dens_r.max()))
             density = controls.density * (ridge_floor + (1 - ridge_floor) * dens_r)
         logger.debug("pass %d: placed peaks %d..%d", p_i, s, e)
-    return px, py, {"passes": passes}
+    return px, py, {"passes": passes, "disk_centres": int(cover[3] * cover[4]) if cover[-1] > 0 else 0}
+
+
+def _coverage_setup(disks: list | None, disk_weight: float, ptype: np.ndarray, n_types: int,
+                    domain: Domain) -> tuple:
+    """Kernel arguments of the per-disk target (all zero-sized when it is off)."""
+    from orokit.synthesis.disks import coverage_targets, disk_centres
+
+    n = ptype.size
+    off = (0.0, 0.0, 1.0, 0, 0, np.zeros(0, np.bool_), np.zeros(1, np.int64), np.zeros(n), 1.0, 0.0)
+    if disk_weight <= 0 or not disks or len(disks) != n_types or any(d is None for d in disks):
+        return off
+    radius = float(disks[0]["radius_m"])
+    extent = (domain.x0, domain.y0, domain.x0 + domain.width, domain.y0 + domain.height)
+    cx, cy, step = disk_centres(extent, radius)
+    if cx.size == 0:
+        return off
+    nx = int(np.unique(cx).size)
+    ny = cx.size // nx
+    target = np.zeros(n)
+    for t in range(n_types):
+        mine = np.flatnonzero(ptype == t)  # peaks are sorted highest first: rank within the type
+        target[mine] = coverage_targets(disks[t], mine.size) * cx.size
+    return (float(cx.min()), float(cy.min()), float(step), nx, ny, np.zeros(cx.size, np.bool_),
+            np.zeros(1, np.int64), target, radius, float(disk_weight))

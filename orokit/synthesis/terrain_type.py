@@ -196,6 +196,10 @@ class TerrainType:
     texture : ``{"rms_m", "beta", "largest_m"}`` of the source DEM's short-wavelength
         texture (:func:`orokit.raster.noise.texture_spectrum`; None: no DEM was seen), which
         the renderer adds back (:class:`orokit.raster.params.RenderParams`).
+    disks : per-disk statistics of the source (:mod:`orokit.synthesis.disks`): quantiles over
+        10 km disks inside the data of their peak count, maximum prominence and ``top_rank``
+        (share of the peaks higher than the disk's highest); None for types made before it or
+        from data narrower than 20 km. The dart throwing follows ``top_rank``.
     bands : optional joint statistics (orokit): ``{"elevation_bins": [i0, ..., iK],
         "prominence": [[...]] * K, "dominance": [[...]] * K}``: prominence and dominance
         counts (on the marginal histograms' bins) of the peaks whose elevation falls in
@@ -215,6 +219,7 @@ class TerrainType:
     source_crs: str | None = None
     source_center: tuple[float, float] | None = None
     texture: Mapping[str, float] | None = None
+    disks: Mapping[str, Any] | None = None
 
     def __post_init__(self) -> None:
         missing = set(FEATURES) - set(self.histograms)
@@ -241,6 +246,10 @@ class TerrainType:
             if not (np.isfinite(t.get("rms_m", np.nan)) and t["rms_m"] >= 0 and np.isfinite(t.get("beta", np.nan))):
                 raise SchemaError(f"texture needs a finite rms_m >= 0 and beta, got {self.texture!r}")
             object.__setattr__(self, "texture", t)
+        if self.disks is not None:
+            from orokit.synthesis.disks import check_disk_quantiles
+
+            object.__setattr__(self, "disks", check_disk_quantiles(self.disks))
         e = self.histograms["elevation"]
         if e.edges[-1] <= 0:
             raise SchemaError("the elevation histogram lies entirely at or below 0 m: peaks need positive elevations")
@@ -259,6 +268,7 @@ class TerrainType:
         name: str = "type",
         provenance: Mapping[str, Any] | None = None,
         crs: Any = None,
+        extent: tuple[float, float, float, float] | None = None,
     ) -> "TerrainType":
         """Type from a peak table (``orokit analyze`` columns).
 
@@ -277,6 +287,8 @@ class TerrainType:
             directions geodesic azimuths (through :mod:`orokit.geodesy`), the nearest
             higher peak is searched in a local azimuthal equidistant projection.
             Projected: the CRS's linear unit is converted to metres. None: metres.
+        extent : ``(xmin, ymin, xmax, ymax)`` of the data in ``crs`` (for the per-disk
+            statistics, ``disks``); default: the peaks' bounding box.
 
         Raises
         ------
@@ -356,7 +368,8 @@ class TerrainType:
         bands = _elevation_bands(z[keyed], values["prominence"], values["dominance"], hists)
         src_crs, center = source_location(crs, 0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max()))
         return cls(name, hists, len(p) / float(area_km2), float(rho), float(min_prominence_m),
-                   isolation_basis, prov, bands, source_crs=src_crs, source_center=center)
+                   isolation_basis, prov, bands, source_crs=src_crs, source_center=center,
+                   disks=_disk_record(x, y, z, prom, crs, extent, min_prominence_m))
 
     @classmethod
     def from_divide_tree(cls, tree: Any, *, area_km2: float, min_prominence_m: float = 30.0,
@@ -399,10 +412,14 @@ class TerrainType:
         crs = grid_crs if crs is None else crs
         area = float(attrs["area_km2"]) if "area_km2" in attrs else grid_area_km2(transform, crs, shape)
         name = name or Path(str(attrs.get("source") or src or "type")).stem
+        extent = None
+        if transform is not None and shape is not None:
+            (ax, ay), (bx, by) = transform * (0, 0), transform * (shape[1], shape[0])
+            extent = (min(ax, bx), min(ay, by), max(ax, bx), max(ay, by))
         tt = cls.from_peaks(peaks, area_km2=area, min_prominence_m=eps,
                             tree=getattr(result, "tree", None), isolation_basis=isolation_basis,
                             rho=rho, name=name, provenance={"source": portable_path(attrs.get("source") or src)},
-                            crs=crs)
+                            crs=crs, extent=extent)
         if transform is not None and shape is not None and crs is not None and not attrs.get("local_grid"):
             cx, cy = transform * (0.5 * shape[1], 0.5 * shape[0])
             src_crs, center = source_location(crs, cx, cy)
@@ -496,6 +513,7 @@ class TerrainType:
             "source_crs": self.source_crs,
             "source_center": None if self.source_center is None else list(self.source_center),
             "texture": None if self.texture is None else dict(self.texture),
+            "disks": None if self.disks is None else dict(self.disks),
         }
 
     @classmethod
@@ -517,7 +535,7 @@ class TerrainType:
                        dict(data.get("provenance", {})), data.get("bands"),
                        source_crs=data.get("source_crs"),
                        source_center=None if data.get("source_center") is None else tuple(data["source_center"]),
-                       texture=data.get("texture"))
+                       texture=data.get("texture"), disks=data.get("disks"))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, SchemaError):
                 raise
@@ -623,6 +641,25 @@ def _check_range(feature: str, h: FeatureHistogram) -> None:
         raise SchemaError(f"{feature} histogram must not go below 0, got first edge {e[0]:g}")
     if FEATURES[feature][1] == "circular" and (e[0] < 0 or e[-1] > 360):
         raise SchemaError(f"{feature} histogram must lie in [0, 360] degrees")
+
+
+def _disk_record(x: np.ndarray, y: np.ndarray, z: np.ndarray, prom: np.ndarray, crs: Any,
+                 extent: tuple[float, float, float, float] | None, min_prominence_m: float) -> dict[str, Any] | None:
+    """The ``disks`` record of a type (None when the data holds no 10 km disk)."""
+    from orokit.synthesis.disks import disk_quantiles, disk_statistics
+    from orokit.synthesis.orometry import planar_xy
+
+    if extent is None:
+        ex = np.array([np.nanmin(x), np.nanmax(x)])
+        ey = np.array([np.nanmin(y), np.nanmax(y)])
+    else:
+        ex = np.array([extent[0], extent[2]], float)
+        ey = np.array([extent[1], extent[3]], float)
+    cx, cy = np.meshgrid(ex, ey)
+    px, py = planar_xy(np.concatenate([x, cx.ravel()]), np.concatenate([y, cy.ravel()]), crs)
+    k = x.size
+    box = (float(px[k:].min()), float(py[k:].min()), float(px[k:].max()), float(py[k:].max()))
+    return disk_quantiles(disk_statistics(px[:k], py[:k], z, prom, box, min_prominence_m=min_prominence_m))
 
 
 def estimate_rho(tree: Any, min_prominence_m: float = 30.0, choices: tuple[float, ...] = (0.0, 1.0, 2.0)) -> float:

@@ -350,7 +350,8 @@ def test_void_weight_fills_the_holes_between_peaks(small_type):
 
     plain, filled = [], []
     for seed in range(3):
-        plain.append(gap_q90(synthesize_divide_tree(small_type, size_m=SIZE, rng=seed)))
+        plain.append(gap_q90(synthesize_divide_tree(small_type, size_m=SIZE, rng=seed,
+                                                    params=SynthesisParams(void_weight=0.0))))
         t = synthesize_divide_tree(small_type, size_m=SIZE, rng=seed, params=SynthesisParams(void_weight=1.0))
         filled.append(gap_q90(t))
         assert compare_to_type(t, small_type)["max_bin_error"].max() < 0.2

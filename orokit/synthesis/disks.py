@@ -1,0 +1,146 @@
+"""Per-disk statistics of a peak set: what a 10 km neighbourhood holds (issue 11).
+
+The region classifier describes ground by disks of radius R (10 km): how many peaks a
+disk holds, how prominent and how high its highest peaks are. Matching a region's
+global histograms does not fix how those quantities vary from disk to disk, so a
+terrain type also records their distribution over disk centres on a regular grid
+inside the data (every disk entirely inside it), and the dart throwing follows one of
+them (:func:`coverage_targets`).
+
+``top_rank`` of a disk is the share of all the peaks that are higher than the disk's
+highest peak: 0 for a disk holding the highest peak, small when every disk holds one
+of the high peaks. It does not depend on the elevation scale, so it survives edits
+of the elevation histogram.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from orokit.errors import SchemaError
+
+__all__ = ["DISK_RADIUS_M", "DISK_LEVELS", "disk_centres", "disk_statistics", "disk_quantiles",
+           "check_disk_quantiles", "coverage_targets"]
+
+#: radius of the disks (the region classifier's R)
+DISK_RADIUS_M = 10_000.0
+#: quantile levels recorded in a terrain type
+DISK_LEVELS = tuple(float(v) for v in np.linspace(0.0, 1.0, 21))
+#: recorded quantities (per disk)
+DISK_QUANTITIES = ("peaks", "max_prominence_m", "top_rank")
+#: at most this many disk centres (the grid step grows to stay below it)
+MAX_CENTRES = 4096
+
+
+def disk_centres(extent: tuple[float, float, float, float], radius_m: float = DISK_RADIUS_M,
+                 step_m: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """Centres (x, y) of the disks of ``radius_m`` lying entirely inside ``extent``.
+
+    ``extent`` is ``(xmin, ymin, xmax, ymax)`` in metres. The centres form a regular grid
+    of step ``step_m`` (default ``radius_m / 10``, enlarged to keep at most
+    :data:`MAX_CENTRES`); empty when the extent is narrower than ``2 radius_m``.
+    Returns x, y (flattened, row-major from the south-west) and the step used.
+    """
+    xmin, ymin, xmax, ymax = (float(v) for v in extent)
+    w, h = xmax - xmin - 2 * radius_m, ymax - ymin - 2 * radius_m
+    step = float(step_m) if step_m is not None else radius_m / 10.0
+    if w < 0 or h < 0:
+        return np.empty(0), np.empty(0), step
+    while (math.floor(w / step) + 1) * (math.floor(h / step) + 1) > MAX_CENTRES:
+        step *= 1.25
+    gx = xmin + radius_m + np.arange(math.floor(w / step) + 1) * step
+    gy = ymin + radius_m + np.arange(math.floor(h / step) + 1) * step
+    cx, cy = np.meshgrid(gx, gy)
+    return cx.ravel(), cy.ravel(), step
+
+
+def disk_statistics(x: np.ndarray, y: np.ndarray, elevation: np.ndarray, prominence: np.ndarray,
+                    extent: tuple[float, float, float, float], *, radius_m: float = DISK_RADIUS_M,
+                    min_prominence_m: float = 30.0, step_m: float | None = None) -> dict[str, np.ndarray]:
+    """Per-disk peak count, maximum prominence and ``top_rank`` (see the module docstring).
+
+    Only peaks with prominence >= ``min_prominence_m`` count (x, y in metres of a planar
+    frame). Disks with no peak have ``max_prominence_m`` 0 and ``top_rank`` 1.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> s = disk_statistics(np.array([15e3, 40e3]), np.array([15e3, 15e3]), np.array([900., 500.]),
+    ...                     np.array([800., 100.]), (0, 0, 50e3, 30e3), step_m=5e3)
+    >>> s["peaks"].tolist()[:7], s["top_rank"].tolist()[:7]
+    ([1, 1, 1, 0, 0, 1, 1], [0.0, 0.0, 0.0, 1.0, 1.0, 0.5, 0.5])
+    """
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    z, prom = np.asarray(elevation, float), np.asarray(prominence, float)
+    keep = np.isfinite(x) & np.isfinite(y) & (prom >= min_prominence_m)
+    x, y, z, prom = x[keep], y[keep], z[keep], prom[keep]
+    cx, cy, _ = disk_centres(extent, radius_m, step_m)
+    n = np.zeros(cx.size, np.int64)
+    mp = np.zeros(cx.size)
+    top = np.ones(cx.size)
+    if x.size and cx.size:
+        # rank of every peak: share of the peaks strictly higher than it
+        zs = np.sort(z)
+        higher = (z.size - np.searchsorted(zs, z, side="right")) / z.size
+        for i, members in enumerate(cKDTree(np.c_[x, y]).query_ball_point(np.c_[cx, cy], radius_m)):
+            if members:
+                n[i] = len(members)
+                mp[i] = prom[members].max()
+                top[i] = higher[members].min()
+    return {"x": cx, "y": cy, "peaks": n, "max_prominence_m": mp, "top_rank": top}
+
+
+def disk_quantiles(stats: Mapping[str, np.ndarray], *, radius_m: float = DISK_RADIUS_M) -> dict[str, Any] | None:
+    """The terrain type's record of :func:`disk_statistics`: quantiles at :data:`DISK_LEVELS`.
+
+    None when there is no disk (data narrower than ``2 radius_m``).
+    """
+    if len(stats["peaks"]) == 0:
+        return None
+    levels = np.asarray(DISK_LEVELS)
+    out: dict[str, Any] = {"radius_m": float(radius_m), "n_disks": int(len(stats["peaks"])),
+                           "levels": [float(v) for v in levels]}
+    for k in DISK_QUANTITIES:
+        out[k] = [float(v) for v in np.quantile(np.asarray(stats[k], float), levels)]
+    return out
+
+
+def check_disk_quantiles(disks: Mapping[str, Any]) -> dict[str, Any]:
+    """Validate a terrain type's ``disks`` record; returns it with floats."""
+    try:
+        levels = [float(v) for v in disks["levels"]]
+        out: dict[str, Any] = {"radius_m": float(disks["radius_m"]), "n_disks": int(disks.get("n_disks", 0)),
+                               "levels": levels}
+        for k in DISK_QUANTITIES:
+            out[k] = [float(v) for v in disks[k]]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise SchemaError(f"terrain type disks record needs radius_m, levels and {list(DISK_QUANTITIES)} "
+                          f"(lists of numbers): {type(exc).__name__}: {exc}") from exc
+    lv = np.asarray(levels)
+    if not (out["radius_m"] > 0 and lv.size >= 2 and lv[0] == 0.0 and lv[-1] == 1.0 and np.all(np.diff(lv) > 0)):
+        raise SchemaError(f"terrain type disks record: radius_m must be > 0 and levels increase from 0 to 1, "
+                          f"got radius_m={out['radius_m']!r}, levels={levels[:4]}...")
+    for k in DISK_QUANTITIES:
+        v = np.asarray(out[k])
+        if v.size != lv.size or not np.all(np.isfinite(v)) or np.any(np.diff(v) < 0):
+            raise SchemaError(f"terrain type disks record: {k} needs {lv.size} finite non-decreasing quantiles")
+    if out["top_rank"][0] < 0 or out["top_rank"][-1] > 1:
+        raise SchemaError("terrain type disks record: top_rank quantiles must lie in [0, 1]")
+    return out
+
+
+def coverage_targets(disks: Mapping[str, Any], n: int) -> np.ndarray:
+    """Share of disk centres that should hold one of the ``k + 1`` highest peaks, for k < n.
+
+    A disk holds one of the ``k + 1`` highest of ``n`` peaks exactly when its ``top_rank``
+    is at most ``k / n``; the type's quantiles of ``top_rank`` give that share.
+    """
+    levels = np.asarray(disks["levels"], float)
+    tr = np.asarray(disks["top_rank"], float)
+    r = (np.arange(int(n)) + 0.5) / max(int(n), 1)
+    # the CDF of top_rank at r (the quantile function inverted; peak k has top_rank k / n)
+    return np.interp(r, tr, levels, left=0.0, right=1.0)
