@@ -3,12 +3,21 @@
 Usage:
     python benchmarks/generators.py bench [--generator belhadj] [--type norway] [--size-km 60] [--res 30]
     python benchmarks/generators.py figures [--type norway] [--size-km 30] [--res 30]
+    python benchmarks/generators.py michel [--type norway] [--seed 0]
+    python benchmarks/generators.py psnr [--regions pyrenees,himalaya-everest,norway] [--radius 16]
 
 ``bench``: a Divide Tree of SIZE x SIZE km is synthesized from the committed terrain type
 ``reports/synthesis/types/TYPE.json`` (seed 0) and rendered at RES metres by the generator in a
 fresh process (numba caches warmed on a coarse render first, so the peak RSS and the times
 are the render's); prints time per stage and peak RSS, records them with the machine load in
 ``reports/benchmarks/generators.json`` (one entry per generator).
+
+``psnr``: Guérin 2016 Table 1 (K-SVD, N = 128, s = 1/2/8) on 512 x 512 crops of real DEMs
+(the paper's Alps DEM is not among the shared data), recorded in ``reports/benchmarks/guerin_psnr.json``.
+
+``michel``: Michel 2015 Fig. 5 (sub-plates, merged plates with velocities, fold height map) in
+``reports/generators/michel/`` and a T1 sweep (plates, landform distances to the real DEM) in
+``reports/benchmarks/michel_t1.json``.
 
 ``figures``: Belhadj 2007 Figs. 3, 5 and 6 on a synthesized tree's skeleton (ridges + rivers):
 MD alone, the cells MDI fills, MDI + MD, and the paper's own particle skeleton
@@ -145,9 +154,118 @@ def figures(type_name: str, size_km: float, res: float, seed: int, out: Path) ->
     return written
 
 
+def psnr_table(regions: list[str], side: int, radius: int, n_atoms: int, sparsities: list[int], seed: int) -> dict:
+    """Guérin 2016 Table 1 setting: K-SVD dictionary of ``n_atoms`` learned on a ``side``^2 terrain,
+    the same terrain coded at sparsity s and rebuilt; PSNR = 20 log10(elevation range / RMSE)."""
+    import numpy as np
+
+    from orokit.data import open_dataset_dem
+    from orokit.generators.guerin import GuerinParams, build_dictionary, synthesize
+
+    rows = []
+    for region in regions:
+        z = np.asarray(open_dataset_dem(region).values, float)
+        i0, j0 = (z.shape[0] - side) // 2, (z.shape[1] - side) // 2
+        z = z[i0:i0 + side, j0:j0 + side]
+        for s in sparsities:
+            t0 = time.perf_counter()
+            p = GuerinParams(radius=radius, factor=1, sparsity=s, dictionary="ksvd", n_atoms=n_atoms)
+            d = build_dictionary(z, p, np.random.default_rng(seed))
+            rec = synthesize(z, d, s, z.shape)
+            rmse = float(np.sqrt(np.mean((rec - z) ** 2)))
+            rows.append({"region": region, "side": side, "radius": radius, "n_atoms": int(d.n_atoms), "sparsity": s,
+                         "rmse_m": round(rmse, 2), "range_m": round(float(z.max() - z.min()), 1),
+                         "psnr_db": round(20.0 * np.log10(float(z.max() - z.min()) / rmse), 2),
+                         "time_s": round(time.perf_counter() - t0, 2)})
+            print(rows[-1], flush=True)
+    return {"paper_alps_512_n128": {"1": 23.7, "2": 26.4, "8": 31.1}, "rows": rows,
+            "load_average_after": list(os.getloadavg())}
+
+
+def michel_sweep(type_name: str, seed: int, t1_values: list[float], out: Path) -> dict:
+    """Michel 2015: Fig. 5 (plate map, fold height map) and a T1 sweep on a synthesized tree.
+
+    The tree (seed ``seed``) of the real DEM's size is rendered on its grid for every T1
+    (T2 at its default and at 0): number of plates, and the landform distances to the real
+    DEM (``compare_landforms``, with the real halves' target).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from orokit.data import open_dataset_dem
+    from orokit.generators import michel as M
+    from orokit.generators import render_terrain
+    from orokit.generators.base import tree_arrays, tree_rivers
+    from orokit.raster.rasterize import make_grid
+    from orokit.raster.skeleton import tree_extent
+    from orokit.validate.landform import compare_landforms, landform_statistics, split_halves
+
+    real = open_dataset_dem(type_name)
+    res = abs(float(real.rio.transform().a))
+    size_km = real.shape[1] * res / 1000.0
+    tree = _tree(type_name, size_km, seed)
+    grid = make_grid(tree_extent(tree), res)
+    rivers = tree_rivers(tree, grid)
+    a = tree_arrays(tree)
+    halves = tuple(landform_statistics(h) for h in split_halves(real))
+    rs = landform_statistics(real)
+    rows = []
+    for t2 in (M.MichelParams().t2, 0.0):
+        for t1 in t1_values:
+            p = M.MichelParams(t1=t1, t2=t2)
+            plates = M.merge_plates(M.sub_plates(a.peaks[:, :2], grid), t1=t1, t2=t2)
+            t0 = time.process_time()
+            dem = render_terrain(tree, generator="michel", grid=grid, rivers=rivers, params=p, seed=seed)
+            cpu = time.process_time() - t0
+            lf = compare_landforms(rs, dem, halves=halves)
+            row = {"t1": t1, "t2": t2, "plates": plates.n, "render_cpu_s": round(cpu, 2),
+                   "within_target": int(lf["ok"].sum()), "n_statistics": int(len(lf))}
+            row.update({f"{k}": round(float(v), 4) for k, v in lf["distance"].items()})
+            rows.append(row)
+            print(row, flush=True)
+    # Fig. 5: initial plate map (sub-plates), merged plates with velocities, fold height map
+    p = M.MichelParams()
+    d, label = M.nearest_peak(a.peaks[:, :2], grid)
+    sub = M.sub_plates(a.peaks[:, :2], grid, label)
+    merged = M.merge_plates(sub, t1=p.t1, t2=p.t2)
+    vel = M.velocity_map(merged, grid.cell_size_m, p.blur_m)
+    pad = int(np.ceil(float(np.abs(vel).max()) / grid.cell_size_m)) + 2
+    noise = M.fbm((grid.ny + 2 * pad, grid.nx + 2 * pad), p.fbm_beta, np.random.default_rng(seed))
+    folds = M.fold_map(noise, pad, vel, grid.cell_size_m)
+    k = p.k_min + (1.0 - p.k_min) * np.exp(-0.5 * (d / p.k_sigma_m) ** 2)
+    km = [0, grid.nx * grid.cell_size_m / 1000.0, grid.ny * grid.cell_size_m / 1000.0, 0]
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5.6))
+    rng = np.random.default_rng(1)
+    for ax, pl, title in ((axes[0], sub, f"sub-plates ({sub.n}, Voronoi of the peaks)"),
+                          (axes[1], merged, f"plates after merging ({merged.n}; T1 {p.t1}, T2 {p.t2})")):
+        colours = rng.permutation(pl.n)
+        ax.imshow(colours[pl.label], cmap="tab20", extent=km, interpolation="nearest")
+        ys, xs = np.mgrid[0:grid.ny:24, 0:grid.nx:24]
+        v = M.velocity_map(pl, grid.cell_size_m, 1e-6)[:, ys, xs] if pl is sub else vel[:, ys, xs]
+        ax.quiver(xs * grid.cell_size_m / 1000, (grid.ny - ys) * grid.cell_size_m / 1000, v[0], v[1],
+                  angles="xy", color="k", width=0.002)
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("km")
+    im = axes[2].imshow((folds - folds.min()) * k, cmap="terrain", extent=km)
+    axes[2].set_title("fold height map f = fBm(p + V(p)) k (Fig. 5 right)", fontsize=9)
+    axes[2].set_xlabel("km")
+    fig.colorbar(im, ax=axes[2], shrink=0.8)
+    fig.tight_layout()
+    out.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out / "fig5_plates_folds.png", dpi=90)
+    plt.close(fig)
+    return {"type": type_name, "seed": seed, "cell_size_m": res, "size_km": round(size_km, 2),
+            "peaks": int(tree.n_peaks), "rows": rows, "load_average_after": list(os.getloadavg())}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("what", choices=["bench", "figures"])
+    ap.add_argument("what", choices=["bench", "figures", "psnr", "michel"])
+    ap.add_argument("--regions", default="pyrenees,himalaya-everest,norway")
+    ap.add_argument("--radius", type=int, default=16)
     ap.add_argument("--generator", default="belhadj")
     ap.add_argument("--type", dest="type_name", default="norway")
     ap.add_argument("--size-km", type=float, default=None)
@@ -158,6 +276,21 @@ def main() -> None:
     if a.what == "figures":
         for p in figures(a.type_name, a.size_km or 30.0, a.res, a.seed, ROOT / "reports" / "generators" / "belhadj"):
             print(p)
+        return
+    if a.what == "michel":
+        sys.path.insert(0, str(Path(__file__).parent))
+        from _record import record
+
+        res = michel_sweep(a.type_name, a.seed, [-1.0, 0.0, 0.5, 0.75, 0.9, 1.0],
+                           ROOT / "reports" / "generators" / "michel")
+        print(f"recorded in {record('michel_t1', res)}")
+        return
+    if a.what == "psnr":
+        sys.path.insert(0, str(Path(__file__).parent))
+        from _record import record
+
+        res = psnr_table(a.regions.split(","), 512, a.radius, 128, [1, 2, 8], a.seed)
+        print(f"recorded in {record('guerin_psnr', res)}")
         return
     size = a.size_km or 60.0
     if a.child:

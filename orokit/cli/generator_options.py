@@ -13,7 +13,7 @@ __all__ = ["generator_options", "check_generator_inputs", "render_generator", "f
 
 #: raster attrs written as COG tags besides those :func:`write_cog` always writes
 EXTRA_TAGS = ("generator_paper", "tree_sha256", "tree_file_sha256", "exemplar_sha256", "coarse_sha256",
-              "generators_sha256", "cell_counts", "n_tree_peaks")
+              "generators_sha256", "map_sha256", "cell_counts", "n_tree_peaks")
 
 
 def _list_generators(ctx: click.Context, param: click.Parameter, value: bool) -> None:
@@ -73,7 +73,7 @@ def file_inputs(params: Any) -> tuple[dict[str, Any], dict[str, str]]:
     """Read the file-valued parameters of a backend (fields with ``metadata={"file": kind}``).
 
     ``dem``: a DEM file or manifest dataset (:func:`exemplar_dem`); ``table``: a CSV file
-    (pandas). Returns the data by parameter name and their
+    (pandas); ``vector``: a vector map (:func:`orokit.io.vector_map_io.read_vector_map`). Returns the data by parameter name and their
     sha256 (``<name>_sha256``) for the raster tags.
     """
     import dataclasses
@@ -93,6 +93,11 @@ def file_inputs(params: Any) -> tuple[dict[str, Any], dict[str, str]]:
             except InputError:
                 raise InputError(f"--param {f.name}={value}: neither a DEM file nor a dataset of the manifest; "
                                  "pass an existing DEM") from None
+        elif kind == "vector":
+            from orokit.io.vector_map_io import read_vector_map
+
+            data[f.name] = read_vector_map(str(value))
+            hashes[f"{f.name}_sha256"] = sha256_file(Path(str(value)))
         else:
             import pandas as pd
 

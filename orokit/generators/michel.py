@@ -4,8 +4,10 @@ E. Michel, A. Emilien, M.-P. Cani, *Generation of folded terrains from simple ve
 Eurographics 2015 short papers (doi:10.2312/egsh.20151011). From a Divide Tree only the peak
 positions are used (not their heights, saddles or ridges: the method has no such input),
 plus the rivers of :func:`orokit.generators.base.tree_rivers` with the sea at their
-outlets; the result is scaled to the tree's relief. The paper gives no value for T1, T2,
-the blur, k or the slopes: the defaults below are orokit's (exposed as parameters).
+outlets; the result is scaled to the tree's relief. ``map=FILE`` is the paper's plain mode: a
+vector map (peak points, river lines drawn from source to mouth, land polygons) replaces the
+tree's peaks and rivers (the tree then only gives the grid and CRS). The paper gives no value
+for T1, T2, the blur, k or the slopes: the defaults below are orokit's (exposed as parameters).
 """
 from __future__ import annotations
 
@@ -13,7 +15,8 @@ import heapq
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -26,8 +29,8 @@ from orokit.raster.rivers import RiverNetwork
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["MichelParams", "Plates", "sub_plates", "merge_plates", "velocity_map", "fbm", "fold_map",
-           "watershed_map", "render"]
+__all__ = ["MichelParams", "Plates", "VectorMap", "sub_plates", "merge_plates", "velocity_map", "fbm", "fold_map",
+           "watershed_map", "map_watershed", "render"]
 
 
 @dataclass(frozen=True)
@@ -43,6 +46,10 @@ class MichelParams:
     river_slope, hill_slope : slopes (m/m) of the watershed map along the rivers and away from them.
     mask_m : distance to the rivers (metres) where the fold map fully takes over from the watershed.
     erosion : run the fastscapelib stream-power erosion of :mod:`orokit.raster.erosion`.
+    map : a vector map file (GeoPackage, GeoJSON, shapefile; read by
+        :func:`orokit.io.vector_map_io.read_vector_map`) used instead of the tree's peaks and rivers.
+    top_m : highest elevation in ``map`` mode when the map's points carry no ``elevation``
+        (the sea is at 0 m).
     """
 
     t1: float = 0.5
@@ -55,6 +62,8 @@ class MichelParams:
     hill_slope: float = 0.05
     mask_m: float = 1000.0
     erosion: bool = True
+    map: str = field(default="", metadata={"file": "vector"})
+    top_m: float = 2000.0
 
     def __post_init__(self) -> None:
         if not (-1.0 <= self.t1 <= 1.0):
@@ -71,6 +80,21 @@ class MichelParams:
             raise InputError(f"k_min must be in (0, 1) (the paper's k is in ]0, 1[), got {self.k_min!r}")
         if not (0.0 < self.river_slope < self.hill_slope):
             raise InputError(f"need 0 < river_slope < hill_slope, got {self.river_slope!r}, {self.hill_slope!r}")
+        if not (self.top_m > 0 and math.isfinite(self.top_m)):
+            raise InputError(f"top_m must be a positive number of metres, got {self.top_m!r}")
+
+
+@dataclass(frozen=True)
+class VectorMap:
+    """The paper's input map: peak points ``(n, 2)``, river polylines (each ``(k, 2)``, drawn
+    from source to mouth), land polygons (a shapely geometry, or None: no coast, the grid
+    border is the sea), the highest elevation if the map gives one, and its CRS (WKT or None)."""
+
+    peaks: np.ndarray
+    rivers: tuple[np.ndarray, ...] = ()
+    land: Any = None
+    top_m: float | None = None
+    crs: str | None = None
 
 
 @dataclass(frozen=True)
@@ -96,14 +120,24 @@ def _adjacent_pairs(label: np.ndarray) -> np.ndarray:
     return np.unique(p, axis=0) if p.size else p.reshape(0, 2)
 
 
-def sub_plates(peak_xy: np.ndarray, grid: Grid) -> Plates:
-    """Voronoi cells of the peaks on the grid; velocity = peak - centre of mass of its cell."""
+def nearest_peak(peak_xy: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
+    """Distance (m) to the nearest peak and its index, for every cell centre (one k-d tree query)."""
     from scipy.spatial import cKDTree
 
     x, y = grid.centres()
     xx, yy = np.meshgrid(x, y)
-    _, label = cKDTree(peak_xy).query(np.column_stack([xx.ravel(), yy.ravel()]))
-    label = label.reshape(grid.ny, grid.nx).astype(np.int64)
+    d, label = cKDTree(peak_xy).query(np.column_stack([xx.ravel(), yy.ravel()]))
+    return d.reshape(grid.ny, grid.nx), label.reshape(grid.ny, grid.nx).astype(np.int64)
+
+
+def sub_plates(peak_xy: np.ndarray, grid: Grid, label: np.ndarray | None = None) -> Plates:
+    """Voronoi cells of the peaks on the grid; velocity = peak - centre of mass of its cell.
+
+    ``label``: the nearest peak of every cell if already known (:func:`nearest_peak`)."""
+    x, y = grid.centres()
+    xx, yy = np.meshgrid(x, y)
+    if label is None:
+        label = nearest_peak(peak_xy, grid)[1]
     n = peak_xy.shape[0]
     count = np.bincount(label.ravel(), minlength=n).astype(float)
     cx = np.bincount(label.ravel(), weights=xx.ravel(), minlength=n)
@@ -266,6 +300,13 @@ def watershed_map(rivers: RiverNetwork | None, grid: Grid, *, river_slope: float
     if not src.any():  # no river inside: the border is the sea
         src[0, :] = src[-1, :] = src[:, 0] = src[:, -1] = True
         h0[src] = 0.0
+    return _spread(h0, src, grid, hill_slope), src
+
+
+def _spread(h0: np.ndarray, src: np.ndarray, grid: Grid, hill_slope: float) -> np.ndarray:
+    """``min over source cells (h0 + hill_slope x 8-connected path length)`` on the grid."""
+    from orokit.generators import _rusnell_kernels as _k
+
     gi, gj = np.nonzero(src)
     w = np.full((grid.ny, grid.nx, 4), hill_slope * grid.cell_size_m)
     w[:, :, 1] *= math.sqrt(2.0)
@@ -277,12 +318,92 @@ def watershed_map(rivers: RiverNetwork | None, grid: Grid, *, river_slope: float
     touched = np.empty(grid.ny * grid.nx, np.int64)
     _k.cost_field(w, gi.astype(np.int64), gj.astype(np.int64), h0[gi, gj], np.inf, np.ones(2), False,
                   np.zeros((0, 0)), 0.0, stamp, 0, cost, srcc, touched, fixed, np.zeros((0, 0), np.uint8))
-    return cost, src
+    return cost
+
+
+def land_mask(vmap: VectorMap, grid: Grid) -> np.ndarray:
+    """True on cells whose centre lies on the map's land (every cell when it has no coast)."""
+    if vmap.land is None:
+        return np.ones((grid.ny, grid.nx), bool)
+    import shapely
+
+    x, y = grid.centres()
+    xx, yy = np.meshgrid(x, y)
+    return np.asarray(shapely.contains_xy(vmap.land, xx, yy), bool)
+
+
+def map_watershed(vmap: VectorMap, grid: Grid, *, river_slope: float, hill_slope: float
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Watershed map g of a vector map, its river cells and its land cells.
+
+    Sea cells (outside the land polygons) are at 0 m. Each river line is drawn from source
+    to mouth; its height rises by ``river_slope x`` the distance along it from the mouth.
+    A mouth at the sea or on the grid border (within 1.5 cells) starts at 0; a mouth on
+    another river (within 1.5 cells of a river cell placed before) starts at that river's
+    height there; rivers are placed in that order. Other cells: as :func:`watershed_map`.
+    Without sea and rivers, the grid border is the sea.
+    """
+    from scipy.spatial import cKDTree
+
+    from orokit.generators.belhadj import _densify
+
+    land = land_mask(vmap, grid)
+    h0 = np.where(land, np.inf, 0.0)
+    tol = 1.5 * grid.cell_size_m
+    x, y = grid.centres()
+    xmin, ymin, xmax, ymax = grid.extent
+    sea_xy = None
+    if (~land).any():
+        si, sj = np.nonzero(~land)
+        sea_xy = cKDTree(np.column_stack([x[sj], y[si]]))
+    placed: list[np.ndarray] = []   # xy of river samples placed so far
+    placed_h: list[np.ndarray] = []
+    pending = [np.asarray(r, float)[::-1] for r in vmap.rivers if len(r) >= 2]  # mouth first
+    while pending:
+        rest = []
+        tree = cKDTree(np.concatenate(placed)) if placed else None
+        hs = np.concatenate(placed_h) if placed_h else np.zeros(0)
+        for line in pending:
+            m = line[0]
+            at_border = min(m[0] - xmin, xmax - m[0], m[1] - ymin, ymax - m[1]) <= tol
+            at_sea = sea_xy is not None and sea_xy.query(m)[0] <= tol
+            if at_border or at_sea:
+                start = 0.0
+            elif tree is not None and tree.query(m)[0] <= tol:
+                start = float(hs[tree.query(m)[1]])
+            else:
+                rest.append(line)
+                continue
+            seg = np.hypot(*np.diff(line, axis=0).T)
+            dist = np.concatenate([[0.0], np.cumsum(seg)])
+            xy, h = _densify(line[:-1], line[1:], start + river_slope * dist[:-1], start + river_slope * dist[1:],
+                             0.5 * grid.cell_size_m)
+            placed.append(xy)
+            placed_h.append(h)
+            row, col, ok = grid.cell_of(xy)
+            np.minimum.at(h0, (row[ok], col[ok]), h[ok])
+        if len(rest) == len(pending):  # mouths on nothing known (inland lakes): start at the sea level
+            for line in rest:
+                seg = np.hypot(*np.diff(line, axis=0).T)
+                dist = np.concatenate([[0.0], np.cumsum(seg)])
+                xy, h = _densify(line[:-1], line[1:], river_slope * dist[:-1], river_slope * dist[1:],
+                                 0.5 * grid.cell_size_m)
+                row, col, ok = grid.cell_of(xy)
+                np.minimum.at(h0, (row[ok], col[ok]), h[ok])
+            break
+        pending = rest
+    river = np.isfinite(h0) & land
+    src = np.isfinite(h0)
+    if not src.any():
+        src[0, :] = src[-1, :] = src[:, 0] = src[:, -1] = True
+        h0[src] = 0.0
+    return _spread(h0, src, grid, hill_slope), river, land
 
 
 def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generator,
-           params: MichelParams | None = None) -> xr.DataArray:
-    """Elevation raster after Michel et al. 2015 from a Divide Tree's peak positions and rivers.
+           params: MichelParams | None = None, *, map: VectorMap | None = None) -> xr.DataArray:  # noqa: A002
+    """Elevation raster after Michel et al. 2015 from a Divide Tree's peak positions and rivers,
+    or from a vector map (``map``, read by the caller from ``params.map``).
 
     Notes
     -----
@@ -290,47 +411,65 @@ def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generat
     2. Merging (:func:`merge_plates`) with thresholds t1 (direction) and t2 (area ratio).
     3. V: plate velocities blurred (sigma ``blur_m``).
     4. Folds: ``f(p) = fBm(p + V(p)) x k(p)``, k falling with the distance to the nearest peak.
-    5. Watershed g (:func:`watershed_map`) from the rivers, the sea at their outlets.
-    6. ``h = g (1 - m) + F m`` with m = distance to the rivers / ``mask_m`` (clipped to 1) and F the
-       fold map scaled to the tree's relief (from the sea, the rivers' outlet level, to the
-       highest peak); g starts at the sea.
+    5. Watershed g (:func:`watershed_map`) from the rivers, the sea at their outlets; with a
+       map, :func:`map_watershed` (sea outside the land polygons, at 0 m).
+    6. ``h = g (1 - m) + F m`` with m = distance to the rivers (and the sea) / ``mask_m``
+       (clipped to 1) and F the fold map scaled to the relief (from the sea, the rivers'
+       outlet level, to the highest peak; with a map from 0 to its top elevation or
+       ``top_m``); g starts at the sea.
     7. Optional fastscapelib erosion (:func:`orokit.raster.erosion.erode_multiscale`, no uplift).
 
-    Peak heights, saddles and ridges of the tree are not used (the paper's input is a vector
-    map of peak positions).
+    From a tree, its peak heights, saddles and ridges are not used (the paper's input is a
+    vector map of peak positions).
     """
     params = params or MichelParams()
     crs = check_crs(tree)
     a = tree_arrays(tree)
+    if params.map and map is None:
+        raise InputError(f"map={params.map!r}: the caller reads the vector map file (orokit render does); "
+                         "pass map=VectorMap(...) to render")
+    if map is not None:
+        if map.crs and crs is not None:
+            from pyproj import CRS
+
+            if CRS.from_user_input(map.crs) != crs:
+                raise InputError(f"the vector map's CRS ({CRS.from_user_input(map.crs).name}) differs from the "
+                                 f"tree's ({crs.name}); reproject the map (e.g. ogr2ogr -t_srs) first")
+        peak_xy = np.asarray(map.peaks, float).reshape(-1, 2)
+        what = "the vector map"
+    else:
+        peak_xy = a.peaks[:, :2]
+        what = "the Divide Tree"
     t: dict[str, float] = {}
     t0 = time.perf_counter()
-    row, col, ok = grid.cell_of(a.peaks[:, :2])
+    row, col, ok = grid.cell_of(peak_xy)
     if not ok.any():
-        raise InputError("no peak of the Divide Tree lies inside the grid")
-    plates = merge_plates(sub_plates(a.peaks[ok, :2], grid), t1=params.t1, t2=params.t2)
+        raise InputError(f"no peak of {what} lies inside the grid")
+    d, label = nearest_peak(peak_xy[ok], grid)
+    plates = merge_plates(sub_plates(peak_xy[ok], grid, label), t1=params.t1, t2=params.t2)
     t["plates"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     vel = velocity_map(plates, grid.cell_size_m, params.blur_m)
     pad = int(math.ceil(float(np.abs(vel).max()) / grid.cell_size_m)) + 2
     noise = fbm((grid.ny + 2 * pad, grid.nx + 2 * pad), params.fbm_beta, rng)
     folds = fold_map(noise, pad, vel, grid.cell_size_m)
-    from scipy.spatial import cKDTree
-
-    x, y = grid.centres()
-    xx, yy = np.meshgrid(x, y)
-    d, _ = cKDTree(a.peaks[ok, :2]).query(np.column_stack([xx.ravel(), yy.ravel()]))
-    k = params.k_min + (1.0 - params.k_min) * np.exp(-0.5 * (d.reshape(xx.shape) / params.k_sigma_m) ** 2)
+    k = params.k_min + (1.0 - params.k_min) * np.exp(-0.5 * (d / params.k_sigma_m) ** 2)
     f = (folds - folds.min()) * k
     t["folds"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    g, river = watershed_map(rivers, grid, river_slope=params.river_slope, hill_slope=params.hill_slope)
-    dist = ndimage.distance_transform_edt(~river, sampling=grid.cell_size_m)
+    if map is None:
+        g, wet = watershed_map(rivers, grid, river_slope=params.river_slope, hill_slope=params.hill_slope)
+        top = float(a.peaks[:, 2].max())
+        # the sea: the rivers' outlets (the tree's lowest point minus the river margin)
+        sea = float(rivers.elevation.min()) if rivers is not None and rivers.n_nodes else \
+            float(np.concatenate([a.peaks[:, 2], a.saddles[:, 2]]).min())
+        sea = min(sea, top - 1.0)
+    else:
+        g, river, land = map_watershed(map, grid, river_slope=params.river_slope, hill_slope=params.hill_slope)
+        wet = river | ~land
+        sea, top = 0.0, float(map.top_m if map.top_m is not None else params.top_m)
+    dist = ndimage.distance_transform_edt(~wet, sampling=grid.cell_size_m)
     m = np.clip(dist / params.mask_m, 0.0, 1.0)
-    top = float(a.peaks[:, 2].max())
-    # the sea: the rivers' outlets (the tree's lowest point minus the river margin)
-    sea = float(rivers.elevation.min()) if rivers is not None and rivers.n_nodes else \
-        float(np.concatenate([a.peaks[:, 2], a.saddles[:, 2]]).min())
-    sea = min(sea, top - 1.0)
     fmax = float(f.max())
     F = sea + (top - sea) * (f / fmax if fmax > 0 else f)
     h = sea + g * (1.0 - m) + (F - sea) * m

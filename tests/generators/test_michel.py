@@ -1,6 +1,8 @@
 """Michel 2015 backend: exact sub-plate velocities, merging rules, folds as translations, drainage."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -110,3 +112,92 @@ def test_render_scales_to_the_tree_relief():
     z = dem.values
     assert np.isfinite(z).all() and z.max() <= 1500.0 + 1e-3
     assert z.max() - z.min() > 300.0
+
+
+# ----------------------------------------------------------------------------- plain mode: a vector map
+def _island_map():
+    from shapely.geometry import Polygon
+
+    land = Polygon([(800.0, 800.0), (7200.0, 800.0), (7200.0, 7200.0), (800.0, 7200.0)])
+    peaks = np.array([[3000.0, 3000.0], [5000.0, 3500.0], [4000.0, 5200.0], [2500.0, 5500.0]])
+    # a river from the interior to the coast, and a tributary ending on it (both source -> mouth)
+    main = np.array([[4000.0, 4200.0], [4000.0, 2500.0], [4000.0, 820.0]])
+    trib = np.array([[5600.0, 5000.0], [4000.0, 3000.0]])
+    return M.VectorMap(peaks=peaks, rivers=(main, trib), land=land, top_m=1800.0)
+
+
+def test_map_watershed_rises_from_the_sea_along_the_rivers():
+    grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 100.0)
+    vmap = _island_map()
+    g, river, land = M.map_watershed(vmap, grid, river_slope=0.01, hill_slope=0.1)
+    assert (g[~land] == 0).all() and land.sum() == 64 * 64
+    # the main river: 0 at its mouth on the coast, rising 0.01 m/m upstream
+    col = 40
+    rows = np.flatnonzero(river[:, col])
+    assert rows.size > 30
+    x, y = grid.centres()
+    np.testing.assert_allclose(g[rows, col], 0.01 * (y[rows] - 820.0), atol=0.01 * grid.cell_size_m)
+    # the tributary starts at the main river's height at the junction (y = 3000 m: 21.8 m), not at 0
+    i, j, _ = grid.cell_of(np.array([[4700.0, 3875.0]]))
+    assert river[i[0], j[0]] and g[i[0], j[0]] > 0.01 * (3000.0 - 820.0)
+    # every land cell drains: some neighbour is lower, down to a river or the sea
+    inner = g[1:-1, 1:-1]
+    nb = np.min([g[1 + di:g.shape[0] - 1 + di, 1 + dj:g.shape[1] - 1 + dj]
+                 for di in (-1, 0, 1) for dj in (-1, 0, 1) if di or dj], axis=0)
+    src = (river | ~land)[1:-1, 1:-1]
+    assert (nb[~src] < inner[~src]).all()
+
+
+def test_render_from_a_vector_map_keeps_the_sea_and_the_top():
+    vmap = _island_map()
+    tree = small_tree()
+    dem = render_terrain(tree, generator="michel", cell_size_m=100.0, seed=1, params={"erosion": False},
+                         inputs={"map": vmap})
+    z = dem.values
+    grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 100.0)
+    land = M.land_mask(vmap, grid)
+    assert (z[~land] == 0).all()
+    assert z[land].max() <= 1800.0 + 1e-3 and z[land].max() > 900.0
+    again = render_terrain(tree, generator="michel", cell_size_m=100.0, seed=1, params={"erosion": False},
+                           inputs={"map": vmap})
+    assert again.values.tobytes() == z.tobytes()
+    # the plates come from the map's four peaks, not the tree's five
+    assert json.loads(dem.attrs["cell_counts"])["plates"] <= 4
+    with pytest.raises(InputError, match="caller reads"):
+        render_terrain(tree, generator="michel", cell_size_m=100.0, seed=1, params={"map": "x.gpkg"})
+
+
+def test_cli_render_michel_from_a_vector_map_file(tmp_path):
+    import geopandas as gpd
+    import rasterio
+    from click.testing import CliRunner
+    from shapely.geometry import LineString, Point
+
+    from orokit.cli.main import cli
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+
+    vmap = _island_map()
+    geoms = [Point(*p) for p in vmap.peaks] + [LineString(r) for r in vmap.rivers] + [vmap.land]
+    elev = [1800.0, 1500.0, 1600.0, 1200.0] + [None] * 3
+    gpd.GeoDataFrame({"elevation": elev}, geometry=geoms, crs="EPSG:32633").to_file(tmp_path / "map.geojson")
+    write_divide_tree_gpkg(small_tree(crs="EPSG:32633"), tmp_path / "tree.gpkg")
+    args = ["render", str(tmp_path / "tree.gpkg"), "-o", str(tmp_path / "dem.tif"), "--resolution", "100m",
+            "--generator", "michel", "--param", "erosion=false", "--param", f"map={tmp_path / 'map.geojson'}",
+            "--seed", "0"]
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code == 0, r.output
+    with rasterio.open(tmp_path / "dem.tif") as src:
+        assert len(src.tags()["map_sha256"]) == 64
+        z = src.read(1)
+    from orokit.io.vector_map_io import read_vector_map
+
+    read = read_vector_map(tmp_path / "map.geojson")
+    assert read.top_m == 1800.0 and read.peaks.shape == (4, 2) and len(read.rivers) == 2 and read.land is not None
+    same = render_terrain(small_tree(crs="EPSG:32633"), generator="michel", cell_size_m=100.0, seed=0,
+                          params={"erosion": False}, inputs={"map": read})
+    np.testing.assert_array_equal(z, same.values)
+    assert z.min() == 0.0 and 900.0 < z.max() <= 1800.0 + 1e-3
+    (tmp_path / "empty.geojson").write_text('{"type": "FeatureCollection", "features": []}')
+    for bad, msg in (("no.gpkg", "does not exist"), (str(tmp_path / "empty.geojson"), "no point")):
+        out = CliRunner().invoke(cli, args[:3] + [str(tmp_path / "bad.tif")] + args[4:10] + ["--param", f"map={bad}"])
+        assert out.exit_code != 0 and msg in out.output and "Traceback" not in out.output
