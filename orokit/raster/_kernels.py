@@ -174,14 +174,16 @@ def reconstruct_from_markers(indptr: np.ndarray, indices: np.ndarray, h: np.ndar
 @njit(cache=True)
 def carve_saddles(z: np.ndarray, x0: float, y0: float, res: float, sx: np.ndarray, sy: np.ndarray,
                   sz: np.ndarray, nxv: np.ndarray, nyv: np.ndarray, max_len: float, drop: float,
-                  label: np.ndarray) -> int:
+                  label: np.ndarray, slope: float = 0.0, max_depth: float = 0.0) -> int:
     """Cut a 4-connected trench through each saddle, perpendicular to its ridge (in place).
 
     From the saddle, both ways along the unit normal ``(nxv, nyv)``, cells are lowered
     to ``min(z, sz - drop)`` until the ground is already below ``sz - drop`` (or after
     ``max_len`` metres) or a cell of another ridge (``label`` holds the ridge id of
     each burnt cell; saddle ``s`` belongs to ridge ``s``), so no path beside the saddle
-    crosses the ridge above it. Each
+    crosses the ridge above it. With ``slope`` > 0 the trench descends from the saddle:
+    a cell at distance ``t`` goes to ``min(z, sz - drop - min(slope t, max_depth))`` (a col
+    falling away on both sides, not a level groove); where it stops is the same. Each
     diagonal step also lowers one 4-neighbour so the trench stops 8-connected paths.
     Returns the number of cells lowered (numba: walks of data-dependent length).
     """
@@ -198,6 +200,7 @@ def carve_saddles(z: np.ndarray, x0: float, y0: float, res: float, sx: np.ndarra
                 y = sy[s] + side * nyv[s] * t
                 j = int(np.floor((x - x0) / res))
                 i = int(np.floor((y0 - y) / res))
+                here = np.float32(target - min(slope * t, max_depth))
                 t += 0.5 * res
                 if i < 0 or i >= ny or j < 0 or j >= nx:
                     break
@@ -206,34 +209,40 @@ def carve_saddles(z: np.ndarray, x0: float, y0: float, res: float, sx: np.ndarra
                 if label[i, j] >= 0 and label[i, j] != s:
                     break
                 if pi >= 0 and i != pi and j != pj:
-                    if z[pi, j] > target:
-                        z[pi, j] = target
+                    if z[pi, j] > here:
+                        z[pi, j] = here
                         count += 1
                 pi, pj = i, j
                 if z[i, j] <= target:
                     if t > 1.5 * res:
                         break
-                    continue
-                z[i, j] = target
-                count += 1
+                    if z[i, j] <= here:
+                        continue
+                if z[i, j] > here:
+                    z[i, j] = here
+                    count += 1
     return count
 
 
 @njit(cache=True)
-def reconstruct_masked(z: np.ndarray, mask: np.ndarray, step: float) -> int:
+def reconstruct_masked(z: np.ndarray, mask: np.ndarray, step: float, grade: float = 0.0,
+                       max_depth: float = 0.0) -> int:
     """Lower the hills inside ``mask`` that hold no marker (peak cutting, in place).
 
     Cells outside ``mask`` keep their elevation and seed the flood at their height; a
     masked cell becomes ``min(z, b - step * k)`` with ``b`` the bottleneck height of its
     best path from an unmasked cell, so masked hills are cut down to their pass and get a
-    strictly ascending path out. Used with ``mask`` = basins of spurious maxima, whose
-    outside already ascends to a marker. Returns the number of lowered cells (numba:
-    priority queue).
+    strictly ascending path out. With ``grade`` > 0 the cut falls ``grade`` per cell (a
+    shallow bowl below the pass instead of a flat shelf) until it is ``max_depth`` below
+    the pass it hangs from, then ``step`` per cell again. Used with ``mask`` = basins of
+    spurious maxima, whose outside already ascends to a marker. Returns the number of
+    lowered cells (numba: priority queue).
     """
     ny, nx = z.shape
     heap = [(np.float32(0.0), np.int64(0))]
     heap.pop()
     best = np.full((ny, nx), -np.inf, np.float32)
+    base = np.zeros((ny, nx), np.float32)  # the pass (last unlowered height) a cut cell hangs from
     for i in range(ny):
         for j in range(nx):
             if not mask[i, j]:
@@ -249,6 +258,7 @@ def reconstruct_masked(z: np.ndarray, mask: np.ndarray, step: float) -> int:
                     h = z[ii, jj]
                     if np.isfinite(h) and h > best[ii, jj]:
                         best[ii, jj] = h
+                        base[ii, jj] = h
                         heapq.heappush(heap, (-h, np.int64(ii * nx + jj)))
     done = ~mask
     count = 0
@@ -256,6 +266,7 @@ def reconstruct_masked(z: np.ndarray, mask: np.ndarray, step: float) -> int:
         negz, v = heapq.heappop(heap)
         i = v // nx
         j = v - i * nx
+        zv = -negz
         if mask[i, j]:
             if done[i, j]:
                 continue
@@ -263,7 +274,12 @@ def reconstruct_masked(z: np.ndarray, mask: np.ndarray, step: float) -> int:
             if best[i, j] < z[i, j]:
                 z[i, j] = best[i, j]
                 count += 1
-        zv = -negz
+        elif zv < best[i, j]:
+            continue
+        bv = base[i, j]
+        down = np.float32(step)
+        if grade > 0.0 and zv - grade >= bv - max_depth:
+            down = np.float32(grade)
         for di in range(-1, 2):
             ii = i + di
             if ii < 0 or ii >= ny:
@@ -275,9 +291,15 @@ def reconstruct_masked(z: np.ndarray, mask: np.ndarray, step: float) -> int:
                 h = z[ii, jj]
                 if not np.isfinite(h):
                     continue
-                cand = h if h < zv else zv - np.float32(step)
+                if h < zv:
+                    cand = h
+                    cb = h
+                else:
+                    cand = zv - down
+                    cb = bv
                 if cand > best[ii, jj]:
                     best[ii, jj] = cand
+                    base[ii, jj] = cb
                     heapq.heappush(heap, (-cand, np.int64(ii * nx + jj)))
     return count
 
@@ -336,3 +358,70 @@ def bottlenecks(parent: np.ndarray, height: np.ndarray, depth: np.ndarray, a: np
             v = parent[v]
         out[k] = height[u] if (u == v and u >= 0) else -np.inf
     return out
+
+
+@njit(cache=True)
+def flood_levels(z: np.ndarray, mask: np.ndarray, owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pass level and flood source of every cell in ``mask`` (nothing is modified).
+
+    ``level`` is the height of the best path from an unmasked cell (the highest bottleneck:
+    grey reconstruction by dilation), ``source`` the ``owner`` of the unmasked cell that
+    path starts from; both stay ``-inf`` / -1 outside ``mask`` and where no path exists
+    (numba: priority queue).
+    """
+    ny, nx = z.shape
+    heap = [(np.float32(0.0), np.int64(0))]
+    heap.pop()
+    level = np.full((ny, nx), -np.inf, np.float32)
+    source = np.full((ny, nx), -1, np.int64)
+    done = ~mask
+    for i in range(ny):
+        for j in range(nx):
+            if not mask[i, j]:
+                continue
+            for di in range(-1, 2):
+                ii = i + di
+                if ii < 0 or ii >= ny:
+                    continue
+                for dj in range(-1, 2):
+                    jj = j + dj
+                    if jj < 0 or jj >= nx or mask[ii, jj] or owner[ii, jj] < 0:
+                        continue
+                    h = z[ii, jj]
+                    if np.isfinite(h) and h > level[ii, jj]:
+                        level[ii, jj] = h
+                        source[ii, jj] = owner[ii, jj]
+                        heapq.heappush(heap, (-h, np.int64(ii * nx + jj)))
+    while heap:
+        negz, v = heapq.heappop(heap)
+        i = v // nx
+        j = v - i * nx
+        if mask[i, j]:
+            if done[i, j]:
+                continue
+            done[i, j] = True
+        zv = -negz
+        if zv < level[i, j]:
+            continue
+        for di in range(-1, 2):
+            ii = i + di
+            if ii < 0 or ii >= ny:
+                continue
+            for dj in range(-1, 2):
+                jj = j + dj
+                if jj < 0 or jj >= nx or done[ii, jj]:
+                    continue
+                h = z[ii, jj]
+                if not np.isfinite(h):
+                    continue
+                cand = h if h < zv else zv
+                if cand > level[ii, jj]:
+                    level[ii, jj] = cand
+                    source[ii, jj] = source[i, j]
+                    heapq.heappush(heap, (-cand, np.int64(ii * nx + jj)))
+    for i in range(ny):
+        for j in range(nx):
+            if not mask[i, j]:
+                level[i, j] = -np.inf
+                source[i, j] = -1
+    return level, source

@@ -42,18 +42,26 @@ def _saddle_normals(skel: TerrainSkeleton) -> tuple[np.ndarray, np.ndarray]:
 
 
 def enforce_orometry(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, label: np.ndarray | None = None,
-                     drop_m: float = 0.5, trench_m: float = 3000.0, max_rounds: int = 6) -> np.ndarray:
+                     drop_m: float = 0.5, trench_m: float = 3000.0, trench_slope: float = 0.0,
+                     trench_depth_m: float = 0.0, keep_hills_m: float = 0.0, cut_slope: float = 0.0,
+                     cut_depth_m: float = 0.0, max_rounds: int = 6) -> np.ndarray:
     """Make the raster's orometry that of the tree (in place).
 
     1. A trench perpendicular to the ridge through every saddle, just below it, until the
        ground is lower (no path beside a saddle crosses the ridge above it); a trench
-       stops at a cell of another ridge (``label``: tree edge id of burnt ridge cells).
+       stops at a cell of another ridge (``label``: tree edge id of burnt ridge cells)
+       and descends from the saddle at ``trench_slope`` (m/m) down to ``trench_depth_m``
+       below it.
     2. Peak and saddle cells get their exact elevations.
-    3. Rounds of basin checks (:func:`cap_basins`): hills without a tree peak are cut
-       down to their pass with a strictly ascending path (1 mm per cell) to a tree peak,
-       and every pass between the basins of two tree peaks that is higher than the
-       tree's bottleneck between them (the lowest saddle on the tree path) is lowered
-       ``drop_m`` below it, so the raster's Divide Tree is the tree.
+    3. Rounds of basin checks (:func:`cap_basins`): hills without a tree peak that rise
+       ``keep_hills_m`` or more above their pass (or above the tree peak they drain to)
+       are cut down to their pass with a strictly ascending path (1 mm per cell) to a
+       tree peak (with ``cut_slope`` > 0 the cut falls away from the pass at that slope, down to
+       ``cut_depth_m`` below it: a shallow bowl, not a flat shelf); lower hills are kept (they cannot be peaks of prominence
+       ``>= keep_hills_m``); every pass between the basins of two tree peaks that is
+       higher than the tree's bottleneck between them (the lowest saddle on the tree
+       path) is lowered ``drop_m`` below it, so the raster's Divide Tree at a prominence
+       above ``keep_hills_m`` is the tree.
     """
     n = skel.n_peaks
     nodes = skel.node_xyz
@@ -63,7 +71,8 @@ def enforce_orometry(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, label:
         _kernels.carve_saddles(z, float(grid.x0), float(grid.y0), float(grid.cell_size_m),
                                np.ascontiguousarray(s[:, 0]), np.ascontiguousarray(s[:, 1]),
                                np.ascontiguousarray(s[:, 2]), nxv, nyv, float(trench_m), float(drop_m),
-                               label if label is not None else np.full(z.shape, -1, np.int32))
+                               label if label is not None else np.full(z.shape, -1, np.int32), float(trench_slope),
+                               float(trench_depth_m))
     set_cells(z, grid, nodes[:, :2], nodes[:, 2])
     # ridge cells may be lowered down to their own saddle, peak and saddle cells never
     floor = np.full(z.shape, -np.inf, np.float32)
@@ -72,7 +81,8 @@ def enforce_orometry(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, label:
         floor[on] = nodes[n + label[on], 2]
     row, col, ok = grid.cell_of(nodes[:, :2])
     floor[row[ok], col[ok]] = np.inf
-    cap_basins(z, grid, skel, floor=floor, drop_m=drop_m, max_rounds=max_rounds)
+    cap_basins(z, grid, skel, floor=floor, drop_m=drop_m, keep_hills_m=keep_hills_m, cut_slope=cut_slope,
+               cut_depth_m=cut_depth_m, max_rounds=max_rounds)
     set_cells(z, grid, nodes[:, :2], nodes[:, 2])
     return z
 
@@ -93,19 +103,26 @@ def _border_pairs(owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.ndarray, drop_m: float = 0.5,
+               keep_hills_m: float = 0.0, cut_slope: float = 0.0, cut_depth_m: float = 0.0,
                max_rounds: int = 6) -> dict[str, int]:
     """Rounds of spurious-hill cutting and pass capping on the raster's own basins (in place).
 
     Each round labels the basins of steepest ascent with the orometry engine's own
     kernels (:func:`orokit.topology.engine.steepest_ascent_basins`, so
-    the total order and tie-breaks are the engine's); basins whose maximum is not a tree peak are cut down (flooded from their
-    outside with a 1 mm per cell ascent); then every pair of 8-adjacent cells in the
-    basins of two tree peaks whose pass (the lower of the two) is above the tree's
-    bottleneck between the peaks (lowest saddle on the tree path) is lowered ``drop_m``
-    below it: the lower cell, or the higher one when the target is below the lower
-    cell's ``floor`` (a ridge cell's own saddle elevation, +inf at peaks and saddles).
-    Stops when a round changes nothing. ``z`` must be C-contiguous. Returns counters
-    (rounds, cells cut, cells capped, border pairs left above their bottleneck).
+    the total order and tie-breaks are the engine's). A basin whose maximum is not a tree
+    peak is a spurious hill: its pass (best path from tree-owned ground) and the tree
+    peak that path comes from are found by a flood (:func:`_kernels.flood_levels`). Hills
+    whose top is less than ``keep_hills_m`` above their pass and below that tree peak are
+    kept and join its basin (their prominence is below ``keep_hills_m``); the others are
+    cut down (flooded from their outside with a 1 mm per cell ascent, or ``cut_slope`` per metre
+    down to ``cut_depth_m`` below their pass: :func:`_kernels.reconstruct_masked`). Then every pair of
+    8-adjacent cells in the basins of two tree peaks whose pass (the lower of the two) is
+    above the tree's bottleneck between the peaks (lowest saddle on the tree path) is
+    lowered ``drop_m`` below it: the lower cell, or the higher one when the target is below
+    the lower cell's ``floor`` (a ridge cell's own saddle elevation, +inf at peaks and
+    saddles). Stops when a round changes nothing. ``z`` must be C-contiguous. Returns
+    counters (rounds, cells cut, hills kept, cells capped, border pairs left above their
+    bottleneck).
     """
     if not z.flags.c_contiguous:
         raise ValueError("cap_basins works in place on a C-contiguous array; pass np.ascontiguousarray(z)")
@@ -123,30 +140,49 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
     cells, pid = cells[order], pid[order]
     last = np.r_[cells[1:] != cells[:-1], True] if cells.size else np.zeros(0, bool)
     cells, pid = cells[last], pid[last]
+    peak_z = nodes[:n, 2]
     zf = z.reshape(-1)
     ff = floor.reshape(-1)
-    stats = {"rounds": 0, "cut": 0, "capped": 0, "left": 0}
+    stats = {"rounds": 0, "cut": 0, "kept": 0, "capped": 0, "left": 0}
 
     if cells.size == 0:
         return stats
 
-    def owners() -> np.ndarray:
-        """Tree peak owning each cell's basin (-1: a spurious maximum, -2: NaN)."""
+    def owners() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Tree peak owning each cell's basin (-1: a spurious maximum, -2: NaN), basin labels, basin tops."""
         lab, peak_cell = steepest_ascent_basins(z)
         k = np.minimum(np.searchsorted(cells, peak_cell), cells.size - 1)
         tid = np.where(cells[k] == peak_cell, pid[k], -1)
-        return np.where(lab >= 0, tid[np.maximum(lab, 0)], -2).reshape(z.shape)
+        return np.where(lab >= 0, tid[np.maximum(lab, 0)], -2).reshape(z.shape), lab, peak_cell
+
+    def spurious_hills(own: np.ndarray, lab: np.ndarray, top: np.ndarray):
+        """Mask of spurious basins, the tree peak each drains to and whether it is kept."""
+        sp = own == -1
+        sp.reshape(-1)[cells] = False  # tree peaks seed the flood, never lowered
+        if not sp.any():
+            return sp, None, None
+        level, source = _kernels.flood_levels(z, sp, own)
+        lv, src = level.reshape(-1)[top], source.reshape(-1)[top]
+        keep = (src >= 0) & (zf[top] - lv < keep_hills_m) & (zf[top] < peak_z[np.maximum(src, 0)])
+        return sp, src, keep
 
     for _ in range(max_rounds):
         stats["rounds"] += 1
-        own = owners()
+        own, lab, top = owners()
         cut = 0
-        spurious = own == -1
-        spurious.reshape(-1)[cells] = False  # tree peaks seed the flood, never lowered
-        if spurious.any():
-            cut = _kernels.reconstruct_masked(z, spurious, 1e-3)
-            stats["cut"] += cut
-            own = owners()
+        sp, src, keep = spurious_hills(own, lab, top)
+        if sp.any():
+            cutting = sp & ~keep[np.maximum(lab, 0)].reshape(z.shape)
+            if cutting.any():
+                cut = _kernels.reconstruct_masked(z, cutting, 1e-3, cut_slope * grid.cell_size_m, cut_depth_m)
+                stats["cut"] += cut
+                own, lab, top = owners()
+                sp, src, keep = spurious_hills(own, lab, top)
+        if sp.any():
+            # kept hills join the basin of the tree peak their pass leads to (a sound owner: every
+            # cell ascends to the hill top, whose best path out reaches that basin)
+            stats["kept"] = int(np.unique(lab[sp.reshape(-1)]).size)
+            own = np.where(sp, src[np.maximum(lab, 0)].reshape(z.shape), own)
         ia, ib = _border_pairs(own)
         ta, tb = own.reshape(-1)[ia], own.reshape(-1)[ib]
         lo, hi = np.minimum(ta, tb), np.maximum(ta, tb)
@@ -164,11 +200,11 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
         # (ridge cells of the saddle itself end at the saddle's height: a tie, not a bypass)
         lim = (bn[viol] + 1e-4).astype(zf.dtype)
         pick = np.where(ff[low] <= lim, low, np.where(ff[high] <= lim, high, -1))
-        keep = pick >= 0
-        pick = pick[keep]
-        np.minimum.at(zf, pick, np.maximum(target[keep].astype(zf.dtype), ff[pick]))
-        stats["capped"] += int(keep.sum())
-        if not keep.any() and cut == 0:
+        keep_pair = pick >= 0
+        pick = pick[keep_pair]
+        np.minimum.at(zf, pick, np.maximum(target[keep_pair].astype(zf.dtype), ff[pick]))
+        stats["capped"] += int(keep_pair.sum())
+        if not keep_pair.any() and cut == 0:
             break
     logger.debug("basin capping: %s", stats)
     return stats

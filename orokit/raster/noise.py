@@ -149,14 +149,19 @@ def spectral_noise(shape: tuple[int, int], res: float, *, rms: float, beta: floa
     ny, nx = shape
     if rms <= 0 or ny < 2 or nx < 2:
         return np.zeros(shape, np.float32)
-    white = rng.standard_normal(shape)
-    ky = np.fft.fftfreq(ny, res)
-    kx = np.fft.rfftfreq(nx, res)
+    white = rng.standard_normal(shape, dtype=np.float32)  # float32 throughout: half the memory and time
+    ky = np.fft.fftfreq(ny, res).astype(np.float32)
+    kx = np.fft.rfftfreq(nx, res).astype(np.float32)
     k = np.hypot(ky[:, None], kx[None, :])
     k[0, 0] = np.inf
-    filt = k ** (-0.5 * float(beta)) * _highpass(k, largest_m)
+    filt = k ** np.float32(-0.5 * float(beta)) * _highpass(k, largest_m).astype(np.float32)
     filt[0, 0] = 0.0
-    out = np.fft.irfft2(np.fft.rfft2(white) * filt, s=shape)
-    out -= out.mean()
-    sd = float(out.std())
-    return (out * (rms / sd)).astype(np.float32) if sd > 0 else np.zeros(shape, np.float32)
+    del k
+    f = np.fft.rfft2(white)
+    del white
+    f *= filt
+    del filt
+    out = np.fft.irfft2(f, s=shape)
+    out -= out.mean(dtype=np.float64)
+    sd = float(out.std(dtype=np.float64))
+    return (out * np.float32(rms / sd)).astype(np.float32, copy=False) if sd > 0 else np.zeros(shape, np.float32)

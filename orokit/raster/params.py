@@ -37,7 +37,20 @@ class RenderParams:
         Spurious hills it makes are cut by the orometry enforcement.
     texture_slope_power : the texture's amplitude follows the skeleton's slope to this power
         (normalised to an RMS of 1; 0 = uniform).
+    texture_relief_ratio : without a measured texture (``texture_rms_m`` 0, e.g. a real tree's render),
+        its RMS is this times the median 1 km relief of the skeleton raster (the 13 shared DEMs: 0.066-0.116,
+        mean 0.09); 0 = no texture.
     texture_clearance_m : the texture fades to 0 within this distance of peaks and saddles.
+    keep_hill_ratio : the orometry enforcement keeps hills without a tree peak that rise less than
+        ``keep_hill_ratio * min_prominence_m`` above their pass (they cannot become peaks of the
+        tree's prominence; cutting them left flat shelves); 0 cuts every one.
+    cut_slope, cut_depth_ratio : the hills the orometry enforcement cuts fall from their pass at
+        ``cut_slope`` (m/m) down to ``cut_depth_ratio * min_prominence_m`` below it (0: a flat shelf).
+    trench_slope, trench_depth_ratio : the trenches cut through saddles descend from the saddle at
+        ``trench_slope`` (m/m) down to ``trench_depth_ratio * min_prominence_m`` below it (0: a level
+        groove just below the saddle).
+    flank_max_slope : the flank cones fall at most this steeply (m/m) where they are not next to a
+        saddle (None: no limit); see :func:`orokit.raster.skeleton.build_skeleton`.
     flank_depth : the cones of a ridge piece reach at most ``flank_depth * (peak - saddle)``
         below its saddle (None: no limit; far from ridges steep cones dug canyons).
     """
@@ -58,12 +71,19 @@ class RenderParams:
     flank_ratio: float = 1.5
     profiles: str = "linear"
     flank_depth: float | None = None
+    keep_hill_ratio: float = 0.0
+    cut_slope: float = 0.0
+    cut_depth_ratio: float = 1.0
+    trench_slope: float = 0.0
+    trench_depth_ratio: float = 0.5
+    flank_max_slope: float | None = None
     texture_rms_m: float = 0.0
     texture_beta: float = 4.5
     texture_gain: float = 0.4
     texture_largest_m: float = 1000.0
     texture_clearance_m: float = 300.0
     texture_slope_power: float = 1.0
+    texture_relief_ratio: float = 0.0
 
     def __post_init__(self) -> None:
         from orokit.errors import InputError

@@ -69,11 +69,29 @@ def _slope_weight(z: np.ndarray, res: float, smooth_m: float, power: float) -> n
     """``(s / mean s) ** power`` of the slope ``s`` of ``z`` smoothed over ``smooth_m`` (RMS 1 when power=1)."""
     if power == 0:
         return np.ones(z.shape, np.float32)
-    zs = ndimage.gaussian_filter(z.astype(np.float32), max(0.5 * smooth_m / res, 0.5))
-    gy, gx = np.gradient(zs, res)
-    s = np.hypot(gx, gy) ** power
-    m = float(np.sqrt(np.mean(s * s)))
-    return (s / m).astype(np.float32) if m > 0 else np.ones(z.shape, np.float32)
+    # the weight is smooth at smooth_m: computed on a grid ~4 cells per smooth_m, then interpolated
+    f = max(int(smooth_m / (4.0 * res)), 1)
+    zc = z[::f, ::f].astype(np.float32)
+    zs = ndimage.gaussian_filter(zc, max(0.5 * smooth_m / (res * f), 0.5))
+    gy, gx = np.gradient(zs, res * f)
+    s = np.hypot(gx, gy) ** np.float32(power)
+    if f > 1:
+        s = ndimage.zoom(s, (z.shape[0] / s.shape[0], z.shape[1] / s.shape[1]), order=1, grid_mode=True,
+                         mode="nearest")[: z.shape[0], : z.shape[1]]
+        if s.shape != z.shape:
+            s = np.pad(s, [(0, z.shape[0] - s.shape[0]), (0, z.shape[1] - s.shape[1])], mode="edge")
+    m = float(np.sqrt(np.mean(s * s, dtype=np.float64)))
+    return (s / np.float32(m)).astype(np.float32) if m > 0 else np.ones(z.shape, np.float32)
+
+
+def _median_relief(z: np.ndarray, res: float, window_m: float = 1000.0) -> float:
+    """Median of ``max - min`` over non-overlapping ``window_m`` blocks of ``z`` (whole grid if smaller)."""
+    f = max(int(round(window_m / res)), 1)
+    ny, nx = (z.shape[0] // f) * f, (z.shape[1] // f) * f
+    if ny == 0 or nx == 0:
+        return float(np.ptp(z))
+    b = z[:ny, :nx].reshape(ny // f, f, nx // f, f)
+    return float(np.median(b.max(axis=(1, 3)) - b.min(axis=(1, 3))))
 
 
 def _check_crs(tree) -> Any:
@@ -186,12 +204,16 @@ def render_elevation(
     mask[row[ok], col[ok]] = False
     dist = ndimage.distance_transform_edt(mask, sampling=grid.cell_size_m).astype(np.float32)
     uplift = falloff(dist / np.float32(params.uplift_radius))
-    if params.texture_rms_m * params.texture_gain > 0:
+    texture_rms = params.texture_rms_m
+    if texture_rms == 0 and params.texture_relief_ratio > 0:
+        # no measured texture (a real tree): real DEMs have texture RMS ~ 0.07-0.12 x their median 1 km relief
+        texture_rms = params.texture_relief_ratio * _median_relief(z, grid.cell_size_m)
+    if texture_rms * params.texture_gain > 0:
         # texture where the skeleton is steep (real valley floors and glaciers are smooth),
         # faded near peaks and saddles; mean amplitude = gain x the type's texture RMS
         fade = 1.0 - falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
         weight = _slope_weight(z, grid.cell_size_m, params.texture_largest_m, params.texture_slope_power) * fade
-        z += spectral_noise(z.shape, grid.cell_size_m, rms=params.texture_gain * params.texture_rms_m,
+        z += spectral_noise(z.shape, grid.cell_size_m, rms=params.texture_gain * texture_rms,
                             beta=params.texture_beta, largest_m=params.texture_largest_m, rng=rng) * weight
         del fade, weight
     del dist, mask
@@ -211,7 +233,10 @@ def render_elevation(
         timings["erosion"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     set_cells(z, grid, nodes[:, :2], nodes[:, 2])
-    enforce_orometry(z, grid, skel, label=label)
+    enforce_orometry(z, grid, skel, label=label, trench_slope=params.trench_slope,
+                     trench_depth_m=params.trench_depth_ratio * params.min_prominence_m,
+                     keep_hills_m=params.keep_hill_ratio * params.min_prominence_m, cut_slope=params.cut_slope,
+                     cut_depth_m=params.cut_depth_ratio * params.min_prominence_m)
     timings["orometry"] = time.perf_counter() - t0
 
     x, y = grid.centres()
@@ -226,7 +251,7 @@ def render_elevation(
         "generator": "orokit.raster.render_elevation (Argudo et al. 2019, section 6)",
         "orokit_version": __version__,
         "parameters": json.dumps({**params.to_dict(), "cell_size_m": grid.cell_size_m, "extent": list(ext),
-                                  "erosion": bool(erosion)}),
+                                  "erosion": bool(erosion), "texture_rms_used_m": round(float(texture_rms), 3)}),
         "seed": seed,
         "local_grid": crs is None,
         "cell_size_m": (grid.cell_size_m, grid.cell_size_m),

@@ -173,6 +173,11 @@ def build_skeleton(
                                 ridge_lines.z[fine[:, 0]], ridge_lines.z[fine[:, 1]], fine[:, 0], fine[:, 1])
     rxy, rz, rs, rorig = densify(ridge_lines, lam / 4.0, value="slope", origin=True)
     rs = np.maximum(params.flank_slope, params.flank_ratio * rs)
+    if params.flank_max_slope is not None and n < nodes.shape[0]:
+        # steep cones dig valley walls that follow them (> 60 deg tails); beside a saddle
+        # (within 2 lambda) they stay steep so the saddle stays the highest pass
+        near, _ = cKDTree(nodes[n:, :2]).query(rxy)
+        rs = np.where(near > 2.0 * lam, np.minimum(rs, params.flank_max_slope), rs)
     rfloor = _cone_floor(ridge_lines, rorig, ridges, nodes[:, 2], params.flank_depth)
     rtree = cKDTree(rxy)
 

@@ -83,3 +83,79 @@ def test_saddle_in_the_cell_of_its_peak_keeps_the_peak():
     comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=200.0)
     assert comp.recovered_share == 1.0
     assert comp.peaks["raster_prominence"].to_numpy() == pytest.approx([900.0, 100.0], abs=5.0)
+
+
+def _cone(ny: int, nx: int, top: float, r0: float, c0: float, slope: float) -> np.ndarray:
+    y, x = np.mgrid[0:ny, 0:nx]
+    return (top - slope * np.hypot(y - r0, x - c0)).astype(np.float32)
+
+
+def test_flood_levels_give_the_pass_and_the_peak_it_comes_from():
+    # a tree peak (owner 0) on the left, a spurious knob on the right joined by a col at 45 m
+    z = np.maximum(_cone(9, 15, 100.0, 4, 2, 10.0), _cone(9, 15, 75.0, 4, 11, 10.0))
+    own = np.where(np.arange(15)[None, :] < 7, 0, -1) * np.ones((9, 1), np.int64)
+    level, source = _kernels.flood_levels(z, own == -1, own)
+    assert z[4, 8] == 45.0 and level[4, 11] == pytest.approx(45.0)  # the knob's pass to owner 0
+    assert (source[own == -1] == 0).all() and (source[own == 0] == -1).all()
+    assert np.isneginf(level[own == 0]).all()
+
+
+def test_cut_hills_fall_from_their_pass_and_keep_an_ascending_path():
+    """The graded cut makes a bowl below the pass (no flat shelf) and leaves no maximum inside."""
+    left, right = _cone(21, 31, 100.0, 10, 3, 4.0), _cone(21, 31, 90.0, 10, 20, 4.0)
+    z = np.maximum(left, right)
+    mask = right > left  # the spurious hill's side
+    flat, graded = z.copy(), z.copy()
+    _kernels.reconstruct_masked(flat, mask, 1e-3)
+    _kernels.reconstruct_masked(graded, mask, 1e-3, 2.0, 10.0)
+    pass_z = float(flat[10, 20]) + 1e-2
+    assert float(z[10, 20]) > pass_z + 10.0
+    cut = mask & (z > pass_z)
+    assert np.ptp(flat[cut]) < 0.1  # the old cut: a shelf at the pass
+    assert graded[cut].max() <= pass_z and graded[cut].min() >= pass_z - 10.0 - 0.1
+    assert np.ptp(graded[cut]) > 10.0 - 2.0 - 0.1  # a bowl down to within one grade step of max_depth
+    assert (graded <= z + 1e-6).all() and (graded[~mask] == z[~mask]).all()
+    from orokit.topology.engine import steepest_ascent_basins
+    for out in (flat, graded):
+        _, tops = steepest_ascent_basins(out)
+        assert not mask.reshape(-1)[tops].any()  # every cut cell ascends out of the mask
+
+
+def test_cap_basins_keeps_low_hills_and_cuts_high_ones():
+    """A knob of prominence < keep_hills_m beside a tree peak stays; one above it is cut."""
+    z = np.maximum(_cone(15, 41, 200.0, 7, 5, 5.0), _cone(15, 41, 190.0, 7, 35, 5.0))
+    z = np.maximum(z, _cone(15, 41, z[7, 12] + 25.0, 7, 12, 8.0))  # low knob on A's flank
+    z = np.maximum(z, _cone(15, 41, z[7, 28] + 40.0, 7, 28, 8.0))  # knob higher than B
+    before = z.copy()
+    prom = orokit.analyze(as_dem(z), min_prominence_m=1.0, isolation=False).peaks.set_index(["row", "col"])
+    assert prom.loc[(7, 12), "prominence"] < 27.0 and prom.loc[(7, 28), "prominence"] > 30.0
+    grid = Grid(0.0, 1000.0, 1.0, 15, 41)
+    centre = lambda r, c: [c + 0.5, 1000.0 - r - 0.5]  # noqa: E731
+    skel = SimpleNamespace(n_peaks=2, node_xyz=np.array([centre(7, 5) + [200.0], centre(7, 35) + [190.0],
+                                                         centre(7, 21) + [120.0]]),
+                           edges=np.array([[0, 1, 0]]))
+    floor = np.full(z.shape, -np.inf, np.float32)
+    floor[7, [5, 21, 35]] = np.inf
+    stats = cap_basins(z, grid, skel, floor=floor, keep_hills_m=27.0, cut_slope=0.5, cut_depth_m=27.0)
+    assert stats["kept"] >= 1 and stats["cut"] > 0 and stats["left"] == 0
+    assert (z[5:10, 10:15] == before[5:10, 10:15]).all()  # the low knob is untouched
+    assert z[7, 28] < 190.0  # the high knob is cut below B
+    after = orokit.analyze(as_dem(z), min_prominence_m=1.0, isolation=False).peaks.set_index(["row", "col"])
+    big = after[after["prominence"] >= 27.0]
+    assert sorted(big.index) == [(7, 5), (7, 35)]
+    assert after.loc[(7, 35), "prominence"] == pytest.approx(70.0, abs=0.6)  # 190 - the tree's saddle
+    assert (7, 12) in after.index  # the knob is still there, below eps
+
+
+def test_descending_trench_is_bounded():
+    z = np.full((11, 31), 100.0, np.float32)
+    label = np.full(z.shape, -1, np.int32)
+    args = (z, 0.0, 11.0, 1.0, np.array([15.5]), np.array([5.5]), np.array([90.0]), np.array([0.0]),
+            np.array([1.0]), 4.0, 0.5, label)
+    level, descending = z.copy(), z.copy()
+    _kernels.carve_saddles(level, *args[1:])
+    _kernels.carve_saddles(descending, *args[1:], 2.0, 3.0)
+    col = descending[:, 15]
+    assert (level[:, 15][level[:, 15] < 100] == pytest.approx(89.5))
+    assert col[5] <= 89.5 and col.min() == pytest.approx(86.5)  # at most trench_depth below the saddle
+    assert ((col < 100) == (level[:, 15] < 100)).all()  # same length
