@@ -79,6 +79,27 @@ def peaks_in_disks(peaks: pd.DataFrame, centres: NDArray[np.float64], radius_m: 
     return out
 
 
+def nearest_peak_distance(peaks: pd.DataFrame, *, geographic: bool) -> NDArray[np.float64]:
+    """Distance (m) from each peak to the nearest other peak of ``peaks`` (NaN when alone).
+
+    Geographic: the nearest peak on the unit sphere, then its WGS84 geodesic distance.
+    Otherwise Euclidean. Peaks at the same place give 0.
+    """
+    x = peaks["x"].to_numpy(dtype=float)
+    y = peaks["y"].to_numpy(dtype=float)
+    if len(x) < 2:
+        return np.full(len(x), np.nan)
+    if not geographic:
+        _, j = cKDTree(np.column_stack([x, y])).query(np.column_stack([x, y]), k=2)
+        return np.hypot(x[j[:, 1]] - x, y[j[:, 1]] - y)
+    from orokit.geodesy import WGS84 as geod
+
+    u = _unit_vectors(x, y)
+    _, j = cKDTree(u).query(u, k=2)
+    _, _, d = geod.inv(x, y, x[j[:, 1]], y[j[:, 1]])
+    return np.asarray(d, dtype=float)
+
+
 def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, feature_set: FeatureSet | None = None,
                   min_prominence_m: float = 30.0, min_peaks: int = 20, label: str | None = None,
                   source: str | None = None, crs: Any = None,
@@ -130,6 +151,7 @@ def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, feature_set: Feat
         keep &= peaks["prominence_exact"].to_numpy(dtype=bool)
     counted = peaks.loc[keep]
     arrays = [counted[c].to_numpy(dtype=float) for c in _METRIC_INPUTS]
+    spacing = nearest_peak_distance(counted, geographic=geo) if fs.pattern else None
     radii = disks["radius_m"].to_numpy(dtype=float) if len(disks) else np.zeros(0)
     rows: list[dict[str, Any]] = []
     vectors: list[NDArray[np.float64]] = []
@@ -146,7 +168,8 @@ def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, feature_set: Feat
             for f in fs.radii:
                 idx = members[f][k]
                 parts.append(disk_feature_vector(*(a[idx] for a in arrays), radius_m=f * float(r), feature_set=fs,
-                                                 relative_elevation_convention=relative_elevation))
+                                                 relative_elevation_convention=relative_elevation,
+                                                 spacing_m=None if spacing is None else spacing[idx]))
             vectors.append(np.concatenate(parts))
             d = disks.iloc[i]
             rows.append({"label": label, "source": source,

@@ -90,6 +90,26 @@ def relative_prominence(prominence: np.ndarray) -> np.ndarray:
     return np.clip(p / pmax, 0.0, 1.0)
 
 
+def axial_resultant(direction_deg: np.ndarray) -> complex:
+    """Mean of ``exp(2i theta)`` over the finite directions (0 when there is none).
+
+    Its modulus in [0, 1] is how strongly the directions line up along one axis (1: all
+    along one line, either way; 0: no preferred axis); rotating every direction by ``a``
+    turns it by ``2a``, so the modulus, and the real part of ``z1 * conj(z2)`` of two such
+    means, do not change when the DEM is rotated or flipped.
+
+    Examples
+    --------
+    >>> round(abs(axial_resultant(np.array([30.0, 210.0, np.nan]))), 6)  # one line, both ways
+    1.0
+    >>> round(abs(axial_resultant(np.array([0.0, 90.0]))), 6)  # a cross: no axis
+    0.0
+    """
+    t = np.deg2rad(np.asarray(direction_deg, dtype=float))
+    t = t[np.isfinite(t)]
+    return complex(np.exp(2j * t).mean()) if len(t) else 0j
+
+
 def clamped_distance(distance_m: np.ndarray, radius_m: float) -> np.ndarray:
     """``min(d, R) / R``; NaN (no target) counts as R, i.e. 1."""
     d = np.asarray(distance_m, dtype=float)

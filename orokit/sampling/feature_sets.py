@@ -36,6 +36,7 @@ from orokit.errors import SchemaError
 from orokit.metrics.disk import (
     RELATIVE_ELEVATION_DEFAULT,
     RelativeElevation,
+    axial_resultant,
     clamped_distance,
     dominance,
     relative_elevation,
@@ -71,6 +72,14 @@ ELEVATION_GROUPS: dict[str, list[str]] = {
     "elevation_summary": [f"{q}_elevation_km" for q in _EQ] + ["max_elevation_km"],
     "saddle_elevation_summary": [f"{q}_saddle_elevation_km" for q in _EQ],
 }
+#: spatial pattern of the peaks (rotation invariant): spacing, alignment of the key-saddle directions,
+#: steepness towards the key saddle, rank correlation of elevation and prominence
+PATTERN_GROUPS: dict[str, list[str]] = {
+    "spacing": [f"{q}_log_spacing_m" for q in _Q] + ["clark_evans"],
+    "alignment": ["saddle_alignment"],
+    "steepness": [f"{q}_log_steepness" for q in _Q],
+    "elevation_prominence_correlation": ["elevation_prominence_rank_correlation"],
+}
 
 #: human-readable names of the summary groups (Table 2 rows)
 SUMMARY_TITLES: dict[str, str] = {
@@ -78,6 +87,9 @@ SUMMARY_TITLES: dict[str, str] = {
     "prominence_spectrum": "Prominence spectrum", "isolation_summary": "Isolation quantiles",
     "saddle_distance_summary": "Key saddle distance quantiles", "dominance_summary": "Dominance quantiles",
     "elevation_summary": "Peak elevation quantiles", "saddle_elevation_summary": "Key saddle elevation quantiles",
+    "spacing": "Peak spacing", "alignment": "Key saddle direction alignment",
+    "steepness": "Steepness to the key saddle",
+    "elevation_prominence_correlation": "Elevation-prominence correlation",
 }
 
 
@@ -102,6 +114,15 @@ class FeatureSet:
         quantiles of their key saddles' elevation (km).
     cumulative : bool
         Cumulative instead of plain normalized histograms (direction histograms stay plain).
+    pattern : bool
+        Add the spatial pattern of the peaks (:data:`PATTERN_GROUPS`): quantiles of the
+        distance to the nearest other counted peak and the Clark-Evans ratio (mean of that
+        distance over its expectation for random points of the same density); how strongly
+        the key-saddle directions line up along one axis
+        (:func:`~orokit.metrics.disk.axial_resultant`); quantiles of the steepness
+        ``prominence / key-saddle distance``; Spearman correlation of elevation and
+        prominence. All are unchanged by rotating or flipping the DEM. (Isolation directions
+        are left out: on a grid, equidistant higher cells make them depend on the scan order.)
     """
 
     name: str
@@ -111,6 +132,7 @@ class FeatureSet:
     summaries: bool = False
     elevation: bool = False
     cumulative: bool = False
+    pattern: bool = False
 
     def __post_init__(self) -> None:
         if not self.radii or any(not (0 < f <= 1.0) for f in self.radii) or len(set(self.radii)) != len(self.radii):
@@ -158,6 +180,8 @@ class FeatureSet:
             g.update(SUMMARY_GROUPS)
         if self.elevation:
             g.update(ELEVATION_GROUPS)
+        if self.pattern:
+            g.update(PATTERN_GROUPS)
         return g
 
     @property
@@ -174,7 +198,8 @@ class FeatureSet:
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "spec": self.spec.to_dict(), "radii": list(self.radii),
                 "histograms": None if self.histograms is None else list(self.histograms),
-                "summaries": self.summaries, "elevation": self.elevation, "cumulative": self.cumulative}
+                "summaries": self.summaries, "elevation": self.elevation, "cumulative": self.cumulative,
+                **({"pattern": True} if self.pattern else {})}  # absent when False: older files compare equal
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> FeatureSet:
@@ -184,7 +209,7 @@ class FeatureSet:
                        radii=tuple(float(f) for f in d.get("radii", (1.0,))),
                        histograms=None if h is None else tuple(str(x) for x in h),
                        summaries=bool(d.get("summaries", False)), elevation=bool(d.get("elevation", False)),
-                       cumulative=bool(d.get("cumulative", False)))
+                       cumulative=bool(d.get("cumulative", False)), pattern=bool(d.get("pattern", False)))
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise SchemaError(f"not a feature set dictionary ({exc!r}): {str(d)[:200]}") from exc
 
@@ -203,11 +228,13 @@ def disk_feature_vector(elevation: NDArray, prominence: NDArray, saddle_distance
                         saddle_direction_deg: NDArray, isolation_m: NDArray, isolation_direction_deg: NDArray, *,
                         radius_m: float, feature_set: FeatureSet,
                         relative_elevation_convention: RelativeElevation = RELATIVE_ELEVATION_DEFAULT,
-                        ) -> NDArray[np.float64]:
+                        spacing_m: NDArray | None = None) -> NDArray[np.float64]:
     """Feature vector of the peaks of one disk of radius ``radius_m`` at one radius fraction.
 
     The arrays hold the counted peaks (prominence >= eps) within ``radius_m``; the
-    per-peak metrics follow :mod:`orokit.metrics.disk`. Returns the values of the
+    per-peak metrics follow :mod:`orokit.metrics.disk`; ``spacing_m`` (needed by a
+    feature set with ``pattern``) is each peak's distance to the nearest other counted
+    peak (:func:`orokit.classify.features.nearest_peak_distance`). Returns the values of the
     feature set's columns for one radius (``len(columns) / len(radii)`` numbers). Every
     value is finite: an empty disk gives zero histograms and zero summaries.
 
@@ -261,4 +288,32 @@ def disk_feature_vector(elevation: NDArray, prominence: NDArray, saddle_distance
         parts.append(_elevation_quantiles(h))
         parts.append(np.array([np.nanmax(h) / 1000.0 if n else 0.0]))
         parts.append(_elevation_quantiles(h - p))  # key-saddle elevations
+    if feature_set.pattern:
+        parts.append(_pattern(h, p, saddle_distance_m, saddle_direction_deg, spacing_m, radius_m))
     return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def _pattern(h: NDArray, p: NDArray, saddle_distance_m: NDArray, saddle_direction_deg: NDArray,
+             spacing_m: NDArray | None, radius_m: float) -> NDArray[np.float64]:
+    """The :data:`PATTERN_GROUPS` values of one disk (see :class:`FeatureSet`)."""
+    if spacing_m is None:
+        raise SchemaError("feature sets with pattern=True need the peaks' spacing_m (distance to the nearest peak)")
+    n = len(h)
+    s = np.asarray(spacing_m, dtype=float)
+    s_ok = s[np.isfinite(s) & (s > 0)]
+    area_m2 = np.pi * radius_m ** 2
+    # Clark & Evans (1954): mean nearest-neighbour distance / 0.5 / sqrt(density); 1 for random points
+    clark_evans = float(s_ok.mean() / (0.5 / np.sqrt(n / area_m2))) if len(s_ok) and n else 0.0
+    alignment = abs(axial_resultant(saddle_direction_deg))
+    d = np.asarray(saddle_distance_m, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        steep = np.log10(p / d)
+    if n >= 2 and np.ptp(h) > 0 and np.ptp(p) > 0:
+        from scipy.stats import spearmanr
+
+        rho = float(spearmanr(h, p).statistic)
+    else:
+        rho = 0.0
+    return np.concatenate([_quantiles(np.log10(s_ok)), [clark_evans],
+                           [alignment],
+                           _quantiles(steep), [rho if np.isfinite(rho) else 0.0]])

@@ -56,9 +56,12 @@ def _centre_features(make_dem, z: np.ndarray, fs: FeatureSet) -> pd.Series:
     return f[fs.columns].iloc[0]
 
 
-@pytest.mark.parametrize("name", ["paper", "orometry"])
+@pytest.mark.parametrize("name", ["paper", "orometry", "pattern"])
 def test_features_invariant_to_rotation_and_flips_except_directions(make_dem, name):
-    fs = FeatureSet.named(name)
+    import dataclasses
+
+    fs = (dataclasses.replace(FeatureSet.orometry(), name="p", pattern=True) if name == "pattern"
+          else FeatureSet.named(name))
     z = _terrain()
     base = _centre_features(make_dem, z, fs)
     direction = [c for c in fs.columns if "direction" in c]
