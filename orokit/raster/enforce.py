@@ -159,8 +159,8 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
         """Mask of spurious basins, the tree peak each drains to and whether it is kept."""
         sp = own == -1
         sp.reshape(-1)[cells] = False  # tree peaks seed the flood, never lowered
-        if not sp.any():
-            return sp, None, None
+        if not sp.any() or keep_hills_m <= 0:  # nothing to keep: no flood needed, every hill is cut
+            return sp, np.full(top.size, -1, np.int64), np.zeros(top.size, bool)
         level, source = _kernels.flood_levels(z, sp, own)
         lv, src = level.reshape(-1)[top], source.reshape(-1)[top]
         keep = (src >= 0) & (zf[top] - lv < keep_hills_m) & (zf[top] < peak_z[np.maximum(src, 0)])
@@ -178,7 +178,7 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
                 stats["cut"] += cut
                 own, lab, top = owners()
                 sp, src, keep = spurious_hills(own, lab, top)
-        if sp.any():
+        if sp.any() and keep_hills_m > 0:
             # kept hills join the basin of the tree peak their pass leads to (a sound owner: every
             # cell ascends to the hill top, whose best path out reaches that basin)
             stats["kept"] = int(np.unique(lab[sp.reshape(-1)]).size)
