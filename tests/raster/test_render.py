@@ -219,3 +219,28 @@ def test_spectral_noise_follows_its_spectral_slope():
         rms, got = texture_spectrum(n, 30.0, largest_m=4000.0, fit_m=(150.0, 1000.0))
         assert got == pytest.approx(beta, abs=0.4)
         assert rms == pytest.approx(10.0, rel=0.25)
+
+
+def test_texture_from_relief_and_kept_hills_keep_the_orometry():
+    """texture_relief_ratio gives a tree-only render a texture scaled by its own relief
+    (recorded), keep_hill_ratio / cut_slope / trench_slope leave low hills and graded cuts:
+    the tree's peaks and prominences stay, no extra peak >= eps appears."""
+    from orokit.raster.noise import texture_spectrum
+    from orokit.raster.render import _median_relief
+
+    tree = small_tree()
+    plain = render_elevation(tree, cell_size_m=50.0, erosion=False, params=FAST, rng=3)
+    params = RenderParams(lam=200.0, erosion_steps=2, texture_relief_ratio=0.2, texture_gain=1.0,
+                          keep_hill_ratio=0.5, cut_slope=0.1, trench_slope=0.1, flank_max_slope=0.5)
+    rough = render_elevation(tree, cell_size_m=50.0, erosion=False, params=params, rng=3)
+    used = json.loads(rough.attrs["parameters"])["texture_rms_used_m"]
+    assert json.loads(plain.attrs["parameters"])["texture_rms_used_m"] == 0.0
+    assert used > 5.0
+    assert texture_spectrum(rough.values, 50.0)[0] > texture_spectrum(plain.values, 50.0)[0] + 0.3 * used
+    res = orokit.analyze(rough, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+    np.testing.assert_allclose(comp.peaks["raster_prominence"].to_numpy(), [1500.0, 200.0, 200.0, 150.0, 100.0],
+                               atol=6.0)
+    z = np.arange(60.0).reshape(6, 10)  # 2 x 2-cell blocks at 1 m: ptp of each block is 11
+    assert _median_relief(z, 1.0, 2.0) == 11.0
