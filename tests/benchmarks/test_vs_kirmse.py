@@ -92,3 +92,23 @@ def test_parse_time_v():
             "\tElapsed (wall clock) time (h:mm:ss or m:ss): 1:02.50\n"
             "\tMaximum resident set size (kbytes): 204800\n")
     assert vk.parse_time_v(text) == {"seconds": 62.5, "cpu_s": 1.75, "rss_mb": 200.0}
+
+
+@pytest.mark.slow
+@pytest.mark.realdata
+def test_parents_agree_with_kirmse_compute_parents(real_data, kirmse_bin, tmp_path):
+    """benchmarks/parents_vs_kirmse.py on gobi: orokit's parents equal the walk on its own
+    unpruned tree for every peak, and Kirmse's compute_parents agrees but for ties and a
+    handful of peaks (measured: 1 of 305 unexplained for each parent kind)."""
+    import parents_vs_kirmse as pk
+
+    real_data("gobi")
+    r = pk.run("gobi", kirmse_bin, tmp_path, vk.EPS_FT)
+    assert r["matched"] >= 0.95 * max(r["kirmse_peaks"], r["orokit_peaks"]) and r["matched"] > 100
+    assert r["orokit_vs_unpruned_walk"]["line_parent_differs"] == 0
+    assert r["orokit_vs_unpruned_walk"]["prominence_parent_differs"] == 0
+    for kind in ("line_parent", "prominence_parent"):
+        c = r[kind]
+        assert c["agree"] + c["tie"] + c["edge"] + c["unexplained"] == r["matched"]
+        assert c["agree"] >= 0.95 * r["matched"]
+        assert c["unexplained"] <= 0.02 * r["matched"], c["examples"]

@@ -1,0 +1,246 @@
+"""Line and prominence parents: orokit against Kirmse's ``compute_parents`` (issue 16).
+
+For each DEM (manifest dataset names or raster paths; default: every shared DEM):
+
+1. integer feet of the DEM are written for both programs as in ``vs_kirmse.py`` (Kirmse:
+   one CUSTOM FLT tile of z / 32, turned by 180 degrees so both break ties alike; orokit:
+   a float32 GeoTIFF in metres);
+2. Kirmse: ``prominence -t 1``, ``merge_divide_trees -f`` (the finalized tree, no runoffs)
+   and ``compute_parents -m EPS`` on it; orokit: ``orokit analyze --min-prominence EPS``;
+3. orokit's parents (tree pruned at EPS) are also checked against the walk on its
+   *unpruned* tree (:func:`unpruned_walk_check`), which pruning must not change;
+4. peaks are matched by cell (a Kirmse peak on a flat summit moved to the summit's first
+   cell, orokit's convention), and so are both parents of every matched peak.
+
+A disagreement is a *tie* when two of the peaks on either program's walk from the peak to the
+farther of the two parents (the chain of its line parents) have the same elevation (Kirmse
+takes the first peak at least as high, orokit the first strictly higher one in its
+raster-order tie rule, and Kirmse's line tree and island tree may order equal peaks
+differently), or when either parent is on a flat summit. It is an *edge* case when
+either walk, or P's key saddle, touches the raster's border (Kirmse's finalized tree
+drops the runoffs there; orokit keeps the border as unknown ground). Every other
+disagreement is counted as unexplained and printed.
+
+Run:  .venv/bin/python benchmarks/parents_vs_kirmse.py --kirmse-bin DIR [--dems gobi alaska my.tif]
+"""
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).parent))
+from vs_kirmse import (  # noqa: E402
+    EPS_FT, FT, SCALE, _plateau_first_cell, build_kirmse, kirmse_commands, orokit_command, timed,
+    write_geotiff_m, write_kirmse_tile,
+)
+
+DATASETS = ["alaska", "andes-aconcagua", "andes-chile", "appalachians", "gobi", "highlands", "himalaya-annapurna",
+            "himalaya-everest", "karakoram", "norway", "pyrenees", "rockies", "sahara"]
+
+
+def dem_feet(name: str) -> np.ndarray:
+    """Integer feet of a manifest dataset or a raster file (NaN = nodata)."""
+    if Path(name).exists():
+        from orokit.io.dem import read_dem
+
+        z = np.asarray(read_dem(name).values, np.float64)
+    else:
+        from orokit.data import open_dataset_dem
+
+        z = np.asarray(open_dataset_dem(name).values, np.float64)
+    return np.rint(z / FT)
+
+
+def kirmse_parents(path: Path, s: int, shape: tuple[int, int]) -> pd.DataFrame:
+    """``compute_parents`` output as cells: row, col, elevation (ft), prominence (ft) and both
+    parents' cells (-1 for none), turned back by 180 degrees."""
+    from orokit.io.kirmse_io import read_kirmse_peaks
+
+    k = read_kirmse_peaks(path)
+    h, w = shape
+
+    def cells(lat: pd.Series, lon: pd.Series) -> tuple[np.ndarray, np.ndarray]:
+        lat_a, lon_a = lat.to_numpy(float), lon.to_numpy(float)
+        none = ~np.isfinite(lat_a) | ((lat_a == 0) & (lon_a == 0))
+        r = h - 1 - np.rint((1.0 - np.nan_to_num(lat_a)) * s).astype(np.int64)
+        c = w - 1 - np.rint(np.nan_to_num(lon_a) * s).astype(np.int64)
+        r[none], c[none] = -1, -1
+        return r, c
+
+    row, col = cells(k["lat"], k["lon"])
+    lr, lc = cells(k["line_parent_lat"], k["line_parent_lon"])
+    pr, pc = cells(k["prominence_parent_lat"], k["prominence_parent_lon"])
+    return pd.DataFrame({"row": row, "col": col, "elevation": np.rint(k["elevation"].to_numpy() * SCALE),
+                         "prominence": np.rint(k["prominence"].to_numpy() * SCALE),
+                         "line_parent_row": lr, "line_parent_col": lc,
+                         "prominence_parent_row": pr, "prominence_parent_col": pc})
+
+
+def compare(kirmse: pd.DataFrame, ours: pd.DataFrame, z_ft: np.ndarray) -> dict:
+    """Parent agreement of the peaks both programs find (see the module docstring)."""
+    def first(r: int, c: int) -> tuple[int, int]:
+        return (r, c) if r < 0 else _plateau_first_cell(z_ft, r, c)
+
+    o = ours.set_index(["row", "col"])
+    kk = kirmse.set_index(["row", "col"])
+    kk = kk[~kk.index.duplicated()]
+    out = {"kirmse_peaks": len(kirmse), "orokit_peaks": len(ours), "matched": 0}
+    for kind in ("line_parent", "prominence_parent"):
+        out[kind] = {"agree": 0, "tie": 0, "edge": 0, "unexplained": 0, "examples": []}
+    for rec in kirmse.itertuples(index=False):
+        cell = first(rec.row, rec.col)
+        if cell not in o.index:
+            continue
+        out["matched"] += 1
+        mine = o.loc[cell]
+        for kind in ("line_parent", "prominence_parent"):
+            theirs = first(getattr(rec, f"{kind}_row"), getattr(rec, f"{kind}_col"))
+            ours_cell = (int(mine[f"{kind}_row"]), int(mine[f"{kind}_col"]))
+            if theirs == ours_cell:
+                out[kind]["agree"] += 1
+                continue
+            chain = _walk(o, cell, {theirs, ours_cell})
+            kchain = _walk(kk, (rec.row, rec.col), {theirs, ours_cell}) if (rec.row, rec.col) in kk.index else []
+            heights = [z_ft[c] for c in chain]
+            kheights = [z_ft[c] for c in kchain]
+            tie = len(set(heights)) < len(heights) or len(set(kheights)) < len(kheights)
+            flat = any(_is_flat_summit(z_ft, *c) for c in (theirs, ours_cell) if c[0] >= 0)
+            h, w = z_ft.shape
+            on_edge = [c for c in chain + kchain + [(int(mine["saddle_row"]), int(mine["saddle_col"]))]
+                       if c[0] >= 0 and (c[0] in (0, h - 1) or c[1] in (0, w - 1))]
+            if tie or flat:
+                out[kind]["tie"] += 1
+            elif on_edge:
+                out[kind]["edge"] += 1
+            else:
+                out[kind]["unexplained"] += 1
+                if len(out[kind]["examples"]) < 5:
+                    out[kind]["examples"].append({"peak": cell, "kirmse": theirs, "orokit": ours_cell})
+    return out
+
+
+def _walk(o: pd.DataFrame, start: tuple[int, int], targets: set) -> list[tuple[int, int]]:
+    """``start`` and its chain of line parents in ``o``, up to the last of ``targets`` met."""
+    chain, last, cell = [start], 1, start
+    while True:
+        nxt = (int(o.at[cell, "line_parent_row"]), int(o.at[cell, "line_parent_col"]))
+        if nxt[0] < 0 or nxt not in o.index or nxt in chain:
+            break
+        chain.append(nxt)
+        if nxt in targets:
+            last = len(chain)
+        cell = nxt
+    return chain[:max(last, 2) if len(chain) > 1 else 1]
+
+
+def _is_flat_summit(z: np.ndarray, r: int, c: int) -> bool:
+    h, w = z.shape
+    win = z[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2]
+    return int((win == z[r, c]).sum()) > 1
+
+
+def unpruned_walk_check(tif: Path, ours: pd.DataFrame, eps_m: float) -> dict:
+    """orokit's parents on the tree pruned at ``eps_m`` against the walk on the *unpruned* tree.
+
+    On the tree of every peak (threshold 0), follow the chain of line parents from P: the
+    line parent among the kept peaks is the first peak on it with prominence >= eps, the
+    prominence parent the first more prominent than P. Returns the number of kept peaks
+    whose pruned-tree parents differ (0 when pruning does not change the walk).
+    """
+    import orokit
+    from orokit.io.dem import read_dem
+
+    full = orokit.analyze(read_dem(tif), min_prominence_m=0.0, isolation=False).peaks
+    cell = list(zip(full["row"].tolist(), full["col"].tolist()))
+    lp = dict(zip(cell, zip(full["line_parent_row"].tolist(), full["line_parent_col"].tolist())))
+    prom = dict(zip(cell, full["prominence"].tolist()))
+    elev = dict(zip(cell, full["elevation"].tolist()))
+    out = {"unpruned_peaks": len(full), "line_parent_differs": 0, "prominence_parent_differs": 0}
+    for rec in ours.itertuples(index=False):
+        p = (rec.row, rec.col)
+        want_line = want_prom = (-1, -1)
+        cur = p
+        while True:
+            cur = lp.get(cur, (-1, -1))
+            if cur[0] < 0:
+                break
+            if want_line[0] < 0 and prom[cur] >= eps_m:
+                want_line = cur
+            if prom[cur] > prom[p] or (prom[cur] == prom[p] and elev[cur] > elev[p]):
+                want_prom = cur
+                break
+        out["line_parent_differs"] += want_line != (rec.line_parent_row, rec.line_parent_col)
+        out["prominence_parent_differs"] += want_prom != (rec.prominence_parent_row, rec.prominence_parent_col)
+    return out
+
+
+def run(name: str, bin_dir: Path, work: Path, eps_ft: float) -> dict:
+    z_ft = dem_feet(name)
+    folder = work / Path(name).stem
+    s = write_kirmse_tile(z_ft, folder / "tiles")
+    tif = write_geotiff_m(z_ft, folder / "dem.tif")
+    out = folder / "kirmse"
+    out.mkdir(parents=True, exist_ok=True)
+    for cmd in kirmse_commands(bin_dir, folder / "tiles", out, s, eps_ft):
+        timed(cmd)
+    dvt = sorted(out.glob("results*.dvt"))
+    if len(dvt) != 1:
+        raise RuntimeError(f"expected one merged tree results*.dvt in {out}, found {dvt}")
+    subprocess.run([str(bin_dir / "compute_parents"), "-m", repr(eps_ft / SCALE), str(dvt[0]),
+                    str(out / "parents.txt")], check=True, capture_output=True, text=True)
+    subprocess.run(orokit_command(tif, folder / "orokit", isolation=False, eps_ft=eps_ft), check=True,
+                   capture_output=True, text=True)
+    ours = pd.read_parquet(folder / "orokit" / "peaks.parquet",
+                           columns=["row", "col", "elevation", "prominence", "saddle_row", "saddle_col", "line_parent_row", "line_parent_col",
+                                    "prominence_parent_row", "prominence_parent_col"])
+    res = compare(kirmse_parents(out / "parents.txt", s, z_ft.shape), ours, z_ft)
+    res["orokit_vs_unpruned_walk"] = unpruned_walk_check(tif, ours, eps_ft * FT)
+    res["dem"] = name
+    return res
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--dems", nargs="+", default=DATASETS, help="dataset names or raster files")
+    ap.add_argument("--kirmse-bin", type=Path, default=None, help="folder of already built Kirmse binaries")
+    ap.add_argument("--workdir", type=Path, default=None)
+    ap.add_argument("--min-prominence-ft", type=float, default=EPS_FT)
+    ap.add_argument("--no-record", action="store_true")
+    a = ap.parse_args()
+    tmp = tempfile.TemporaryDirectory(prefix="orokit-parents-") if a.workdir is None else None
+    work = Path(tmp.name) if tmp else a.workdir
+    try:
+        bin_dir = a.kirmse_bin or build_kirmse(work)
+        rows = []
+        print(f"{'dem':<20} {'peaks K/o':>11} {'matched':>7}  line parent agree/tie/edge/other   "
+              "prominence parent agree/tie/edge/other")
+        for name in a.dems:
+            r = run(name, bin_dir, work, a.min_prominence_ft)
+            rows.append(r)
+            lp, pp = r["line_parent"], r["prominence_parent"]
+            print(f"{r['dem']:<20} {r['kirmse_peaks']:>5}/{r['orokit_peaks']:<5} {r['matched']:>7}  "
+                  f"{lp['agree']:>6}/{lp['tie']:>3}/{lp['edge']:>3}/{lp['unexplained']:<4}            "
+                  f"{pp['agree']:>6}/{pp['tie']:>3}/{pp['edge']:>3}/{pp['unexplained']:<4}")
+            u = r["orokit_vs_unpruned_walk"]
+            print(f"{'':<20} orokit vs the walk on its unpruned tree ({u['unpruned_peaks']} peaks): "
+                  f"{u['line_parent_differs']} line / {u['prominence_parent_differs']} prominence parents differ")
+            for kind in ("line_parent", "prominence_parent"):
+                for ex in r[kind]["examples"]:
+                    print(f"    {kind} differs: {ex}")
+        if not a.no_record:
+            from _record import record
+
+            print(f"recorded in {record('parents_vs_kirmse', {'eps_ft': a.min_prominence_ft, 'dems': rows})}")
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+
+
+if __name__ == "__main__":
+    main()
