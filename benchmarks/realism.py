@@ -89,17 +89,60 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
                             params=dataclasses.replace(params, **texture_params(ttype)), rng=seed)
     t_twin = time.perf_counter() - t0
     ts = landform_statistics(twin)
-    rt2 = roundtrip(twin, ttree, min_prominence_m=EPS, model=model, expected_label=name if model else None).summary()
+    twin_analysis = orokit.analyze(twin, min_prominence_m=EPS)
+    rt2 = roundtrip(twin, ttree, min_prominence_m=EPS, model=model, expected_label=name if model else None,
+                    analysis=twin_analysis).summary()
     out["twin"] = {"time_s": t_twin, "summary": ts.summary,
                    "landform": _table(compare_landforms(real, ts, halves=halves)),
                    "recovered": rt2.get("recovered_share"), "extra": rt2.get("extra_share"),
                    "texture": dict(ttype.texture or {}),
                    "disk_accuracy": rt2.get("disk_accuracy"), "n_disks": rt2.get("n_disks"),
-                   "vote": rt2.get("predicted")}
+                   "vote": rt2.get("predicted"),
+                   "disk_drift": disk_drift(dem, result, twin, twin_analysis)}
     if figures is not None:
         panels = {"real DEM": dem, "render of its real tree": ren, "free twin": twin}
         _figure(figures / f"{name}.png", name, {k: v for k, v in panels.items() if v is not None})
     return out
+
+
+def disk_drift(real_dem, real_analysis, twin, twin_analysis, radius_m: float = 10_000.0) -> dict:
+    """How the twin's 10 km disks differ from the real DEM's, measured on both rasters' analyses.
+
+    ``tv``: total-variation distance between the mean disk histograms of each of the paper's
+    ten Table 1 features (``orokit features --feature-set paper``: relevance, relative prominence
+    and relative elevation are the disk-relative ones); ``w``: Wasserstein distance between the
+    per-disk distributions of log peak count, log max prominence and ``top_rank``
+    (:func:`orokit.synthesis.disks.disk_statistics`, disks on a 1 km grid).
+    """
+    import warnings
+
+    from orokit.classify.features import features_from_dem
+    from orokit.sampling.feature_sets import FeatureSet
+    from orokit.synthesis.disks import disk_statistics
+    from scipy.stats import wasserstein_distance
+
+    fs = FeatureSet.paper()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tabs = [features_from_dem(d, radius_m=radius_m, analysis=a, feature_set=fs, rng=0)
+                for d, a in ((real_dem, real_analysis), (twin, twin_analysis))]
+    tv = {}
+    for group, cols in fs.groups().items():
+        if all(len(t) for t in tabs):
+            m = [t[cols].mean().to_numpy(float) for t in tabs]
+            m = [v / v.sum() if v.sum() > 0 else v for v in m]
+            tv[group] = round(float(0.5 * np.abs(m[0] - m[1]).sum()), 4)
+    per = []
+    for d, a in ((real_dem, real_analysis), (twin, twin_analysis)):
+        pk = a.peaks
+        per.append(disk_statistics(pk["x"].to_numpy(float), pk["y"].to_numpy(float), pk["elevation"].to_numpy(float),
+                                   pk["prominence"].to_numpy(float), _extent(d), radius_m=radius_m,
+                                   min_prominence_m=EPS))
+    w = {"log_peaks": wasserstein_distance(np.log1p(per[0]["peaks"]), np.log1p(per[1]["peaks"])),
+         "log_max_prominence": wasserstein_distance(np.log1p(per[0]["max_prominence_m"]),
+                                                    np.log1p(per[1]["max_prominence_m"])),
+         "top_rank": wasserstein_distance(per[0]["top_rank"], per[1]["top_rank"])}
+    return {"tv": tv, "w": {k: round(float(v), 4) for k, v in w.items()}, "n_disks": [len(t) for t in tabs]}
 
 
 def _figure(path: Path, name: str, panels: dict) -> None:
@@ -139,6 +182,21 @@ def _markdown(results: dict) -> str:
                 met = [sum(r[kind]["landform"][s]["ok"] for r in rows) for s in stats]
                 lines.append(f"| **{grp}: regions within target** | | " + " | ".join(f"{m}/{len(rows)}" for m in met)
                              + " | | | |")
+    return "\n".join(lines)
+
+
+def _drift_markdown(results: dict) -> str:
+    """Per region: how far the twin's 10 km disks are from the real ones (see :func:`disk_drift`)."""
+    tv_cols = ["relevance", "relative_prominence", "relative_elevation", "prominence", "saddle_distance"]
+    w_cols = ["log_peaks", "log_max_prominence", "top_rank"]
+    lines = ["### twin vs real 10 km disks: TV distance of mean disk histograms, W distance of per-disk values", "",
+             "| region | " + " | ".join(f"TV {c}" for c in tv_cols) + " | " + " | ".join(f"W {c}" for c in w_cols) + " |",
+             "|---|" + "---:|" * (len(tv_cols) + len(w_cols))]
+    for name, r in results.items():
+        d = r["twin"].get("disk_drift") or {}
+        tv, w = d.get("tv", {}), d.get("w", {})
+        lines.append(f"| {name} | " + " | ".join(f"{tv[c]:.2f}" if c in tv else "-" for c in tv_cols) + " | "
+                     + " | ".join(f"{w[c]:.2f}" if c in w else "-" for c in w_cols) + " |")
     return "\n".join(lines)
 
 
@@ -197,16 +255,30 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--real-accuracy", type=Path,
                     default=Path(__file__).resolve().parents[1] / "reports" / "classification" / "tables"
                     / "per_class_10km.csv", help="real disks' per-region accuracy (classification report)")
+    ap.add_argument("--combine", type=Path, nargs="+", default=None, metavar="JSON",
+                    help="no run: merge the regions of earlier --json outputs (same seed and parameters, e.g. the "
+                    "groups run in parallel), print and record them as one run")
     a = ap.parse_args(argv)
     groups = {"tune": TUNE, "hold": HOLD, "all": TUNE + HOLD}
     names = a.regions.split(",") if a.regions else list(groups[a.group])
-    results = {}
+    results: dict = {}
     model = None
     if a.model is not None and a.model.is_file():
         from orokit.classify.model import load_model
 
         model = load_model(a.model)
     synthesis = _synthesis_params(a.synthesis)
+    if a.combine:
+        docs = [json.loads(p.read_text()) for p in a.combine]
+        keys = ("seed", "erosion", "synthesis", "model")
+        if any(tuple(d.get(k) for k in keys) != tuple(docs[0].get(k) for k in keys) for d in docs):
+            raise SystemExit(f"--combine: the runs differ in {', '.join(keys)}; combine only runs of one setting")
+        a.seed, a.erosion = docs[0]["seed"], docs[0]["erosion"]
+        synthesis = _synthesis_params([f"{k}={json.dumps(v)}" for k, v in docs[0]["synthesis"].items()])
+        for d in docs:
+            results.update(d["regions"])
+        names = []
+        a.render_real = all("render" in r for r in results.values())
     for name in names:
         t0 = time.perf_counter()
         r = run_region(name, seed=a.seed, erosion=a.erosion, figures=a.figures, model=model, synthesis=synthesis,
@@ -215,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
         r["load_average_1_5_15"] = list(os.getloadavg())
         results[name] = r
         print(f"{name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
-    md = _markdown(results)
+    md = _markdown(results) + "\n\n" + _drift_markdown(results)
     recl = _reclassification(results, a.real_accuracy) if model is not None else None
     if recl:
         md += "\n\n" + recl["markdown"]
@@ -225,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
            "reclassification": recl, "table_markdown": md}
     if a.json is not None:
         a.json.write_text(json.dumps(doc, indent=1, default=float))
-    if a.record and not a.regions and a.render_real:
+    if a.record and (not a.regions or a.combine) and a.render_real:
         from _record import record
 
         print(f"recorded {record('realism', doc)}", file=sys.stderr)
