@@ -101,7 +101,10 @@ class SynthesisParams:
     disk_weight : strength of the per-disk target in the dart throwing: the share of 10 km
         disks that hold one of the highest peaks follows the type's ``disks`` record
         (:mod:`orokit.synthesis.disks`; 0 or a type without it: off). Without it the highest
-        peaks, pushed apart by their large isolation, end up along the domain border.
+        peaks, pushed apart by their large isolation, end up along the domain border. Default 32
+        (issue 11, ``benchmarks/realism.py``, 6 tuning regions, seeds 0-2): the Wasserstein
+        distance of the per-disk ``top_rank`` to the real DEM's went from 0.14-0.27 to 0.02-0.09
+        (seed 2), twin disks right 87.2 % on average against 84.6 % with 0, landforms equal.
     """
 
     n_passes: int = 4
@@ -112,7 +115,7 @@ class SynthesisParams:
     auto_elevation_m: float | None = 8000.0
     use_bands: bool | Literal["auto"] = "auto"
     void_weight: float = 1.0
-    disk_weight: float = 0.0
+    disk_weight: float = 32.0
 
     def __post_init__(self) -> None:
         if self.use_bands not in ("auto", True, False):

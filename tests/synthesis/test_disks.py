@@ -127,7 +127,8 @@ def test_disk_weight_brings_the_per_disk_highest_peaks_to_the_type(peak_factory)
     assert ttype.disks["top_rank"][10] < 0.05  # half of the disks hold one of the top 5 % peaks
     plain, target = [], []
     for seed in range(3):
-        plain.append(_top_rank_distance(synthesize_divide_tree(ttype, size_m=50_000, rng=seed), ttype))
+        plain.append(_top_rank_distance(synthesize_divide_tree(ttype, size_m=50_000, rng=seed,
+                                                             params=SynthesisParams(disk_weight=0.0)), ttype))
         t = synthesize_divide_tree(ttype, size_m=50_000, rng=seed, params=SynthesisParams(disk_weight=32.0))
         t.validate()
         target.append(_top_rank_distance(t, ttype))
