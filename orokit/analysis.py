@@ -271,7 +271,7 @@ def _dem_error(result, dem, core, transform, crs, *, sigma_m, k, corr_m, samples
     z = np.ascontiguousarray(np.asarray(dem.values, dtype=np.float64))
     mc = monte_carlo(z, core.peak_row, core.peak_col, sigma_m=sigma_m, corr_cells=corr, radius_cells=corr,
                      samples=samples, rng=np.random.default_rng(seed), min_prominence_m=min_prominence_m,
-                     outside=outside)
+                     outside=outside, peak_prominence=core.prominence)
     peaks["p_exists"], peaks["prominence_median"] = mc.p_exists, mc.prominence_median
     result.attrs.update({"error_corr_m": corr_m, "samples": samples, "seed": int(seed),
                          "max_abs_error_m": float(mc.max_abs_error_m.max())})

@@ -12,6 +12,7 @@ threshold lies within one correlation length, and the median of its prominence.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -92,15 +93,24 @@ class MonteCarloResult:
 
 def monte_carlo(z: np.ndarray, peak_row: np.ndarray, peak_col: np.ndarray, *, sigma_m: float,
                 corr_cells: tuple[float, float], radius_cells: tuple[float, float], samples: int,
-                rng: np.random.Generator, min_prominence_m: float, outside: str = "unknown") -> MonteCarloResult:
+                rng: np.random.Generator, min_prominence_m: float, outside: str = "unknown",
+                peak_prominence: np.ndarray | None = None, workers: int | None = None) -> MonteCarloResult:
     """Re-run the exact engine on ``samples`` noisy copies of ``z`` and match the peaks.
 
     In each realisation ``z + e`` (``e`` from :func:`correlated_noise`; NaN cells stay
-    NaN), a given peak is matched to the nearest realisation peak with prominence >=
-    ``min_prominence_m`` within the ellipse of half-axes ``radius_cells`` (rows, cols),
-    ties to the more prominent one.
+    NaN), a given peak is matched to a realisation peak with prominence >=
+    ``min_prominence_m`` within the ellipse of half-axes ``radius_cells`` (rows, cols):
+    with ``peak_prominence`` (the peaks' own prominences), the one whose prominence is
+    closest to it, so that a more prominent neighbour is not taken for a small peak that
+    survived; without, the nearest (ties to the more prominent).
+
+    Realisation i draws its error from the i-th child of ``rng`` (``rng.spawn``), so the
+    result does not depend on ``workers``: the number of realisations run at once in
+    threads (default: the CPU count; the engine releases the GIL).
     """
-    from scipy.spatial import cKDTree
+    import os
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
 
     from orokit.topology.engine import orometry
 
@@ -109,25 +119,31 @@ def monte_carlo(z: np.ndarray, peak_row: np.ndarray, peak_col: np.ndarray, *, si
     ry, rx = (max(float(v), 1.0) for v in radius_cells)
     n = len(peak_row)
     pts = np.column_stack([np.asarray(peak_row) / ry, np.asarray(peak_col) / rx])
+    target = None if peak_prominence is None else np.asarray(peak_prominence, dtype=float)
     out = np.full((samples, n), np.nan)
     emax = np.zeros(samples)
-    for i in range(samples):
-        e = correlated_noise(z.shape, sigma_m, corr_cells, rng)
+    rngs = rng.spawn(samples)
+    nan = np.isnan(z)
+    engine_lock = _engine_lock(threading)
+
+    def one(i: int) -> None:
+        e = correlated_noise(z.shape, sigma_m, corr_cells, rngs[i])
         zr = np.ascontiguousarray(z + e)
-        emax[i] = float(np.nanmax(np.abs(np.where(np.isnan(z), 0.0, e)))) if e.size else 0.0
-        core = orometry(zr, min_prominence_m=min_prominence_m, outside=outside)
-        if core.n_kept == 0 or n == 0:
-            continue
-        q = np.column_stack([core.peak_row / ry, core.peak_col / rx])
-        tree = cKDTree(q)
-        dist, idx = tree.query(pts, k=min(4, core.n_kept), distance_upper_bound=1.0 + 1e-9)
-        dist, idx = dist.reshape(n, -1), idx.reshape(n, -1)
-        found = np.isfinite(dist[:, 0])
-        best = np.full(n, -1)
-        for j in np.flatnonzero(found):
-            cand = idx[j][np.isfinite(dist[j]) & (dist[j] <= dist[j, 0] + 1e-12)]
-            best[j] = cand[np.argmax(core.prominence[cand])]
-        out[i, found] = core.prominence[best[found]]
+        emax[i] = float(np.max(np.abs(np.where(nan, 0.0, e)))) if e.size else 0.0
+        del e
+        with engine_lock:
+            core = orometry(zr, min_prominence_m=min_prominence_m, outside=outside)
+        del zr
+        if core.n_kept > 0 and n > 0:
+            out[i] = _match(pts, core.peak_row / ry, core.peak_col / rx, core.prominence, target)
+
+    workers = max(1, min(samples, workers if workers is not None else (os.cpu_count() or 1)))
+    if workers == 1:
+        for i in range(samples):
+            one(i)
+    else:
+        with ThreadPoolExecutor(workers) as pool:
+            list(pool.map(one, range(samples)))
     exists = np.isfinite(out)
     with np.errstate(all="ignore"):
         median = np.full(n, np.nan)
@@ -135,3 +151,40 @@ def monte_carlo(z: np.ndarray, peak_row: np.ndarray, peak_col: np.ndarray, *, si
         if any_found.any():
             median[any_found] = np.nanmedian(out[:, any_found], axis=0)
     return MonteCarloResult(exists.mean(axis=0), median, out, emax)
+
+
+def _engine_lock(threading: Any) -> Any:
+    """A lock around the engine unless numba's threading layer takes concurrent calls
+    (``omp``, ``tbb``; not ``workqueue``)."""
+    import contextlib
+
+    import numba
+
+    try:
+        layer = numba.threading_layer()
+    except ValueError:  # no parallel function has run yet: the layer is not known
+        layer = ""
+    return contextlib.nullcontext() if layer in ("omp", "tbb") else threading.Lock()
+
+
+def _match(pts: np.ndarray, q_row: np.ndarray, q_col: np.ndarray, q_prom: np.ndarray,
+           target: np.ndarray | None) -> np.ndarray:
+    """Prominence of the realisation peak matched to each of ``pts`` (NaN: none within 1)."""
+    from scipy.spatial import cKDTree
+
+    n = len(pts)
+    res = np.full(n, np.nan)
+    tree = cKDTree(np.column_stack([q_row, q_col]))
+    k = min(8, len(q_row))
+    dist, idx = tree.query(pts, k=k, distance_upper_bound=1.0 + 1e-9)
+    dist, idx = dist.reshape(n, -1), idx.reshape(n, -1)
+    for j in np.flatnonzero(np.isfinite(dist[:, 0])):
+        ok = np.isfinite(dist[j])
+        cand, d = idx[j][ok], dist[j][ok]
+        if target is None:
+            near = cand[d <= d[0] + 1e-12]
+            res[j] = q_prom[near[np.argmax(q_prom[near])]]
+        else:
+            gap = np.abs(q_prom[cand] - target[j])
+            res[j] = q_prom[cand[np.lexsort((d, gap))[0]]]
+    return res

@@ -112,3 +112,30 @@ def test_cli_dem_error(make_dem, tmp_path):
     assert meta["attrs"]["seed"] == 3 if "attrs" in meta else meta["seed"] == 3
     bad = CliRunner().invoke(cli, ["analyze", str(p), "-o", str(tmp_path / "o2"), "--samples", "3"])
     assert bad.exit_code == 2 and "--dem-error" in bad.output
+
+
+def test_match_prefers_the_prominence_closest_to_the_peaks_own():
+    """A more prominent neighbour nearer than the peak's own survivor is not taken for it."""
+    from orokit.topology.uncertainty import _match
+
+    pts = np.array([[0.0, 0.0], [5.0, 5.0]])
+    q_row, q_col = np.array([0.3, 0.0, 5.0]), np.array([0.0, 0.5, 5.0])
+    q_prom = np.array([100.0, 12.0, 40.0])
+    with_target = _match(pts, q_row, q_col, q_prom, np.array([10.0, 41.0]))
+    np.testing.assert_array_equal(with_target, [12.0, 40.0])
+    nearest = _match(pts, q_row, q_col, q_prom, None)
+    np.testing.assert_array_equal(nearest, [100.0, 40.0])
+    far = _match(np.array([[20.0, 20.0]]), q_row, q_col, q_prom, np.array([10.0]))
+    assert np.isnan(far[0])
+
+
+def test_monte_carlo_does_not_depend_on_the_number_of_threads():
+    z, _ = _bumps(seed=4)
+    core = orokit.topology.engine.orometry(z, min_prominence_m=20)
+    kw = dict(sigma_m=2.0, corr_cells=(4.0, 4.0), radius_cells=(4.0, 4.0), samples=6, min_prominence_m=20,
+              peak_prominence=core.prominence)
+    one = monte_carlo(z, core.peak_row, core.peak_col, rng=np.random.default_rng(9), workers=1, **kw)
+    two = monte_carlo(z, core.peak_row, core.peak_col, rng=np.random.default_rng(9), workers=2, **kw)
+    np.testing.assert_array_equal(one.prominence_samples, two.prominence_samples)
+    np.testing.assert_array_equal(one.max_abs_error_m, two.max_abs_error_m)
+    assert np.ptp(one.prominence_samples, axis=0).max() > 0.1
