@@ -89,15 +89,31 @@ def _write_parquet(frame, path: Path) -> None:
         frame.to_parquet(tmp)
 
 
-def _write_csv(frame, path: Path) -> None:
-    """A (Geo)DataFrame without its geometry as CSV, index first, floats in full precision."""
+def _write_csv(frame, path: Path, batch_rows: int | None = None) -> None:
+    """A (Geo)DataFrame without its geometry as CSV, index first, floats in full precision.
+
+    Written in batches of rows, so only one batch is ever copied (to pandas, then Arrow).
+    """
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    plain = pd.DataFrame(frame.drop(columns="geometry", errors="ignore")).reset_index()
-    table = pa.Table.from_pandas(plain, preserve_index=False)
+    from orokit.io.divide_tree_gpkg import WRITE_BATCH_ROWS
+
+    step = batch_rows or WRITE_BATCH_ROWS
+    columns = [c for c in frame.columns if c != "geometry"]
     with atomic_path(path) as tmp:
-        pacsv.write_csv(table, tmp)
+        writer = schema = None
+        try:
+            for start in range(0, max(len(frame), 1), step):
+                part = pd.DataFrame(frame.iloc[start:start + step][columns]).reset_index()
+                table = pa.Table.from_pandas(part, preserve_index=False, schema=schema)
+                if writer is None:
+                    schema = table.schema
+                    writer = pacsv.CSVWriter(str(tmp), schema)
+                writer.write_table(table)
+        finally:
+            if writer is not None:
+                writer.close()
 
 
 def read_analysis(outdir: PathLike) -> AnalysisResult:

@@ -40,6 +40,8 @@ def _json_attrs(attrs: dict) -> dict:
 
 #: how every layer is written: through GDAL's Arrow interface, without spatial index (GIS tools
 #: build one on demand; it would double the writing time)
+#: rows per batch when writing large tables (peaks, saddles, CSV): bounds the copies made for a write
+WRITE_BATCH_ROWS = 250_000
 _GPKG = {"driver": "GPKG", "engine": "pyogrio", "use_arrow": True, "layer_options": {"SPATIAL_INDEX": "NO"}}
 
 
@@ -67,7 +69,6 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
 
     path = Path(path)
     tree.validate(check_elevations=False)
-    peak_layer = tree.peaks
     added: list[str] = []
     if peaks is not None:
         validate_peak_table(peaks)
@@ -75,20 +76,24 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
             raise InputError(f"the peaks table has {len(peaks)} rows but the tree {tree.n_peaks} peaks; "
                              "pass the table of the same tree")
         added = [c for c in OROMETRY_COLUMNS if c not in tree.peaks.columns]
-        peak_layer = pd.concat([tree.peaks.reset_index(drop=True),
-                                pd.DataFrame(peaks[added]).reset_index(drop=True)], axis=1)
     meta = {"orokit_attrs": json.dumps(_json_attrs(tree.attrs)), "orometry_columns": json.dumps(added)}
 
-    def points(frame: pd.DataFrame, id_name: str) -> gpd.GeoDataFrame:
-        f = frame.copy()
-        f.insert(0, id_name, np.arange(len(f), dtype=np.int64))
-        return gpd.GeoDataFrame(f.reset_index(drop=True), geometry=gpd.points_from_xy(f["x"], f["y"]), crs=tree.crs)
+    def points(frame: pd.DataFrame, id_name: str, layer: str, extra: pd.DataFrame | None = None, **kw) -> None:
+        """One point layer, appended in batches of rows (points and copies only of a batch in memory)."""
+        for start in range(0, max(len(frame), 1), WRITE_BATCH_ROWS):
+            f = frame.iloc[start:start + WRITE_BATCH_ROWS].reset_index(drop=True)
+            if extra is not None:
+                f = pd.concat([f, pd.DataFrame(extra.iloc[start:start + WRITE_BATCH_ROWS]).reset_index(drop=True)],
+                              axis=1)
+            f.insert(0, id_name, np.arange(start, start + len(f), dtype=np.int64))
+            g = gpd.GeoDataFrame(f, geometry=gpd.points_from_xy(f["x"], f["y"]), crs=tree.crs)
+            g.to_file(tmp, layer=layer, append=start > 0, **kw, **_GPKG)
 
     with atomic_path(path) as tmp, warnings.catch_warnings():
         # a tree on a local grid has no CRS: that is recorded in attrs, not a problem
         warnings.filterwarnings("ignore", message="'crs' was not provided", category=UserWarning)
-        points(peak_layer, "peak_id").to_file(tmp, layer="peaks", **_GPKG)
-        points(tree.saddles, "saddle_id").to_file(tmp, layer="saddles", **_GPKG)
+        points(tree.peaks, "peak_id", "peaks", None if peaks is None else peaks[added])
+        points(tree.saddles, "saddle_id", "saddles")
         ridges = tree.ridges()
         if ridges.crs is None and tree.crs is not None:
             ridges = ridges.set_crs(tree.crs)
@@ -96,7 +101,7 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
         for key in ("runoffs", "basin_saddles"):
             extra = tree.attrs.get(key)
             if isinstance(extra, pd.DataFrame):
-                points(extra, "point_id").to_file(tmp, layer=key, geometry_type="Point", **_GPKG)
+                points(extra, "point_id", key, geometry_type="Point")
         for name, frame in (layers or {}).items():
             frame.reset_index().to_file(tmp, layer=name, geometry_type="Point", **_GPKG)
         import pyogrio

@@ -97,3 +97,25 @@ def test_analysis_folders_of_older_versions_read_under_the_current_keys(result, 
     assert back.attrs["min_prominence_m"] == 5.0 and back.attrs["cell_size_m"] == [30.0, 30.0]
     assert "min_prominence" not in back.attrs and "cell_size" not in back.attrs
     assert back.tree.n_peaks == result.tree.n_peaks
+
+
+def test_tables_written_in_batches_equal_one_batch(result, tmp_path, monkeypatch):
+    """peaks.csv and the GeoPackage layers are written in row batches: same content as in one batch."""
+    import geopandas as gpd
+
+    import orokit.io.divide_tree_gpkg as gp
+    from orokit.analysis import write_analysis
+
+    n = len(result.peaks)
+    assert n > 7 and len(result.saddles) > 7
+    write_analysis(result, tmp_path / "one")
+    monkeypatch.setattr(gp, "WRITE_BATCH_ROWS", 3)  # several batches and a last partial one
+    write_analysis(result, tmp_path / "many")
+    one, many = tmp_path / "one", tmp_path / "many"
+    assert (one / "peaks.csv").read_bytes() == (many / "peaks.csv").read_bytes()
+    for layer in ("peaks", "saddles", "ridges"):
+        a = gpd.read_file(one / "dividetree.gpkg", layer=layer)
+        b = gpd.read_file(many / "dividetree.gpkg", layer=layer)
+        assert len(b) == (n if layer == "peaks" else len(b))
+        assert a.equals(b), layer
+    assert gpd.read_file(many / "dividetree.gpkg", layer="peaks")["peak_id"].tolist() == list(range(n))
