@@ -45,7 +45,8 @@ def _tree(type_name: str, size_km: float, seed: int):
     return synthesize_divide_tree(load_terrain_type(TYPES / f"{type_name}.json"), size_m=size_km * 1000.0, rng=seed)
 
 
-def bench(generator: str, type_name: str, size_km: float, res: float, seed: int) -> dict:
+def bench(generator: str, type_name: str, size_km: float, res: float, seed: int, params: list[str] | None = None
+          ) -> dict:
     from orokit.generators import render_terrain
     from orokit.generators.base import tree_rivers
     from orokit.raster.rasterize import make_grid
@@ -61,21 +62,23 @@ def bench(generator: str, type_name: str, size_km: float, res: float, seed: int)
         from orokit.data import open_dataset_dem
 
         exemplar = open_dataset_dem(type_name)
-    render_terrain(tree, generator=generator, cell_size_m=res * 10, seed=seed, exemplar=exemplar)  # warm caches
+    render_terrain(tree, generator=generator, cell_size_m=res * 10, seed=seed, exemplar=exemplar,
+                   params=params or None)  # warm caches
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
     grid = make_grid(tree_extent(tree), res)
     t0 = time.perf_counter()
     rivers = tree_rivers(tree, grid)
     t_rivers = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    dem = render_terrain(tree, generator=generator, grid=grid, rivers=rivers, seed=seed, exemplar=exemplar)
-    t_render = time.perf_counter() - t0
+    t0, c0 = time.perf_counter(), time.process_time()
+    dem = render_terrain(tree, generator=generator, grid=grid, rivers=rivers, seed=seed, exemplar=exemplar,
+                         params=params or None)
+    t_render, c_render = time.perf_counter() - t0, time.process_time() - c0
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
     stages = json.loads(dem.attrs["timings"])
     stages["rivers"] = round(t_rivers, 3)
-    return {"generator": generator, "type": type_name, "size_km": size_km, "res_m": res, "seed": seed,
+    return {"generator": generator, "params": list(params or []), "type": type_name, "size_km": size_km, "res_m": res, "seed": seed,
             "peaks": int(tree.n_peaks), "shape": f"{dem.shape[1]}x{dem.shape[0]}", "tree_s": round(t_tree, 2),
-            "render_s": round(t_render + t_rivers, 3), "stages_s": stages, "peak_rss_gb": round(rss, 3),
+            "render_s": round(t_render + t_rivers, 3), "render_cpu_s": round(c_render, 3), "stages_s": stages, "peak_rss_gb": round(rss, 3),
             "rss_before_render_gb": round(rss0, 3), "load_average_after": list(os.getloadavg())}
 
 
@@ -236,7 +239,7 @@ def michel_sweep(type_name: str, seed: int, t1_values: list[float], out: Path) -
     noise = M.fbm((grid.ny + 2 * pad, grid.nx + 2 * pad), p.fbm_beta, np.random.default_rng(seed))
     folds = M.fold_map(noise, pad, vel, grid.cell_size_m)
     k = p.k_min + (1.0 - p.k_min) * np.exp(-0.5 * (d / p.k_sigma_m) ** 2)
-    km = [0, grid.nx * grid.cell_size_m / 1000.0, grid.ny * grid.cell_size_m / 1000.0, 0]
+    km = [0, grid.nx * grid.cell_size_m / 1000.0, 0, grid.ny * grid.cell_size_m / 1000.0]  # x, y in km (north up)
     fig, axes = plt.subplots(1, 3, figsize=(16, 5.6))
     rng = np.random.default_rng(1)
     for ax, pl, title in ((axes[0], sub, f"sub-plates ({sub.n}, Voronoi of the peaks)"),
@@ -271,6 +274,7 @@ def main() -> None:
     ap.add_argument("--size-km", type=float, default=None)
     ap.add_argument("--res", type=float, default=30.0)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--param", action="append", default=[], help="generator parameter K=V (bench)")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.what == "figures":
@@ -294,13 +298,15 @@ def main() -> None:
         return
     size = a.size_km or 60.0
     if a.child:
-        print(json.dumps(bench(a.generator, a.type_name, size, a.res, a.seed)))
+        print(json.dumps(bench(a.generator, a.type_name, size, a.res, a.seed, a.param)))
         return
     cmd = [sys.executable, __file__, "bench", "--child", "--generator", a.generator, "--type", a.type_name,
            "--size-km", str(size), "--res", str(a.res), "--seed", str(a.seed)]
+    for kv in a.param:
+        cmd += ["--param", kv]
     res = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout.strip().splitlines()[-1])
     print(f"{a.generator}: {res['shape']} from {res['peaks']} peaks: render {res['render_s']} s, "
-          f"peak RSS {res['peak_rss_gb']} GB (tree synthesis {res['tree_s']} s; load {res['load_average_after']})")
+          f"({res['render_cpu_s']} s CPU), peak RSS {res['peak_rss_gb']} GB (tree synthesis {res['tree_s']} s; load {res['load_average_after']})")
     for k, v in res["stages_s"].items():
         print(f"  {k:10s} {v:7.3f} s")
     sys.path.insert(0, str(Path(__file__).parent))
@@ -309,7 +315,8 @@ def main() -> None:
     prev = {}
     if (OUT / "generators.json").exists():
         prev = json.loads((OUT / "generators.json").read_text()).get("results", {})
-    prev[a.generator] = res
+    key = a.generator + (f"[{','.join(a.param)}]" if a.param else "") + ("" if size == 60.0 else f"@{size:g}km")
+    prev[key] = res
     print(f"recorded in {record('generators', prev)}")
 
 
