@@ -182,34 +182,49 @@ def ranking_markdown(runs: list[dict], note: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_hillshade_row(axes: Any, real: Any, images: dict[str, np.ndarray | None], *, title: str = "") -> Any:
-    """Real DEM hillshade then one hillshade image per generator (None: failed run)."""
-    from orokit.raster.shade import hillshade
+def tinted_hillshade(z: np.ndarray, cell_size_m: float, norm: Any, cmap: str = "terrain") -> np.ndarray:
+    """RGB image: elevation colours (``norm``, one scale for every panel) darkened by the hillshade."""
+    import matplotlib
 
-    axes[0].imshow(np.nan_to_num(hillshade(real), nan=0.0), cmap="gray", vmin=0, vmax=1)
-    axes[0].set_title(f"{title} (real)", fontsize=9)
-    for ax, (name, img) in zip(axes[1:], images.items()):
-        if img is None:
-            ax.text(0.5, 0.5, "failed", ha="center", va="center", transform=ax.transAxes)
+    rgb = matplotlib.colormaps[cmap](norm(np.nan_to_num(np.asarray(z, float), nan=float(norm.vmin))))[..., :3]
+    return rgb * (0.3 + 0.7 * shade(z, cell_size_m)[..., None])
+
+
+def plot_hillshade_row(axes: Any, real: Any, images: dict[str, Any], *, title: str = "", norm: Any = None) -> Any:
+    """Real DEM then one DEM per generator, as hillshades tinted by elevation on one colour
+    scale (``norm``, default: the real DEM's range), with km axes. An image is a DEM
+    (DataArray), the string ``"failed"`` or None (no run)."""
+    from matplotlib.colors import Normalize
+
+    if norm is None:
+        norm = Normalize(float(np.nanmin(real.values)), float(np.nanmax(real.values)))
+    for ax, (name, dem) in zip(axes, [(f"{title} (real)", real), *images.items()]):
+        if dem is None or isinstance(dem, str):
+            ax.text(0.5, 0.5, "failed" if dem == "failed" else "not run", ha="center", va="center",
+                    transform=ax.transAxes)
+            ax.set_xticks([])
+            ax.set_yticks([])
         else:
-            ax.imshow(img, cmap="gray")
+            cell = abs(float(dem.rio.transform().a))
+            ny, nx = dem.shape
+            ax.imshow(tinted_hillshade(dem.values, cell, norm), extent=[0, nx * cell / 1000, 0, ny * cell / 1000],
+                      interpolation="nearest")
+            ax.set_xlabel("km", fontsize=8)
+            ax.tick_params(labelsize=7)
         ax.set_title(name, fontsize=9)
-    for ax in axes:
-        ax.set_xticks([])
-        ax.set_yticks([])
     return axes
 
 
 def write_ranking_report(runs: list[dict], reals: dict[str, Any], out: Any, note: str | None = None) -> None:
-    """Write README.md, README.csv (one row per run) and ``<region>.png`` (real + seed-0
-    hillshade of every generator) into ``out``'s folder; README.md last."""
+    """Write README.md, README.csv (one row per run) and ``<region>.png`` (the real DEM and every
+    generator's DEM of the region's lowest seed, tinted hillshades on one colour scale, km
+    axes) into ``out``'s folder; README.md last."""
     from pathlib import Path
 
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from PIL import Image
 
     from orokit.io.atomic import atomic_path, write_text_atomic
 
@@ -219,18 +234,31 @@ def write_ranking_report(runs: list[dict], reals: dict[str, Any], out: Any, note
     with atomic_path(out.with_suffix(".csv")) as tmp:
         per_run.to_csv(tmp, index=False)
     gens = sorted({r["generator"] for r in runs})
-    seed0 = min(r["seed"] for r in runs)
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    from orokit.io.dem import read_dem
+
     for region, real in reals.items():
-        imgs: dict[str, np.ndarray | None] = {}
+        mine = [r for r in runs if r["region"] == region]
+        seed0 = min(r["seed"] for r in mine) if mine else 0
+        imgs: dict[str, Any] = {}
         for g in gens:
-            run = next((r for r in runs if r["region"] == region and r["generator"] == g and r["seed"] == seed0), None)
-            hs = Path(run["hillshade"]) if run else None
-            ok = run is not None and hs is not None and not run.get("failed") and hs.exists()
-            imgs[g] = np.asarray(Image.open(hs)) if ok and hs is not None else None
-        fig, axes = plt.subplots(1, len(gens) + 1, figsize=(3.2 * (len(gens) + 1), 3.4))
+            run = next((r for r in mine if r["generator"] == g and r["seed"] == seed0), None)
+            dem_path = Path(run.get("dem") or Path(run["hillshade"]).parent / "dem.tif") if run else None
+            if run is None or dem_path is None:
+                imgs[g] = None
+            elif run.get("failed") or not dem_path.exists():
+                imgs[g] = "failed"
+            else:
+                imgs[g] = read_dem(str(dem_path))
+        fig, axes = plt.subplots(1, len(gens) + 1, figsize=(2.9 * (len(gens) + 1) + 1.2, 3.5),
+                                 layout="constrained")
         if real is not None:
-            plot_hillshade_row(np.atleast_1d(axes), real, imgs, title=region)
-        fig.tight_layout()
+            norm = Normalize(float(np.nanmin(real.values)), float(np.nanmax(real.values)))
+            plot_hillshade_row(np.atleast_1d(axes), real, imgs, title=f"{region}, seed {seed0}", norm=norm)
+            fig.colorbar(ScalarMappable(norm=norm, cmap="terrain"), ax=list(np.atleast_1d(axes)), shrink=0.8,
+                         pad=0.01, label="elevation (m), one scale: the real DEM's range")
         with atomic_path(out.parent / f"{region}.png") as tmp:
             fig.savefig(tmp, dpi=100, format="png")
         plt.close(fig)
