@@ -51,6 +51,9 @@ class RenderParams:
         groove just below the saddle).
     flank_max_slope : the flank cones fall at most this steeply (m/m) where they are not next to a
         saddle (None: no limit); see :func:`orokit.raster.skeleton.build_skeleton`.
+    flank_neighbours : the cone envelope is the highest cone of this many nearest ridge points; far from
+        the ridges a small set makes the envelope jump where its highest cone drops out of the set
+        (steep steps mid-slope: on the Everest render 16 gives 4.7 % of cells > 60 deg, 64 gives 3.5 %).
     flank_depth : the cones of a ridge piece reach at most ``flank_depth * (peak - saddle)``
         below its saddle (None: no limit; far from ridges steep cones dug canyons).
     """
@@ -77,6 +80,7 @@ class RenderParams:
     trench_slope: float = 0.0
     trench_depth_ratio: float = 0.5
     flank_max_slope: float | None = None
+    flank_neighbours: int = 16
     texture_rms_m: float = 0.0
     texture_beta: float = 4.5
     texture_gain: float = 0.4

@@ -182,7 +182,7 @@ def build_skeleton(
     rtree = cKDTree(rxy)
 
     def envelope(xy: np.ndarray) -> np.ndarray:
-        return flank_envelope(xy, rxy, rz, rs, ridge_floor=rfloor, tree=rtree)
+        return flank_envelope(xy, rxy, rz, rs, ridge_floor=rfloor, tree=rtree, k_neighbours=params.flank_neighbours)
 
     rivers = river_network(fine_ridges, ridge_lines.xy, extent, base_elevation=base,
                            margin_m=params.river_margin, slope=params.river_slope, cap=envelope)
@@ -215,7 +215,8 @@ def build_skeleton(
     vxy, vz, va = densify(river_lines, dense) if river_seg.size else (rivers.xy, rivers.elevation, area)
     pts = np.concatenate([samples, ring])
     h, dT, dR = sample_elevation(pts, rxy, rz, vxy, vz, valley_width(va, coef=params.valley_coef), ridge_slope=rs,
-                                 ridge_floor=rfloor, profile=hillslope_profile if learned else None)
+                                 ridge_floor=rfloor, profile=hillslope_profile if learned else None,
+                                 k_neighbours=params.flank_neighbours)
     far = (np.minimum(dT, dR) >= 0.5 * lam)
     far[samples.shape[0]:] = True  # keep the ring
     pts, h = pts[far], h[far]

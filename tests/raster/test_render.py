@@ -244,3 +244,20 @@ def test_texture_from_relief_and_kept_hills_keep_the_orometry():
                                atol=6.0)
     z = np.arange(60.0).reshape(6, 10)  # 2 x 2-cell blocks at 1 m: ptp of each block is 11
     assert _median_relief(z, 1.0, 2.0) == 11.0
+
+
+def test_flank_envelope_with_more_neighbours_approaches_the_full_envelope():
+    """The cone envelope over k nearest ridge points is a lower bound of the envelope over all of
+    them (brute force), and equals it when k covers every point (RenderParams.flank_neighbours)."""
+    from orokit.raster.interpolate import flank_envelope
+
+    rng = np.random.default_rng(0)
+    q = rng.uniform(0, 10_000, (200, 2))
+    z = rng.uniform(1000, 3000, 200)
+    s = rng.uniform(0.1, 1.0, 200)
+    p = rng.uniform(0, 10_000, (500, 2))
+    full = np.max(z[None, :] - s[None, :] * np.hypot(*(p[:, None, :] - q[None, :, :]).transpose(2, 0, 1)), axis=1)
+    e16 = flank_envelope(p, q, z, s, k_neighbours=16)
+    e64 = flank_envelope(p, q, z, s, k_neighbours=64)
+    assert (e16 <= e64 + 1e-9).all() and (e64 <= full + 1e-9).all() and (e16 < full - 1.0).any()
+    np.testing.assert_allclose(flank_envelope(p, q, z, s, k_neighbours=200), full)
