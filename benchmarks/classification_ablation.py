@@ -59,7 +59,7 @@ def variants():
          {"separation": 0.25, "max_disks": 400}, {"max_train": 400}),
         ("orometry, another disk layout (seed 1)", oro, {"seed": 1}, {}),
         ("orometry, another disk layout (seed 2)", oro, {"seed": 2}, {}),
-        ("+ spatial pattern (peak spacing, direction alignment, steepness, elevation-prominence correlation)",
+        ("+ spatial pattern (peak spacing, key-saddle alignment, steepness, elevation-prominence correlation)",
          dataclasses.replace(oro, name="v", pattern=True), {}, {}),
         ("summaries + elevation + spatial pattern (no histograms)",
          dataclasses.replace(oro, name="v", pattern=True, histograms=()), {}, {}),
