@@ -140,7 +140,7 @@ def _walk(o: pd.DataFrame, start: tuple[int, int], targets: set) -> list[tuple[i
 
 
 def _is_flat_summit(z: np.ndarray, r: int, c: int) -> bool:
-    h, w = z.shape
+    """True when a neighbour of (r, c) has the same elevation (a flat summit)."""
     win = z[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2]
     return int((win == z[r, c]).sum()) > 1
 
