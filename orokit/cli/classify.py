@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from orokit.cli.options import INPUT, common_input_options, overwrite_option, seed_option
+from orokit.cli.options import INPUT, common_input_options, overwrite_option, progress_option, seed_option
 
 
 @click.command()
@@ -26,8 +26,9 @@ from orokit.cli.options import INPUT, common_input_options, overwrite_option, se
                    "and a PNG map over the hillshade beside it (same name, .png). DEM inputs only.")
 @seed_option(what="the disk placement")
 @overwrite_option("existing --output / --map files")
+@progress_option()
 def classify(model_path, source, z_units, cell_size_m, region, isolation, min_peaks, threshold, as_json, output,
-             map_path, seed, overwrite):
+             map_path, seed, overwrite, progress):
     """Classify INPUT (DEM file or manifest DEM name, `orokit analyze` folder, or peak list) with MODEL.
 
     Features are computed with the model's radius, eps and feature set; each disk is
@@ -37,9 +38,9 @@ def classify(model_path, source, z_units, cell_size_m, region, isolation, min_pe
     from orokit.classify.inputs import open_input_dem
     from orokit.classify.model import load_model
     from orokit.classify.predict import classify_input, disk_map
-    from orokit.io.atomic import atomic_path
-
     from orokit.cli.outputs import claim_outputs
+    from orokit.cli.progress import StageProgress
+    from orokit.io.atomic import atomic_path
 
     outputs = [p for p in (output, map_path, map_path.with_suffix(".png") if map_path else None) if p is not None]
     claim_outputs(*outputs)  # locked for the whole run
@@ -48,24 +49,31 @@ def classify(model_path, source, z_units, cell_size_m, region, isolation, min_pe
         raise click.UsageError(f"{', '.join(existing)} exist(s); pass --overwrite to replace")
     if map_path is not None and map_path.suffix.lower() != ".gpkg":
         raise click.BadParameter(f"{map_path} must end in .gpkg (GeoPackage)", param_hint="--map")
-    model = load_model(model_path)
-    source.dem_options(z_units, cell_size_m)  # a manifest DEM: refuses contradicting --z-units/--cell-size
-    dem = open_input_dem(str(source), z_units=z_units, cell_size_m=cell_size_m) if region is None else None
-    if map_path is not None and dem is None:
-        raise click.UsageError("--map needs a DEM input (a raster file or a manifest DEM name)")
-    pred = classify_input(model, str(source), z_units=z_units, cell_size_m=cell_size_m, region=region, isolation=isolation,
-                          min_peaks=min_peaks, threshold=threshold, dem=dem, rng=seed)
-    if output is not None:
-        with atomic_path(output) as tmp:
-            pred.disks.to_csv(tmp, index=False)
-    if map_path is not None:
-        from orokit.io.model_io import write_disk_map
-        from orokit.reports.classification_map import write_classification_map_png
+    stages = ["read", "features and prediction"] + (["write"] if output is not None or map_path is not None else [])
+    with StageProgress("classify", stages, enabled=progress) as bar:
+        model = load_model(model_path)
+        source.dem_options(z_units, cell_size_m)  # a manifest DEM: refuses contradicting --z-units/--cell-size
+        dem = open_input_dem(str(source), z_units=z_units, cell_size_m=cell_size_m) if region is None else None
+        if map_path is not None and dem is None:
+            raise click.UsageError("--map needs a DEM input (a raster file or a manifest DEM name)")
+        bar.advance()
+        pred = classify_input(model, str(source), z_units=z_units, cell_size_m=cell_size_m, region=region,
+                              isolation=isolation, min_peaks=min_peaks, threshold=threshold, dem=dem, rng=seed)
+        bar.advance()
+        if output is not None:
+            with atomic_path(output) as tmp:
+                pred.disks.to_csv(tmp, index=False)
+        if map_path is not None:
+            from orokit.io.model_io import write_disk_map
+            from orokit.reports.classification_map import write_classification_map_png
 
-        disks = disk_map(pred, crs=dem.rio.crs)
-        write_disk_map(disks, map_path)
-        write_classification_map_png(dem, disks, model.classes, map_path.with_suffix(".png"),
-                                     title=f"{Path(str(source)).name}: {pred.label} (R = {model.radius_m / 1000:g} km)")
+            disks = disk_map(pred, crs=dem.rio.crs)
+            write_disk_map(disks, map_path)
+            write_classification_map_png(dem, disks, model.classes, map_path.with_suffix(".png"),
+                                         title=f"{Path(str(source)).name}: {pred.label} "
+                                               f"(R = {model.radius_m / 1000:g} km)")
+        if output is not None or map_path is not None:
+            bar.advance()
     if as_json:
         click.echo(json.dumps(pred.to_dict(), indent=2, default=float))
     else:

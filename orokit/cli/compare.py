@@ -5,7 +5,7 @@ from pathlib import Path
 
 import click
 
-from orokit.cli.options import LENGTH, Length, cell_size_option, overwrite_option, refuse_existing
+from orokit.cli.options import LENGTH, Length, cell_size_option, overwrite_option, progress_option, refuse_existing
 
 
 @click.command()
@@ -25,8 +25,10 @@ from orokit.cli.options import LENGTH, Length, cell_size_option, overwrite_optio
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write every matched, missing (in B only) and extra (in A only) peak to this CSV.")
 @overwrite_option("an existing --csv file")
+@progress_option()
 def compare(a: Path, b: Path, max_cells: float, max_distance_m: float, z_tolerance_m: float,
-            cell_size_m: float | None, tree_z_units: str, tree_rows: int | None, csv_path: Path | None, overwrite: bool) -> None:
+            cell_size_m: float | None, tree_z_units: str, tree_rows: int | None, csv_path: Path | None, overwrite: bool,
+            progress: bool) -> None:
     """Compare peak list A (under test) with B (reference).
 
     A and B are analysis folders or peaks tables (orokit), Divide Trees (.gpkg,
@@ -36,6 +38,7 @@ def compare(a: Path, b: Path, max_cells: float, max_distance_m: float, z_toleran
     prominence) precision and recall regardless of location, and the line and
     prominence parent agreement of matched peaks.
     """
+    from orokit.cli.progress import StageProgress
     from orokit.io.peak_lists import read_peak_list
     from orokit.metrics.peak_match import compare_peak_lists
 
@@ -44,10 +47,14 @@ def compare(a: Path, b: Path, max_cells: float, max_distance_m: float, z_toleran
 
         claim_outputs(csv_path)
         refuse_existing(csv_path, overwrite=overwrite)
-    ta = read_peak_list(a, cell_size_m=cell_size_m, z_units=tree_z_units, height=tree_rows)
-    tb = read_peak_list(b, cell_size_m=cell_size_m, z_units=tree_z_units, height=tree_rows)
-    summary, pairs = compare_peak_lists(ta, tb, max_cells=max_cells, max_distance_m=max_distance_m,
-                                        z_tolerance_m=z_tolerance_m)
+    with StageProgress("compare", [f"read {a.name}", f"read {b.name}", "match"], enabled=progress) as bar:
+        ta = read_peak_list(a, cell_size_m=cell_size_m, z_units=tree_z_units, height=tree_rows)
+        bar.advance()
+        tb = read_peak_list(b, cell_size_m=cell_size_m, z_units=tree_z_units, height=tree_rows)
+        bar.advance()
+        summary, pairs = compare_peak_lists(ta, tb, max_cells=max_cells, max_distance_m=max_distance_m,
+                                            z_tolerance_m=z_tolerance_m)
+        bar.advance()
     unit = "cells" if summary["match_unit"] == "cells" else "m"
 
     def pct(v: float) -> str:

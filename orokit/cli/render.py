@@ -14,6 +14,7 @@ from orokit.cli.options import (
     resolve_input,
     min_prominence_option,
     overwrite_option,
+    progress_option,
     refuse_existing,
     seed_option,
 )
@@ -92,9 +93,10 @@ def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None
 @click.option("--tin", "tin_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write the TIN as a PLY mesh.")
 @overwrite_option("existing outputs")
+@progress_option()
 @generator_options
 def render(tree, out, resolution, erosion, seed, extent, like, min_prominence_m, lam, cell_size_m, preview,
-           tin_path, overwrite, generator, params, exemplar) -> None:
+           tin_path, overwrite, progress, generator, params, exemplar) -> None:
     """Render the Divide Tree TREE (.gpkg, .txt or a synthesize folder) to an elevation raster.
 
     --generator picks the backend (default argudo, orokit's renderer); --erosion, --lambda and
@@ -103,6 +105,7 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence_m,
     import time
 
     from orokit.cli.outputs import claim_outputs
+    from orokit.cli.progress import StageProgress
     from orokit.raster.params import RenderParams
     from orokit.raster.render import render_elevation
 
@@ -121,22 +124,31 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence_m,
         if generator == "argudo":
             params = (f"lam={lam}", f"min_prominence_m={min_prominence_m}", f"erosion={erosion}") + tuple(params)
         parsed = check_generator_inputs(generator, params, exemplar)
-        t = read_tree(tree, cell_size_m=cell_size_m)
-        t0 = time.perf_counter()
-        dem = render_generator(t, generator=generator, params=parsed, cell_size_m=res, extent=extent, seed=seed,
-                               tree_path=tree, exemplar=exemplar)
-        write_outputs(dem, out, preview=preview, tin_path=None)
+        with StageProgress("render", ["read tree", f"render ({generator})", "write"], enabled=progress) as bar:
+            t = read_tree(tree, cell_size_m=cell_size_m)
+            bar.advance()
+            t0 = time.perf_counter()
+            dem = render_generator(t, generator=generator, params=parsed, cell_size_m=res, extent=extent, seed=seed,
+                                   tree_path=tree, exemplar=exemplar)
+            bar.advance()
+            write_outputs(dem, out, preview=preview, tin_path=None)
+            bar.advance()
         click.echo(f"{dem.shape[1]} x {dem.shape[0]} cells at {res:g} m from {t.n_peaks} peaks with {generator} "
                    f"in {time.perf_counter() - t0:.1f} s (seed {dem.attrs['seed']}) -> {out}")
         return
     params = RenderParams(lam=lam, min_prominence_m=min_prominence_m)
-    t = read_tree(tree, cell_size_m=cell_size_m)
-    t0 = time.perf_counter()
-    dem, skel = render_elevation(t, cell_size_m=res, extent=extent, erosion=erosion, params=params,
-                                 return_skeleton=True, rng=seed)
-    # staged: the old outputs are replaced only once every new one is written
-    write_outputs(dem, stage.file(out), preview=None if preview is None else stage.file(preview),
-                  tin_path=None if tin_path is None else stage.file(tin_path), skeleton=skel)
-    stage.commit()
+    with StageProgress("render", ["read tree", "render" + (" + erosion" if erosion else ""), "write"],
+                       enabled=progress) as bar:
+        t = read_tree(tree, cell_size_m=cell_size_m)
+        bar.advance()
+        t0 = time.perf_counter()
+        dem, skel = render_elevation(t, cell_size_m=res, extent=extent, erosion=erosion, params=params,
+                                     return_skeleton=True, rng=seed)
+        bar.advance()
+        # staged: the old outputs are replaced only once every new one is written
+        write_outputs(dem, stage.file(out), preview=None if preview is None else stage.file(preview),
+                      tin_path=None if tin_path is None else stage.file(tin_path), skeleton=skel)
+        stage.commit()
+        bar.advance()
     click.echo(f"{dem.shape[1]} x {dem.shape[0]} cells at {res:g} m from {t.n_peaks} peaks "
                f"in {time.perf_counter() - t0:.1f} s (seed {dem.attrs['seed']}) -> {out}")

@@ -10,6 +10,7 @@ from orokit.cli.options import (
     LENGTH,
     min_prominence_option,
     overwrite_option,
+    progress_option,
     refuse_existing,
     seed_option,
     z_units_option,
@@ -56,8 +57,9 @@ def append_row(table: Path, row: dict) -> None:
                    "OUT/synthesis.json, if any].")
 @click.option("--real-cell-size", type=LENGTH, default=None,
               help="Cell size of a --real file without georeference (a length: 92.6m; a plain number is metres).")
+@progress_option()
 def validate(out, model_path, tree_path, type_file, label, min_prominence_m, z_units, json_path, append_to, overwrite,
-             seed, real, real_cell_size) -> None:
+             seed, real, real_cell_size, progress) -> None:
     """Re-analyse OUT (a synthesize folder or a raster), compare it with its Divide Tree, classify it.
 
     Writes OUT/validation.json for a folder (or -o JSON) and, with --append-to, one row to a CSV log;
@@ -89,41 +91,48 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence_m, z_u
         if real is None and meta.get("like"):
             real = meta["like"]
 
+    from orokit.cli.progress import StageProgress
     from orokit.cli.render import read_tree
     from orokit.io.atomic import write_text_atomic
     from orokit.io.dem import read_dem
     from orokit.validate.roundtrip import roundtrip, summary_json
 
-    dem = read_dem(str(raster), z_units=z_units)
-    tree = read_tree(tree_path)
-    ttype = None
-    if type_file is not None:
-        from orokit.synthesis.terrain_type import load_terrain_type
+    stages = ["read", "re-analyse and compare"] + (["landforms vs real"] if real is not None else []) + ["write"]
+    with StageProgress("validate", stages, enabled=progress) as bar:
+        dem = read_dem(str(raster), z_units=z_units)
+        tree = read_tree(tree_path)
+        ttype = None
+        if type_file is not None:
+            from orokit.synthesis.terrain_type import load_terrain_type
 
-        ttype = load_terrain_type(type_file)
-    model = None
-    if model_path is not None:
-        from orokit.classify.model import load_model
+            ttype = load_terrain_type(type_file)
+        model = None
+        if model_path is not None:
+            from orokit.classify.model import load_model
 
-        model = load_model(model_path)
-    rt = roundtrip(dem, tree, min_prominence_m=min_prominence_m, terrain_type=ttype, model=model,
-                   expected_label=label, rng=seed)
-    s = rt.summary()
-    landform = None
-    if real is not None:
-        from orokit.cli.render import like_dem
-        from orokit.validate.landform import compare_landforms
+            model = load_model(model_path)
+        bar.advance()
+        rt = roundtrip(dem, tree, min_prominence_m=min_prominence_m, terrain_type=ttype, model=model,
+                       expected_label=label, rng=seed)
+        s = rt.summary()
+        bar.advance()
+        landform = None
+        if real is not None:
+            from orokit.cli.render import like_dem
+            from orokit.validate.landform import compare_landforms
 
-        landform = compare_landforms(like_dem(real, cell_size_m=real_cell_size, z_units=None, hint="--real"), dem)
-    if json_path is not None:
-        doc = json.loads(summary_json(rt))
-        if landform is not None:
-            doc["landform"] = {"real": str(real), "table": landform.reset_index().to_dict(orient="records")}
-        write_text_atomic(json_path, json.dumps(doc, indent=2))
-    if append_to is not None:
-        row = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "raster": str(raster),
-               "tree": str(tree_path), "model": str(model_path) if model_path else "", **s}
-        append_row(append_to, row)
+            landform = compare_landforms(like_dem(real, cell_size_m=real_cell_size, z_units=None, hint="--real"), dem)
+            bar.advance()
+        if json_path is not None:
+            doc = json.loads(summary_json(rt))
+            if landform is not None:
+                doc["landform"] = {"real": str(real), "table": landform.reset_index().to_dict(orient="records")}
+            write_text_atomic(json_path, json.dumps(doc, indent=2))
+        if append_to is not None:
+            row = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "raster": str(raster),
+                   "tree": str(tree_path), "model": str(model_path) if model_path else "", **s}
+            append_row(append_to, row)
+        bar.advance()
     msg = (f"recovered {100 * s['recovered_share']:.1f} % of {s['tree_peaks']} tree peaks >= {min_prominence_m:g} m, "
            f"{s['extra_peaks']} extra ({100 * s['extra_share']:.1f} %)")
     if "max_bin_error" in s:

@@ -191,3 +191,13 @@ def test_png_with_cell_size_has_no_rasterio_warning(real_data, tmp_path):
     assert "NotGeoreferenced" not in proc.stderr and "geotransform" not in proc.stderr, proc.stderr
     assert "warnings.warn" not in proc.stderr and "Traceback" not in proc.stderr
     assert (out / "analysis.json").is_file()
+
+
+#: commands whose work takes long enough to want a progress bar (the DEM readers and renderers)
+LONG_COMMANDS = ["analyze", "features", "classify", "train", "type", "synthesize", "synthesize-tree", "render",
+                 "validate", "compare", "data fetch"]
+
+
+@pytest.mark.parametrize("name", LONG_COMMANDS)
+def test_long_commands_offer_progress(name):
+    assert _option(dict(_all_commands())[name], "--progress") is not None, name
