@@ -161,11 +161,9 @@ def synthesize(type_file, size, resolution, like, cell_size_m, n_peaks, control_
         center_ll = ttype.source_center
     if seed is None:
         seed = resolve_seed(None)  # fresh entropy, recorded, so the run can be replayed
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+    from orokit.cli.progress import StageProgress
 
-        bar = tqdm(total=3, desc="synthesize", unit="stage")
+    bar = StageProgress("synthesize", ["synthesize tree", "render", "write"], enabled=progress)
     t0 = time.perf_counter()
     # the same int seeds the tree and the raster: `synthesize-tree --seed S` gives this tree and
     # `render --seed S` this raster
@@ -185,8 +183,7 @@ def synthesize(type_file, size, resolution, like, cell_size_m, n_peaks, control_
     else:
         tree = synthesize_divide_tree(ttype, size_m=(w, h), n_peaks=n_peaks, crs=crs, center=center_ll,
                                       control_elevation=c_h, rng=seed)
-    if bar is not None:
-        bar.update(1)
+    bar.advance()
     if parsed is None:
         dem, skel = render_elevation(tree, cell_size_m=res, extent=tree_extent(tree), erosion=erosion,
                                      params=RenderParams(min_prominence_m=float(tree.attrs.get("min_prominence_m", 30.0)),
@@ -198,8 +195,7 @@ def synthesize(type_file, size, resolution, like, cell_size_m, n_peaks, control_
         skel = None
         dem = render_generator(tree, generator=generator, params=parsed, cell_size_m=res, extent=tree_extent(tree),
                                seed=seed, exemplar=exemplar)
-    if bar is not None:
-        bar.update(1)
+    bar.advance()
     # the new files go to a hidden folder beside OUTPUT and replace the old ones only when all
     # are written (the marker first removed, moved in last; the old ones not rewritten removed)
     new = stage.folder(outdir, marker=MARKER, stale=outputs + STALE_FILES)
@@ -215,8 +211,7 @@ def synthesize(type_file, size, resolution, like, cell_size_m, n_peaks, control_
     write_outputs(dem, new / "dem.tif", preview=new / "hillshade.png",
                   tin_path=new / "tin.ply" if write_tin else None, skeleton=skel)
     stage.commit()
-    if bar is not None:
-        bar.update(1)
-        bar.close()
+    bar.advance()
+    bar.close()
     click.echo(f"{tree.n_peaks} peaks, {dem.shape[1]} x {dem.shape[0]} cells at {res:g} m "
                f"in {time.perf_counter() - t0:.1f} s -> {outdir}")

@@ -76,11 +76,9 @@ def synthesize_tree(type_files, size, n_peaks, control_elevation, control_densit
         center = types[0].source_center  # where the type was measured (None: a local frame)
     fixed = _read_points(fixed_peaks) if fixed_peaks is not None else None
     frag = _read_tree(fragment) if fragment is not None else None
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+    from orokit.cli.progress import StageProgress
 
-        bar = tqdm(total=2, desc="synthesize-tree", unit="stage")
+    bar = StageProgress("synthesize-tree", ["synthesize tree", "write"], enabled=progress)
     t0 = time.perf_counter()
     tree = synthesize_divide_tree(
         types if len(types) > 1 else types[0], size_m=(w, h), n_peaks=n_peaks, crs=crs, center=center,
@@ -89,17 +87,15 @@ def synthesize_tree(type_files, size, n_peaks, control_elevation, control_densit
         type_map=None if type_map is None else str(type_map), fixed_peaks=fixed, fragment=frag,
         fragment_offset=fragment_offset, rng=seed,
     )
-    if bar is not None:
-        bar.update(1)
+    bar.advance()
     extra = {"seed": seed, "types": [str(p) for p in type_files]}
     if len(types) == 1:
         extra["fidelity"] = compare_to_type(tree, types[0]).reset_index().to_dict(orient="records")
     from orokit.synthesis.tree import peaks_table
 
     write_synthesis(tree, outdir, peaks=peaks_table(tree), txt_cell_m=txt_cell_size, extra=extra)
-    if bar is not None:
-        bar.update(1)
-        bar.close()
+    bar.advance()
+    bar.close()
     click.echo(f"{tree.n_peaks} peaks, {len(tree.edges)} ridges in {time.perf_counter() - t0:.2f} s "
                f"(OT rounds {tree.attrs['ot_iterations']}) -> {outdir}")
 
