@@ -104,9 +104,11 @@ class LazyGroup(click.Group):
         from orokit.errors import OrokitError
 
         verbose = bool(ctx.obj and ctx.obj.get("verbose", 0) >= 2)
-        previous = _catch_sigterm()
+        previous = _catch_signals()
         try:
-            return super().invoke(ctx)
+            result = super().invoke(ctx)
+            _exit_if_stopped()  # a signal whose KeyboardInterrupt was swallowed on the way
+            return result
         except OrokitError as exc:
             if verbose:
                 raise
@@ -119,7 +121,7 @@ class LazyGroup(click.Group):
                 raise
             if verbose:
                 raise
-            terminated = _caused_by(exc, _Terminated)
+            terminated = _caused_by(exc, _Terminated) or _stopped_by_sigterm()
             click.echo("terminated" if terminated else "interrupted", err=True)
             sys.exit(143 if terminated else 130)
         except Exception as exc:
@@ -130,31 +132,57 @@ class LazyGroup(click.Group):
             click.echo(f"Error: {no_space_error(_where(ctx, exc), exc)}", err=True)
             sys.exit(1)
         finally:
-            _restore_sigterm(previous)
+            _restore_signals(previous)
 
 
 class _Terminated(KeyboardInterrupt):
     """SIGTERM (``kill``), raised like Ctrl-C so staged outputs are cleaned up the same way."""
 
 
-def _on_sigterm(signum, frame):  # noqa: ANN001 - signal handler signature
-    raise _Terminated()
+def _on_signal(signum, frame):  # noqa: ANN001 - signal handler signature
+    """SIGINT / SIGTERM: recorded first (so no output is replaced after it, even if the exception
+    below is swallowed somewhere), then raised as KeyboardInterrupt / :class:`_Terminated`."""
+    import signal
+
+    from orokit.io.atomic import request_stop
+
+    request_stop(signum)
+    raise _Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
-def _catch_sigterm():
+def _catch_signals():
     import signal
     import threading
 
+    from orokit.io.atomic import clear_stop
+
+    clear_stop()
     if threading.current_thread() is not threading.main_thread():
         return None
-    return signal.signal(signal.SIGTERM, _on_sigterm)
+    return {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
 
 
-def _restore_sigterm(previous) -> None:  # noqa: ANN001
+def _restore_signals(previous) -> None:  # noqa: ANN001
     import signal
 
     if previous is not None:
-        signal.signal(signal.SIGTERM, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def _stopped_by_sigterm() -> bool:
+    import signal
+
+    from orokit.io.atomic import stop_requested
+
+    return stop_requested() == signal.SIGTERM
+
+
+def _exit_if_stopped() -> None:
+    from orokit.io.atomic import stop_requested
+
+    if stop_requested() is not None:
+        raise _Terminated() if _stopped_by_sigterm() else KeyboardInterrupt()
 
 
 def _caused_by(exc: BaseException, kind: type[BaseException]) -> bool:

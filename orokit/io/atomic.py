@@ -30,7 +30,43 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["atomic_path", "atomic_open", "write_text_atomic", "write_bytes_atomic", "temp_path_for",
            "output_lock", "lock_path_for", "remove_stale_temps", "Staging", "staged_folder", "is_no_space_error", "no_space_error",
-           "check_free_space"]
+           "check_free_space", "request_stop", "clear_stop", "stop_requested", "check_stop"]
+
+#: signals received by the running command and not yet acted on (set by the CLI's handlers): once one
+#: is recorded, no output is replaced any more, even if the KeyboardInterrupt it raised was swallowed
+#: on the way (e.g. inside a finalizer or a worker thread)
+_STOP: list[int] = []
+
+
+def request_stop(signum: int) -> None:
+    """Record that the process received ``signum`` (SIGINT/SIGTERM): no output is committed after this."""
+    _STOP.append(int(signum))
+
+
+def clear_stop() -> None:
+    """Forget recorded signals (at the start of a command)."""
+    _STOP.clear()
+
+
+def stop_requested() -> int | None:
+    """The first signal recorded by :func:`request_stop`, or None."""
+    return _STOP[0] if _STOP else None
+
+
+def check_stop() -> None:
+    """Raise KeyboardInterrupt if a stop was requested (called before any output is replaced).
+
+    >>> clear_stop(); check_stop()  # nothing recorded: returns
+    >>> request_stop(2)
+    >>> try:
+    ...     check_stop()
+    ... except KeyboardInterrupt:
+    ...     print("stopped")
+    stopped
+    >>> clear_stop()
+    """
+    if _STOP:
+        raise KeyboardInterrupt(f"signal {_STOP[0]} received: outputs not replaced")
 
 
 def temp_path_for(final_path: PathLike) -> Path:
@@ -127,6 +163,7 @@ def atomic_path(final_path: PathLike, *, fsync: bool = True) -> Iterator[Path]:
             )
         if fsync and tmp.is_file():
             _fsync_file(tmp)
+        check_stop()
         os.replace(tmp, final)
         if fsync:
             _fsync_dir(final.parent)
@@ -331,6 +368,7 @@ class Staging:
 
     def commit(self) -> None:
         """Move every staged output to its final name."""
+        check_stop()
         for tmp, final, marker, stale in self._folders:
             if final.exists() and not final.is_dir():
                 raise OutputError(f"{final} is a file, not a folder; remove it or choose another output folder")

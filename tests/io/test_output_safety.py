@@ -314,6 +314,44 @@ def test_signal_during_the_numba_stage_exits_cleanly(tmp_path, dem_tif, sig, sta
     assert _leftovers(out, tmp_path) == []
 
 
+def test_a_swallowed_interrupt_still_keeps_the_old_outputs(tmp_path, dem_tif):
+    """Ctrl-C whose KeyboardInterrupt is swallowed on the way (here by the injected kernel wrapper, as a
+    finalizer or a worker thread might): the run goes on, but the signal was recorded, so nothing is
+    replaced and the exit status still says "interrupted"."""
+    out = tmp_path / "out"
+    assert _analyze(dem_tif, out).exit_code == 0
+    before = _snapshot(out)
+    code = textwrap.dedent("""
+        import os, signal, sys
+        import orokit.topology._kernels as k
+        fired = []
+        def wrap(f):
+            def g(*a, **kw):
+                if not fired:
+                    fired.append(1)
+                    try:
+                        os.kill(os.getpid(), signal.SIGINT)
+                        for _ in range(1000):  # the handler runs between bytecodes
+                            pass
+                    except KeyboardInterrupt:
+                        pass  # swallowed
+                return f(*a, **kw)
+            return g
+        for n in dir(k):
+            f = getattr(k, n)
+            if hasattr(f, "py_func"):
+                setattr(k, n, wrap(f))
+        from orokit.cli.main import cli
+        cli(sys.argv[1:])
+    """)
+    proc = subprocess.run([sys.executable, "-c", code, "analyze", str(dem_tif), "-o", str(out), "--overwrite",
+                           "--no-progress", "--min-prominence", "5"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 130, proc.stderr
+    assert "interrupted" in proc.stderr and "Traceback" not in proc.stderr
+    assert _snapshot(out) == before
+    assert _leftovers(out, tmp_path) == []
+
+
 def test_waiting_lock_gets_it_once_the_holder_is_done(tmp_path):
     import threading
 
