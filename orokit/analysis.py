@@ -301,17 +301,30 @@ def _depressions(dem, transform, crs, *, min_prominence_m, outside, sea_level_m,
         gda = gda.rio.write_crs(crs)
     neg = analyze(gda, min_prominence_m=min_prominence_m, outside="unknown", isolation=False,
                   chunks=chunks, scheduler=scheduler)
-    area = None
-    need = int(np.prod(g.shape)) * 40
-    if need <= 0.5 * available_memory():
-        gv = np.asarray(g, dtype=np.float64)
-        dx, dy = CellMetric(gt, crs).cell_size_m(np.arange(gv.shape[0]))
-        area = spill_areas(gv, neg.peaks["row"].to_numpy(), neg.peaks["col"].to_numpy(), dx * dy)
+    gv_rows = CellMetric(gt, crs).cell_size_m(np.arange(g.shape[0]))
+    row_area = np.asarray(gv_rows[0] * gv_rows[1], np.float64) * np.ones(g.shape[0])
+    p = neg.peaks
+    if chunks is not None or hasattr(g, "dask"):
+        from orokit.tiling.depression_area import tiled_spill_areas
+        from orokit.tiling.engine import get_compute
+
+        gd = g if hasattr(g, "dask") else _as_dask(g, chunks)
+        if chunks is not None:
+            gd = gd.rechunk(chunks)
+        spill = np.where(p["island_parent"].to_numpy() < 0, np.nan, p["saddle_elevation"].to_numpy())
+        client = None
+        if isinstance(scheduler, str) and "://" in scheduler:  # one client for both passes, closed after
+            from distributed import Client
+
+            client = scheduler = Client(scheduler, set_as_default=False, timeout="20s")
+        try:
+            area = tiled_spill_areas(gd, p["row"].to_numpy(), p["col"].to_numpy(), p["elevation"].to_numpy(),
+                                     spill, row_area, compute=get_compute(scheduler))
+        finally:
+            if client is not None:
+                client.close()
     else:
-        logger.warning(
-            "depressions: area_m2 left NaN: the flooding pass that measures it needs the whole raster in memory "
-            "(about %.1f GB, %.1f GB free); depths, spill points and spills_into are complete. For areas, analyse "
-            "a crop around the depressions or use a machine with more memory", need / 1e9, available_memory() / 1e9)
+        area = spill_areas(np.asarray(g, dtype=np.float64), p["row"].to_numpy(), p["col"].to_numpy(), row_area)
     table = depressions_table(neg.peaks, area_m2=area, sea=sea, pad=pad)
     logger.info("%d depressions with depth >= %g m in %.2f s", len(table), min_prominence_m,
                 time.perf_counter() - t0)

@@ -50,6 +50,21 @@ def test_local_cluster_equals_in_memory(cluster, make_dem):
     _same(a, c)
 
 
+def test_depressions_on_a_local_cluster(cluster, make_dem):
+    """Depressions with area_m2 (the chunked pass) on the cluster equal the in-memory table."""
+    _, client = cluster
+    z = np.round(_terrain((150, 170), seed=3) / 5)
+    dem = make_dem(z)
+    a = orokit.analyze(dem, min_prominence_m=2, isolation=False, depressions=True).depressions
+    b = orokit.analyze(dem, min_prominence_m=2, isolation=False, depressions=True, chunks=(40, 60),
+                       scheduler=client).depressions
+    area = a["area_m2"].to_numpy()
+    assert len(a) > 10 and np.isfinite(area).sum() > 10
+    cols = [c for c in a.columns if c not in ("geometry", "area_m2")]
+    assert a[cols].equals(b[cols])
+    np.testing.assert_allclose(b["area_m2"].to_numpy(), area, rtol=1e-12, atol=0)  # another summation order
+
+
 def test_killed_worker_run_still_exact(cluster, make_dem):
     """A worker killed mid-run: its tasks are recomputed elsewhere and the result is identical."""
     cl, client = cluster

@@ -67,13 +67,36 @@ def test_depressions_of_minus_h_are_the_peaks_of_h(z):
         np.testing.assert_array_equal(a, b, err_msg=col)
 
 
-@pytest.mark.slow
-@settings(max_examples=40, deadline=None)
-@given(z=grids(12, min_side=2), chunk=st.integers(1, 5), eps=st.sampled_from([0.0, 2.0]))
-def test_chunks_give_identical_depressions(z, chunk, eps):
-    a, b = _dep(z, eps), _dep(z, eps, chunks=chunk)
-    cols = [c for c in DEPRESSION_COLUMNS if c not in WALK]
+def _same_tables(a, b):
+    """Identical depressions tables; area_m2 summed in another order: equal within 1e-12 relative."""
+    cols = [c for c in DEPRESSION_COLUMNS if c not in WALK and c != "area_m2"]
     assert a[cols].equals(b[cols])
+    np.testing.assert_allclose(b["area_m2"].to_numpy(), a["area_m2"].to_numpy(), rtol=1e-12, atol=0)
+    assert np.array_equal(np.isnan(a["area_m2"].to_numpy()), np.isnan(b["area_m2"].to_numpy()))
+
+
+@pytest.mark.slow
+@settings(max_examples=60, deadline=None)
+@given(z=grids(12, min_side=2), chunk=st.integers(1, 5), eps=st.sampled_from([0.0, 2.0]),
+       sea=st.sampled_from([{}, {"outside": "sea"}, {"sea_level_m": 0.0}, {"outside": "sea", "sea_level_m": 5.0}]))
+def test_chunks_give_identical_depressions(z, chunk, eps, sea):
+    """area_m2 included: with chunks it comes from the chunked pass (orokit.tiling.depression_area)."""
+    a, b = _dep(z, eps, **sea), _dep(z, eps, chunks=chunk, **sea)
+    _same_tables(a, b)
+
+
+def test_chunked_areas_on_a_lon_lat_grid():
+    """Row areas shrink with latitude; the chunked pass weighs each row as the in-memory one."""
+    rng = np.random.default_rng(5)
+    z = np.round(rng.normal(size=(60, 70)).cumsum(0).cumsum(1) / 3).astype(np.float32)
+    z[rng.random(z.shape) < 0.03] = np.nan
+    dem = make_dem(z, res=(0.01, 0.01), crs="EPSG:4326", x0=10.0, y0=62.0)
+    a = orokit.analyze(dem, min_prominence_m=1.0, isolation=False, depressions=True).depressions
+    b = orokit.analyze(dem, min_prominence_m=1.0, isolation=False, depressions=True, chunks=(17, 23)).depressions
+    area = a["area_m2"].to_numpy()
+    assert len(a) > 10 and np.isfinite(area).sum() > 10
+    assert len(np.unique(area[np.isfinite(area)] / 1e4)) > 5  # not all one-cell lakes
+    _same_tables(a, b)
 
 
 def test_sea_outside_and_sea_level():

@@ -1,0 +1,380 @@
+"""Out-of-core area below the spill level of every depression (``area_m2``).
+
+The area of a pit ``p`` (a peak of the engine grid ``g = -h``) is the area of its
+*lake*: the component of ``{g > s_p}`` that holds ``p``, with ``s_p`` its key saddle
+value in ``g`` (the in-memory :func:`orokit.topology.depressions.spill_areas`). Lakes
+of the kept pits are nested, so a cell lies in a chain of lakes; its area goes to the
+smallest one and each lake's area is the sum over its sub-lakes.
+
+Chunk by chunk, with memory of one chunk plus the chunk borders:
+
+1. Every chunk sweeps its cells from high to low (union-find) and keeps a
+   bottleneck tree over its *nodes*: the kept pits in it and its cells on sides
+   facing other chunks (edge weight = the lowest value on the best path).
+2. The chunk trees and the seam edges between facing border cells (weight = the
+   lower cell) form a graph whose Kruskal sweep from high to low gives the exact
+   bottleneck between any two nodes of the raster. Closing each lake at ``s_p``
+   (after the edges above ``s_p``, before the ones at ``s_p``) tells, for every
+   node, the smallest lake holding it, and every lake's parent lake.
+3. Every chunk sweeps again. A cell of value ``v`` connected (through cells >= v)
+   to a node ``y`` lies in exactly the lakes of ``y`` with ``s < v``; a chunk
+   component without a node holds no kept pit, so its cells wait until it meets one
+   at value ``u`` and then go to the lakes of that node with ``s < u``.
+
+Sums run in another order than the in-memory flooding, so areas agree with it up to
+floating-point rounding of the sum.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["tiled_spill_areas"]
+
+_NB8 = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
+
+
+@njit(cache=True, nogil=True)
+def _find(uf, x):
+    root = x
+    while uf[root] != root:
+        root = uf[root]
+    while uf[x] != root:
+        nxt = uf[x]
+        uf[x] = root
+        x = nxt
+    return root
+
+
+@njit(cache=True, nogil=True)
+def _advance(q, t, lake_par, lake_s):
+    """First lake on the chain from ``q`` (itself, then parents) whose level is below ``t``."""
+    while q >= 0 and lake_s[q] >= t:
+        q = lake_par[q]
+    return q
+
+
+@njit(cache=True, nogil=True)
+def _chunk_sweep(g, order, nvalid, node, row_area, lake_of_node, lake_par, lake_s, acc):
+    """One high-to-low sweep of a chunk (``g``: its cells, NaN = nodata).
+
+    ``node``: local node index of each cell (-1 if none). Returns the bottleneck tree
+    over the nodes as (a, b, w) arrays. With a non-empty ``lake_of_node`` it also adds
+    every cell's area to the smallest kept lake holding it (``acc``).
+    """
+    h, w = g.shape
+    n = h * w
+    assign = lake_of_node.size > 0
+    uf = np.full(n, -1, np.int64)
+    size = np.zeros(n, np.int64)
+    anchor = np.full(n, -1, np.int64)
+    cursor = np.full(n, -1, np.int64)
+    pend = np.zeros(n)
+    nn = 0
+    for k in range(n):
+        if node.ravel()[k] >= 0:
+            nn += 1
+    ea = np.empty(max(nn - 1, 0), np.int64)
+    eb = np.empty(max(nn - 1, 0), np.int64)
+    ew = np.empty(max(nn - 1, 0))
+    ne = 0
+    gf = g.ravel()
+    nf = node.ravel()
+    roots = np.empty(8, np.int64)
+    for k in range(nvalid):
+        c = order[k]
+        v = gf[c]
+        r = c // w
+        q = c % w
+        uf[c] = c
+        size[c] = 1
+        nd = nf[c]
+        a = row_area[r]
+        if nd >= 0:
+            anchor[c] = nd
+            if assign:
+                cur = _advance(lake_of_node[nd], v, lake_par, lake_s)
+                cursor[c] = cur
+                if cur >= 0:
+                    acc[cur] += a
+        else:
+            pend[c] = a
+        nr = 0
+        for dr, dc in _NB8:
+            rr = r + dr
+            cc = q + dc
+            if rr < 0 or rr >= h or cc < 0 or cc >= w:
+                continue
+            nb = rr * w + cc
+            if uf[nb] < 0:
+                continue
+            rt = _find(uf, nb)
+            seen = False
+            for t in range(nr):
+                if roots[t] == rt:
+                    seen = True
+            if not seen:
+                roots[nr] = rt
+                nr += 1
+        for t in range(nr):
+            x = _find(uf, c)
+            y = roots[t]
+            if x == y:
+                continue
+            if size[x] < size[y]:
+                x, y = y, x
+            # merge y into x at level v
+            if anchor[x] >= 0 and anchor[y] >= 0:
+                ea[ne] = anchor[x]
+                eb[ne] = anchor[y]
+                ew[ne] = v
+                ne += 1
+            elif anchor[x] >= 0 or anchor[y] >= 0:
+                if anchor[x] < 0:
+                    anchor[x] = anchor[y]
+                    cursor[x] = cursor[y]
+                    pend[x], pend[y] = pend[y], pend[x]
+                if assign:
+                    cur = _advance(cursor[x], v, lake_par, lake_s)
+                    cursor[x] = cur
+                    if cur >= 0:
+                        acc[cur] += pend[y]
+                pend[y] = 0.0
+            else:
+                pend[x] += pend[y]
+            uf[y] = x
+            size[x] += size[y]
+    return ea[:ne], eb[:ne], ew[:ne]
+
+
+@njit(cache=True, nogil=True)
+def _lake_forest(n_nodes, ea, eb, ew, close_node, close_s):
+    """Kruskal sweep (high to low) of the node graph, closing lake ``k`` at ``close_s[k]``.
+
+    Edges above a lake's level join before it closes, edges at its level after.
+    Returns (smallest lake of each node or -1, parent lake of each lake or -1, lakes
+    in closing order). ``close_node[k] < 0`` marks a lake that never closes.
+    """
+    ne = ea.size
+    nl = close_node.size
+    eo = np.argsort(-ew, kind="mergesort")
+    lo = np.argsort(-close_s, kind="mergesort")
+    total = n_nodes + ne + nl
+    uf = np.arange(n_nodes)
+    krt = np.arange(n_nodes)  # current tree node of each union-find root
+    parent = np.full(total, -1, np.int64)
+    label = np.full(total, -1, np.int64)
+    lake_node = np.full(nl, -1, np.int64)
+    closed = np.empty(nl, np.int64)
+    nc = 0
+    m = n_nodes
+    i = 0
+    j = 0
+    while j < nl and close_node[lo[j]] < 0:
+        j += 1
+    while i < ne or j < nl:
+        if j < nl and (i >= ne or ew[eo[i]] <= close_s[lo[j]]):
+            k = lo[j]
+            j += 1
+            while j < nl and close_node[lo[j]] < 0:
+                j += 1
+            r = _find(uf, close_node[k])
+            t = krt[r]
+            if label[t] >= 0:
+                parent[t] = m
+                krt[r] = m
+                t = m
+                m += 1
+            label[t] = k
+            lake_node[k] = t
+            closed[nc] = k
+            nc += 1
+        else:
+            e = eo[i]
+            i += 1
+            ra = _find(uf, ea[e])
+            rb = _find(uf, eb[e])
+            if ra == rb:
+                continue
+            parent[krt[ra]] = m
+            parent[krt[rb]] = m
+            uf[rb] = ra
+            krt[ra] = m
+            m += 1
+    nearest = np.full(m, -1, np.int64)
+    for t in range(m - 1, -1, -1):
+        if label[t] >= 0:
+            nearest[t] = label[t]
+        elif parent[t] >= 0:
+            nearest[t] = nearest[parent[t]]
+    lake_par = np.full(nl, -1, np.int64)
+    for k in range(nl):
+        t = lake_node[k]
+        if t >= 0 and parent[t] >= 0:
+            lake_par[k] = nearest[parent[t]]
+    return nearest[:n_nodes].copy(), lake_par, closed[:nc].copy()
+
+
+def _side_cells(region: tuple[int, int, int, int], shape: tuple[int, int]) -> np.ndarray:
+    """Global flat index of the cells of ``region`` on sides that face other chunks (sorted)."""
+    r0, r1, c0, c1 = region
+    H, W = shape
+    rows, cols = np.arange(r0, r1), np.arange(c0, c1)
+    mask = np.zeros((r1 - r0, c1 - c0), bool)
+    if r0 > 0:
+        mask[0] = True
+    if r1 < H:
+        mask[-1] = True
+    if c0 > 0:
+        mask[:, 0] = True
+    if c1 < W:
+        mask[:, -1] = True
+    rr, cc = np.nonzero(mask)
+    return np.sort(rows[rr] * W + cols[cc])
+
+
+def _chunk_nodes(block: np.ndarray, region, shape, pit_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Node keys of a chunk (valid side cells and kept pits, sorted) and the local node grid."""
+    r0, r1, c0, c1 = region
+    W = shape[1]
+    keys = np.union1d(_side_cells(region, shape), pit_keys)
+    lr, lc = keys // W - r0, keys % W - c0
+    keep = ~np.isnan(block[lr, lc])
+    keys, lr, lc = keys[keep], lr[keep], lc[keep]
+    node = np.full(block.shape, -1, np.int64)
+    node[lr, lc] = np.arange(keys.size)
+    return keys, node
+
+
+def _sorted_cells(block: np.ndarray) -> tuple[np.ndarray, int]:
+    flat = block.ravel()
+    valid = ~np.isnan(flat)
+    return np.argsort(-np.where(valid, flat, -np.inf), kind="stable"), int(valid.sum())
+
+
+class _Block:
+    """One chunk as a small dask array read inside its own task (opaque to the outer graph)."""
+
+    def __init__(self, data, region):
+        r0, r1, c0, c1 = region
+        self.array = data[r0:r1, c0:c1]
+
+    def read(self) -> np.ndarray:
+        return np.ascontiguousarray(np.asarray(self.array.compute(scheduler="sync"), np.float64))
+
+
+def _tree_task(data, region, shape, pit_keys, row_area) -> tuple:
+    """Pass 1 of a chunk: node keys, bottleneck tree (global keys), seam values."""
+    r0, r1, c0, c1 = region
+    block = data.read()
+    keys, node = _chunk_nodes(block, region, shape, pit_keys)
+    order, nvalid = _sorted_cells(block)
+    empty = np.empty(0, np.int64)
+    a, b, w = _chunk_sweep(block, order, nvalid, node, row_area[r0:r1], empty, empty, np.empty(0), np.empty(0))
+    return keys, keys[a], keys[b], w, block.ravel()[(keys // shape[1] - r0) * (c1 - c0) + keys % shape[1] - c0]
+
+
+def _area_task(data, region, shape, pit_keys, row_area, lake_of_node, lake_par, lake_s) -> tuple:
+    """Pass 2 of a chunk: (lake ids, area added to each) for the cells of the chunk."""
+    r0, r1, c0, c1 = region
+    block = data.read()
+    keys, node = _chunk_nodes(block, region, shape, pit_keys)
+    order, nvalid = _sorted_cells(block)
+    acc = np.zeros(lake_s.size)
+    _chunk_sweep(block, order, nvalid, node, row_area[r0:r1], lake_of_node, lake_par, lake_s, acc)
+    idx = np.flatnonzero(acc)
+    return idx, acc[idx]
+
+
+def _seam_edges(keys: np.ndarray, vals: np.ndarray, W: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Edges between 8-neighbouring node cells (weight = the lower value), each pair once.
+
+    Neighbours inside one chunk are joined too; that is harmless (the chunk tree
+    already holds a path at least as high).
+    """
+    pos = np.arange(keys.size)
+    ea, eb, ew = [], [], []
+    r, c = keys // W, keys % W
+    for dr, dc in ((0, 1), (1, -1), (1, 0), (1, 1)):
+        rr, cc = r + dr, c + dc
+        ok = (cc >= 0) & (cc < W)
+        nk = rr * W + cc
+        j = np.searchsorted(keys, nk)
+        j = np.minimum(j, keys.size - 1)
+        hit = ok & (keys[j] == nk)
+        ea.append(pos[hit])
+        eb.append(j[hit])
+        ew.append(np.minimum(vals[hit], vals[j[hit]]))
+    return np.concatenate(ea), np.concatenate(eb), np.concatenate(ew)
+
+
+def tiled_spill_areas(g, pit_row: np.ndarray, pit_col: np.ndarray, pit_value: np.ndarray, spill_value: np.ndarray,
+                      row_area_m2: np.ndarray, *, compute: Any = None) -> np.ndarray:
+    """Area (m²) of each pit's lake, computed chunk by chunk on the dask array ``g``.
+
+    ``g`` is the engine grid (the peaks of ``g`` are the pits, NaN = nodata), the pits
+    are kept peaks of ``g`` at ``pit_row/col`` with value ``pit_value`` and key saddle
+    value ``spill_value`` (NaN for a pit that never spills: its area is NaN).
+    ``row_area_m2`` is the cell area of every row; ``compute`` a function computing a
+    list of dask objects (:func:`orokit.tiling.engine.get_compute`). Equal to
+    :func:`orokit.topology.depressions.spill_areas` up to the rounding of the sums.
+    """
+    import dask
+
+    if compute is None:
+        from orokit.tiling.engine import get_compute
+
+        compute = get_compute(None)
+    H, W = g.shape
+    pit_row, pit_col = np.asarray(pit_row, np.int64), np.asarray(pit_col, np.int64)
+    pit_value, spill_value = np.asarray(pit_value, np.float64), np.asarray(spill_value, np.float64)
+    row_area = np.asarray(row_area_m2, np.float64)
+    rb = np.concatenate([[0], np.cumsum(g.chunks[0])]).astype(int)
+    cb = np.concatenate([[0], np.cumsum(g.chunks[1])]).astype(int)
+    pit_keys = pit_row * W + pit_col
+    cbi = np.searchsorted(rb, pit_row, side="right") - 1
+    cbj = np.searchsorted(cb, pit_col, side="right") - 1
+    regions, pits = [], []
+    for i in range(len(rb) - 1):
+        for j in range(len(cb) - 1):
+            regions.append((int(rb[i]), int(rb[i + 1]), int(cb[j]), int(cb[j + 1])))
+            pits.append(np.sort(pit_keys[(cbi == i) & (cbj == j)]))
+    ra = dask.delayed(row_area)
+    trees = compute([dask.delayed(_tree_task)(_Block(g, reg), reg, (H, W), pk, ra) for reg, pk in zip(regions, pits)])
+    chunk_keys = [t[0] for t in trees]
+    keys = np.concatenate(chunk_keys)
+    vals = np.concatenate([t[4] for t in trees])
+    keys, first = np.unique(keys, return_index=True)
+    vals = vals[first]
+    ea = np.searchsorted(keys, np.concatenate([t[1] for t in trees]))
+    eb = np.searchsorted(keys, np.concatenate([t[2] for t in trees]))
+    ew = np.concatenate([t[3] for t in trees])
+    del trees
+    sa, sb, sw = _seam_edges(keys, vals, W)
+    ea, eb, ew = np.concatenate([ea, sa]), np.concatenate([eb, sb]), np.concatenate([ew, sw])
+    # a lake closes at its spill value; a pit at its spill value has an empty lake
+    closes = np.isfinite(spill_value) & (pit_value > spill_value)
+    close_node = np.where(closes, np.searchsorted(keys, pit_keys), -1).astype(np.int64)
+    close_s = np.where(closes, spill_value, -np.inf)
+    lake_of_node, lake_par, closed = _lake_forest(keys.size, ea, eb, ew, close_node, close_s)
+    del ea, eb, ew, sa, sb, sw
+    logger.info("depression areas: %d chunk-border nodes, %d lakes", keys.size, int(closes.sum()))
+    lp, ls = dask.delayed(lake_par), dask.delayed(close_s)
+    tasks = []
+    for reg, pk, ck in zip(regions, pits, chunk_keys):
+        lon = lake_of_node[np.searchsorted(keys, ck)]  # the chunk's nodes, in its own order
+        tasks.append(dask.delayed(_area_task)(_Block(g, reg), reg, (H, W), pk, ra, lon, lp, ls))
+    acc = np.zeros(pit_keys.size)
+    for idx, val in compute(tasks):
+        np.add.at(acc, idx, val)
+    for k in closed:  # children close before their parents
+        if lake_par[k] >= 0:
+            acc[lake_par[k]] += acc[k]
+    out = np.where(closes, acc, np.nan)
+    out[np.isfinite(spill_value) & ~closes] = 0.0
+    return out
