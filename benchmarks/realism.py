@@ -33,6 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 TUNE = ("alaska", "andes-chile", "appalachians", "gobi", "himalaya-everest", "norway")
 HOLD = ("andes-aconcagua", "highlands", "himalaya-annapurna", "karakoram", "pyrenees", "rockies", "sahara")
 EPS = 30.0
+#: shares of the highest peaks whose position inside the border is recorded (``top_interior``)
+TOP_SHARES = (0.02, 0.05, 0.1)
 
 
 def _extent(dem) -> tuple[float, float, float, float]:
@@ -112,13 +114,16 @@ def disk_drift(real_dem, real_analysis, twin, twin_analysis, radius_m: float = 1
     ten Table 1 features (``orokit features --feature-set paper``: relevance, relative prominence
     and relative elevation are the disk-relative ones); ``w``: Wasserstein distance between the
     per-disk distributions of log peak count, log max prominence and ``top_rank``
-    (:func:`orokit.synthesis.disks.disk_statistics`, disks on a 1 km grid).
+    (:func:`orokit.synthesis.disks.disk_statistics`, disks on a 1 km grid); ``top_interior``:
+    per raster, the share of its highest 2 %, 5 % and 10 % of peaks lying >= 10 km inside its
+    border (:func:`orokit.synthesis.disks.interior_share`; the classifier's disks see only that
+    interior) and the interior's share of the area.
     """
     import warnings
 
     from orokit.classify.features import features_from_dem
     from orokit.sampling.feature_sets import FeatureSet
-    from orokit.synthesis.disks import disk_statistics
+    from orokit.synthesis.disks import disk_statistics, interior_share
     from scipy.stats import wasserstein_distance
 
     fs = FeatureSet.paper()
@@ -133,8 +138,13 @@ def disk_drift(real_dem, real_analysis, twin, twin_analysis, radius_m: float = 1
             m = [v / v.sum() if v.sum() > 0 else v for v in m]
             tv[group] = round(float(0.5 * np.abs(m[0] - m[1]).sum()), 4)
     per = []
-    for d, a in ((real_dem, real_analysis), (twin, twin_analysis)):
+    top_interior: dict = {}
+    for label, d, a in (("real", real_dem, real_analysis), ("twin", twin, twin_analysis)):
         pk = a.peaks
+        pk = pk[pk["prominence"].to_numpy(float) >= EPS]
+        top_interior[label] = [round(interior_share(pk["x"].to_numpy(float), pk["y"].to_numpy(float),
+                                                    pk["elevation"].to_numpy(float), _extent(d), top=q,
+                                                    margin_m=radius_m), 4) for q in TOP_SHARES]
         per.append(disk_statistics(pk["x"].to_numpy(float), pk["y"].to_numpy(float), pk["elevation"].to_numpy(float),
                                    pk["prominence"].to_numpy(float), _extent(d), radius_m=radius_m,
                                    min_prominence_m=EPS))
@@ -142,7 +152,11 @@ def disk_drift(real_dem, real_analysis, twin, twin_analysis, radius_m: float = 1
          "log_max_prominence": wasserstein_distance(np.log1p(per[0]["max_prominence_m"]),
                                                     np.log1p(per[1]["max_prominence_m"])),
          "top_rank": wasserstein_distance(per[0]["top_rank"], per[1]["top_rank"])}
-    return {"tv": tv, "w": {k: round(float(v), 4) for k, v in w.items()}, "n_disks": [len(t) for t in tabs]}
+    x0, y0, x1, y1 = _extent(real_dem)
+    top_interior["area"] = round(max(x1 - x0 - 2 * radius_m, 0) * max(y1 - y0 - 2 * radius_m, 0)
+                                 / ((x1 - x0) * (y1 - y0)), 4)
+    return {"tv": tv, "w": {k: round(float(v), 4) for k, v in w.items()}, "n_disks": [len(t) for t in tabs],
+            "top_interior": top_interior}
 
 
 def _figure(path: Path, name: str, panels: dict) -> None:
@@ -189,14 +203,19 @@ def _drift_markdown(results: dict) -> str:
     """Per region: how far the twin's 10 km disks are from the real ones (see :func:`disk_drift`)."""
     tv_cols = ["relevance", "relative_prominence", "relative_elevation", "prominence", "saddle_distance"]
     w_cols = ["log_peaks", "log_max_prominence", "top_rank"]
-    lines = ["### twin vs real 10 km disks: TV distance of mean disk histograms, W distance of per-disk values", "",
-             "| region | " + " | ".join(f"TV {c}" for c in tv_cols) + " | " + " | ".join(f"W {c}" for c in w_cols) + " |",
-             "|---|" + "---:|" * (len(tv_cols) + len(w_cols))]
+    lines = ["### twin vs real 10 km disks: TV distance of mean disk histograms, W distance of per-disk values; "
+             "share of the highest 2 % / 10 % of peaks >= 10 km inside the border, real / twin (area: the interior's "
+             "share of the area)", "",
+             "| region | " + " | ".join(f"TV {c}" for c in tv_cols) + " | " + " | ".join(f"W {c}" for c in w_cols)
+             + " | top 2 % inside | top 10 % inside | area |",
+             "|---|" + "---:|" * (len(tv_cols) + len(w_cols) + 3)]
     for name, r in results.items():
         d = r["twin"].get("disk_drift") or {}
-        tv, w = d.get("tv", {}), d.get("w", {})
+        tv, w, ti = d.get("tv", {}), d.get("w", {}), d.get("top_interior")
+        inside = (" | ".join(f"{ti['real'][i]:.2f} / {ti['twin'][i]:.2f}" for i in (0, 2)) + f" | {ti['area']:.2f}"
+                  if ti else "- | - | -")
         lines.append(f"| {name} | " + " | ".join(f"{tv[c]:.2f}" if c in tv else "-" for c in tv_cols) + " | "
-                     + " | ".join(f"{w[c]:.2f}" if c in w else "-" for c in w_cols) + " |")
+                     + " | ".join(f"{w[c]:.2f}" if c in w else "-" for c in w_cols) + f" | {inside} |")
     return "\n".join(lines)
 
 

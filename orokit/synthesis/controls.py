@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import warnings
 from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -270,13 +271,19 @@ def build_controls(
     return ControlMaps(dens.astype(float), None if elev is None else elev.astype(float), types)
 
 
-def random_elevation_field(domain: Domain, elevation_hist: Any, *, correlation_m: float, rng: Any) -> np.ndarray:
+def random_elevation_field(domain: Domain, elevation_hist: Any, *, correlation_m: float, rng: Any,
+                           border_rank: Sequence[float] | None = None) -> np.ndarray:
     """A smooth random C_H whose values follow ``elevation_hist`` (orokit default).
 
     Without a user C_H, peak elevations would be spatially uncorrelated, so high peaks
     would sit among low ones and their ridges would dip through low peaks (too much
     prominence). Gaussian-filtered white noise (standard deviation ``correlation_m``)
     is mapped by rank onto the quantiles of the type's elevation histogram.
+
+    ``border_rank`` (a type's :func:`orokit.synthesis.disks.border_rank`): a smooth trend
+    in the distance to the domain border is added to the noise before the ranking, fitted so
+    the mean rank of the field in each border band matches it (a twin of a DEM cropped around
+    its relief then holds its high ground inside, issue 11). None: no trend (stationary field).
     """
     from scipy.ndimage import gaussian_filter
 
@@ -287,6 +294,8 @@ def random_elevation_field(domain: Domain, elevation_hist: Any, *, correlation_m
     ny, nx = domain.shape
     sigma = (min(correlation_m / cy, float(ny)), min(correlation_m / cx, float(nx)))
     noise = gaussian_filter(rng.standard_normal(domain.shape), sigma=sigma, mode="wrap")
+    if border_rank is not None:
+        noise = _with_border_trend(noise, domain, np.asarray(border_rank, float))
     ranks = np.argsort(np.argsort(noise.ravel(), kind="stable"), kind="stable")
     q = (ranks + 0.5) / ranks.size
     p = elevation_hist.probabilities()
@@ -294,3 +303,39 @@ def random_elevation_field(domain: Domain, elevation_hist: Any, *, correlation_m
     e = np.asarray(elevation_hist.edges, float)
     vals = np.interp(q, cdf, e)
     return vals.reshape(domain.shape)
+
+
+def _with_border_trend(noise: np.ndarray, domain: Domain, target: np.ndarray, iterations: int = 30) -> np.ndarray:
+    """``noise`` plus a trend in the distance to the border whose band mean ranks approach ``target``.
+
+    The trend is linear between the bands' centres (per band one offset, in units of the
+    noise's standard deviation), fitted by a damped fixed-point iteration on the grid. The
+    target is first shifted so its mean over the domain's cells is 0.5 (as every field's is).
+    """
+    from orokit.synthesis.disks import BORDER_BANDS, border_distance
+
+    ny, nx = domain.shape
+    cx, cy = domain.cell
+    xs = domain.x0 + (np.arange(nx) + 0.5) * cx
+    ys = domain.y0 + (np.arange(ny) + 0.5) * cy
+    t = border_distance(*np.meshgrid(xs, ys), (domain.x0, domain.y0, domain.x0 + domain.width,
+                                                domain.y0 + domain.height)).ravel()
+    edges = np.asarray(BORDER_BANDS)
+    mids = 0.5 * (edges[1:] + edges[:-1])
+    band = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, mids.size - 1)
+    count = np.bincount(band, minlength=mids.size)
+    z = (noise - noise.mean()) / max(float(noise.std()), 1e-12)
+    z = z.ravel()
+    # the field's mean rank is 0.5 whatever the trend: only the differences between bands can be
+    # met, so the target is shifted to a mean of 0.5 over the domain's own band areas
+    target = np.clip(target - (np.dot(count, target) / count.sum() - 0.5), 0.02, 0.98)
+    offset = np.zeros(mids.size)
+    for _ in range(iterations):
+        score = z + np.interp(t, mids, offset)
+        q = (np.argsort(np.argsort(score, kind="stable"), kind="stable") + 0.5) / score.size
+        mean = np.bincount(band, weights=q, minlength=mids.size) / np.maximum(count, 1)
+        err = np.where(count > 0, target - mean, 0.0)
+        if np.abs(err).max() < 0.005:
+            break
+        offset += 4.0 * err
+    return (z + np.interp(t, mids, offset)).reshape(noise.shape)

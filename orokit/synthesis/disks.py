@@ -23,8 +23,8 @@ from scipy.spatial import cKDTree
 
 from orokit.errors import SchemaError
 
-__all__ = ["DISK_RADIUS_M", "DISK_LEVELS", "disk_centres", "disk_statistics", "disk_quantiles",
-           "check_disk_quantiles", "coverage_targets"]
+__all__ = ["DISK_RADIUS_M", "DISK_LEVELS", "BORDER_BANDS", "disk_centres", "disk_statistics", "disk_quantiles",
+           "check_disk_quantiles", "coverage_targets", "border_distance", "border_rank", "interior_share"]
 
 #: radius of the disks (the region classifier's R)
 DISK_RADIUS_M = 10_000.0
@@ -34,6 +34,9 @@ DISK_LEVELS = tuple(float(v) for v in np.linspace(0.0, 1.0, 21))
 DISK_QUANTITIES = ("peaks", "max_prominence_m", "top_rank")
 #: at most this many disk centres (the grid step grows to stay below it)
 MAX_CENTRES = 4096
+#: bands of the normalised distance to the data border (:func:`border_distance`): five
+#: bands of equal area on a square, the outermost first
+BORDER_BANDS = (0.0, 0.106, 0.225, 0.368, 0.553, 1.0)
 
 
 def disk_centres(extent: tuple[float, float, float, float], radius_m: float = DISK_RADIUS_M,
@@ -94,6 +97,63 @@ def disk_statistics(x: np.ndarray, y: np.ndarray, elevation: np.ndarray, promine
     return {"x": cx, "y": cy, "peaks": n, "max_prominence_m": mp, "top_rank": top}
 
 
+def border_distance(x: np.ndarray, y: np.ndarray, extent: tuple[float, float, float, float]) -> np.ndarray:
+    """Distance to the nearest side of ``extent``, divided by half its shorter side (0 on the border, 1 at the centre of a square).
+
+    >>> border_distance(np.array([0.0, 25.0, 50.0]), np.array([50.0, 50.0, 50.0]), (0, 0, 100, 100)).tolist()
+    [0.0, 0.5, 1.0]
+    """
+    xmin, ymin, xmax, ymax = (float(v) for v in extent)
+    half = 0.5 * min(xmax - xmin, ymax - ymin)
+    d = np.minimum.reduce([np.asarray(x, float) - xmin, xmax - np.asarray(x, float),
+                           np.asarray(y, float) - ymin, ymax - np.asarray(y, float)])
+    return np.clip(d / half, 0.0, 1.0) if half > 0 else np.zeros(np.shape(d))
+
+
+def border_rank(x: np.ndarray, y: np.ndarray, elevation: np.ndarray,
+                extent: tuple[float, float, float, float]) -> list[float]:
+    """Mean elevation rank of the peaks in each :data:`BORDER_BANDS` band (outermost first).
+
+    The rank of a peak is ``(i + 0.5) / n`` in increasing elevation, so peaks placed
+    irrespective of the border give 0.5 in every band; a crop centred on a massif gives
+    ranks rising towards the centre. An empty band gets 0.5.
+
+    >>> x = np.array([1.0, 2.0, 50.0, 48.0]); y = np.array([1.0, 98.0, 50.0, 52.0])
+    >>> border_rank(x, y, np.array([100.0, 200.0, 900.0, 800.0]), (0, 0, 100, 100))
+    [0.25, 0.5, 0.5, 0.5, 0.75]
+    """
+    z = np.asarray(elevation, float)
+    if z.size == 0:
+        return [0.5] * (len(BORDER_BANDS) - 1)
+    rank = (np.argsort(np.argsort(z, kind="stable"), kind="stable") + 0.5) / z.size
+    band = np.clip(np.searchsorted(BORDER_BANDS, border_distance(x, y, extent), side="right") - 1,
+                   0, len(BORDER_BANDS) - 2)
+    total = np.bincount(band, weights=rank, minlength=len(BORDER_BANDS) - 1)
+    count = np.bincount(band, minlength=len(BORDER_BANDS) - 1)
+    return [float(t / c) if c else 0.5 for t, c in zip(total, count)]
+
+
+def interior_share(x: np.ndarray, y: np.ndarray, elevation: np.ndarray, extent: tuple[float, float, float, float],
+                   *, top: float = 0.02, margin_m: float = DISK_RADIUS_M) -> float:
+    """Share of the highest ``top`` of the peaks (at least one) lying at least ``margin_m`` inside ``extent``.
+
+    With peaks placed irrespective of the border it is near the interior's share of the
+    area; the real DEMs, cropped around their relief, hold more of their highest peaks inside.
+
+    >>> interior_share(np.array([50.0, 5.0, 60.0]), np.array([50.0, 50.0, 40.0]), np.array([3.0, 2.0, 1.0]),
+    ...                (0, 0, 100, 100), top=0.5, margin_m=10)
+    0.5
+    """
+    z = np.asarray(elevation, float)
+    if z.size == 0:
+        return float("nan")
+    order = np.argsort(-z, kind="stable")[: max(1, int(round(top * z.size)))]
+    xmin, ymin, xmax, ymax = (float(v) for v in extent)
+    px, py = np.asarray(x, float)[order], np.asarray(y, float)[order]
+    inside = (px - xmin >= margin_m) & (xmax - px >= margin_m) & (py - ymin >= margin_m) & (ymax - py >= margin_m)
+    return float(inside.mean())
+
+
 def disk_quantiles(stats: Mapping[str, np.ndarray], *, radius_m: float = DISK_RADIUS_M) -> dict[str, Any] | None:
     """The terrain type's record of :func:`disk_statistics`: quantiles at :data:`DISK_LEVELS`.
 
@@ -130,6 +190,15 @@ def check_disk_quantiles(disks: Mapping[str, Any]) -> dict[str, Any]:
             raise SchemaError(f"terrain type disks record: {k} needs {lv.size} finite non-decreasing quantiles")
     if out["top_rank"][0] < 0 or out["top_rank"][-1] > 1:
         raise SchemaError("terrain type disks record: top_rank quantiles must lie in [0, 1]")
+    if disks.get("border_rank") is not None:  # optional: types made before session 5 lack it
+        try:
+            br = [float(v) for v in disks["border_rank"]]
+        except (TypeError, ValueError) as exc:
+            raise SchemaError(f"terrain type disks record: border_rank must be a list of numbers ({exc})") from exc
+        if len(br) != len(BORDER_BANDS) - 1 or not all(0.0 <= v <= 1.0 for v in br):
+            raise SchemaError(f"terrain type disks record: border_rank needs {len(BORDER_BANDS) - 1} mean ranks "
+                              f"in [0, 1] (one per border band), got {disks['border_rank']!r}")
+        out["border_rank"] = br
     return out
 
 

@@ -199,7 +199,10 @@ class TerrainType:
     disks : per-disk statistics of the source (:mod:`orokit.synthesis.disks`): quantiles over
         10 km disks inside the data of their peak count, maximum prominence and ``top_rank``
         (share of the peaks higher than the disk's highest); None for types made before it or
-        from data narrower than 20 km. The dart throwing follows ``top_rank``.
+        from data narrower than 20 km. The dart throwing follows ``top_rank``. Its optional
+        ``border_rank`` (:func:`orokit.synthesis.disks.border_rank`: mean elevation rank of the
+        peaks by distance to the data border) shapes the default C_H, so a twin of a DEM cropped
+        around its relief holds its high ground inside as the DEM does.
     bands : optional joint statistics (orokit): ``{"elevation_bins": [i0, ..., iK],
         "prominence": [[...]] * K, "dominance": [[...]] * K}``: prominence and dominance
         counts (on the marginal histograms' bins) of the peaks whose elevation falls in
@@ -646,7 +649,7 @@ def _check_range(feature: str, h: FeatureHistogram) -> None:
 def _disk_record(x: np.ndarray, y: np.ndarray, z: np.ndarray, prom: np.ndarray, crs: Any,
                  extent: tuple[float, float, float, float] | None, min_prominence_m: float) -> dict[str, Any] | None:
     """The ``disks`` record of a type (None when the data holds no 10 km disk)."""
-    from orokit.synthesis.disks import disk_quantiles, disk_statistics
+    from orokit.synthesis.disks import border_rank, disk_quantiles, disk_statistics
     from orokit.synthesis.orometry import planar_xy
 
     if extent is None:
@@ -659,7 +662,10 @@ def _disk_record(x: np.ndarray, y: np.ndarray, z: np.ndarray, prom: np.ndarray, 
     px, py = planar_xy(np.concatenate([x, cx.ravel()]), np.concatenate([y, cy.ravel()]), crs)
     k = x.size
     box = (float(px[k:].min()), float(py[k:].min()), float(px[k:].max()), float(py[k:].max()))
-    return disk_quantiles(disk_statistics(px[:k], py[:k], z, prom, box, min_prominence_m=min_prominence_m))
+    rec = disk_quantiles(disk_statistics(px[:k], py[:k], z, prom, box, min_prominence_m=min_prominence_m))
+    if rec is not None:
+        rec["border_rank"] = border_rank(px[:k], py[:k], z, box)
+    return rec
 
 
 def estimate_rho(tree: Any, min_prominence_m: float = 30.0, choices: tuple[float, ...] = (0.0, 1.0, 2.0)) -> float:
