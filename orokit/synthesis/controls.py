@@ -318,8 +318,8 @@ def _with_border_trend(noise: np.ndarray, domain: Domain, target: np.ndarray, it
     cx, cy = domain.cell
     xs = domain.x0 + (np.arange(nx) + 0.5) * cx
     ys = domain.y0 + (np.arange(ny) + 0.5) * cy
-    t = border_distance(*np.meshgrid(xs, ys), (domain.x0, domain.y0, domain.x0 + domain.width,
-                                                domain.y0 + domain.height)).ravel()
+    gx, gy = np.meshgrid(xs, ys)
+    t = border_distance(gx, gy, (domain.x0, domain.y0, domain.x0 + domain.width, domain.y0 + domain.height)).ravel()
     edges = np.asarray(BORDER_BANDS)
     mids = 0.5 * (edges[1:] + edges[:-1])
     band = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, mids.size - 1)
