@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 from orokit._typing import SeedLike
 from orokit.raster import _kernels
 
-__all__ = ["poisson_samples", "valley_width", "sample_elevation", "flank_envelope"]
+__all__ = ["poisson_samples", "valley_width", "sample_elevation", "flank_envelope", "field_elevation"]
 
 
 def poisson_samples(extent: tuple[float, float, float, float], radius: float, *, rng: SeedLike = None) -> np.ndarray:
@@ -106,3 +106,73 @@ def flank_envelope(points: np.ndarray, ridge_xy: np.ndarray, ridge_z: np.ndarray
     if ridge_floor is not None:
         env = np.maximum(env, np.min(ridge_floor[ik], axis=1))
     return env
+
+
+def field_elevation(
+    shape: tuple[int, int],
+    cell_size_m: float,
+    ridge_rc: tuple[np.ndarray, np.ndarray],
+    ridge_z: np.ndarray,
+    river_rc: tuple[np.ndarray, np.ndarray],
+    river_z: np.ndarray,
+    river_w: np.ndarray,
+    *,
+    profile: Callable[[np.ndarray], np.ndarray] | None = None,
+    beyond_slope: float = 0.05,
+    beyond_depth_m: float = np.inf,
+    smooth_m: float = 0.0,
+) -> np.ndarray:
+    """Ground between ridges and rivers on a grid, from exact distance transforms.
+
+    Every cell takes its nearest ridge cell q and nearest river cell r
+    (:func:`scipy.ndimage.distance_transform_edt` with indices, Euclidean, all ridge and
+    river cells at once): ``h = h(r)`` on the valley floor (``d(p, R) < w(r)``), else
+    ``h = h(r) + (h(q) - h(r)) f(u)`` with ``u = a / (a + d(p, T))``, ``a = d(p, R) - w``
+    and ``f`` the identity or ``profile``. Unlike a TIN of scattered samples capped by the
+    cones of the k nearest ridge points, the surface has no facets and no steps: q and r
+    change only on the medial axes of the ridges (the rivers, where ``u = 0``) and of the
+    rivers (the ridges, where ``u = 1``).
+
+    ``ridge_rc`` / ``river_rc`` are (rows, cols) of the cells with elevations
+    ``ridge_z`` / ``river_z`` (several values per cell: the highest ridge, the lowest
+    river); ``river_w`` is the valley floor half-width in metres. Returns float32.
+
+    >>> h = field_elevation((1, 5), 10.0, (np.array([0]), np.array([0])), np.array([100.0]),
+    ...                     (np.array([0]), np.array([4])), np.array([0.0]), np.array([0.0]))
+    >>> h.round(1).tolist()
+    [[100.0, 75.0, 50.0, 25.0, 0.0]]
+    """
+    from scipy import ndimage
+
+    zt = np.full(shape, -np.inf)
+    np.maximum.at(zt, ridge_rc, ridge_z)
+    zr = np.full(shape, np.inf)
+    np.minimum.at(zr, river_rc, river_z)
+    wr = np.zeros(shape)
+    np.maximum.at(wr, river_rc, river_w)
+    is_ridge = np.isfinite(zt)
+    is_river = np.isfinite(zr) & ~is_ridge
+    if not is_ridge.any() or not is_river.any():
+        raise ValueError("field_elevation needs at least one ridge cell and one river cell")
+    dT, (ti, tj) = ndimage.distance_transform_edt(~is_ridge, sampling=cell_size_m, return_indices=True)
+    hq = zt[ti, tj]
+    dR, (ri, rj) = ndimage.distance_transform_edt(~is_river, sampling=cell_size_m, return_indices=True)
+    hr, w = zr[ri, rj], wr[ri, rj]
+    # beyond its river, seen from its ridge ((p - r) . (q - r) < 0: between the last river and
+    # the border), the ground falls gently instead of rising again into a hill with no peak
+    ii, jj = np.indices(shape, sparse=True)
+    beyond = (ii - ri) * (ti - ri) + (jj - rj) * (tj - rj) < 0
+    del ti, tj, ri, rj, ii, jj
+    if smooth_m > 0:
+        # h(q) and h(r) are constant on the Voronoi cells of the ridge / river cells and jump
+        # across their medial axes (the concave side of a bend): blur them, not the distances
+        sigma = smooth_m / cell_size_m
+        hq = ndimage.gaussian_filter(hq, sigma, mode="nearest")
+        hr = ndimage.gaussian_filter(hr, sigma, mode="nearest")
+        w = ndimage.gaussian_filter(w, sigma, mode="nearest")
+    a = np.maximum(dR - w, 0.0)
+    u = np.where(beyond, 0.0, a / np.maximum(a + dT, 1e-9))
+    f = u if profile is None else np.asarray(profile(u), dtype=np.float64)
+    h = hr + (hq - hr) * f - np.where(beyond, np.minimum(beyond_slope * a, beyond_depth_m), 0.0)
+    h[is_ridge] = zt[is_ridge]
+    return h.astype(np.float32)

@@ -54,6 +54,12 @@ class RenderParams:
     flank_neighbours : the cone envelope is the highest cone of this many nearest ridge points; far from
         the ridges a small set makes the envelope jump where its highest cone drops out of the set
         (steep steps mid-slope: on the Everest render 16 gives 4.7 % of cells > 60 deg, 64 gives 3.5 %).
+    surface : ``"tin"`` (the paper: Poisson samples capped by the flank cones, triangulated and
+        rasterized) or ``"field"`` (every cell from its nearest ridge and river cell by exact
+        distance transforms, :func:`orokit.raster.interpolate.field_elevation`: no facets, no
+        steps where the cone set changes).
+    field_smooth_m : the ``"field"`` surface blurs its nearest ridge and river heights over this
+        many metres (Gaussian sigma; they jump on the inner side of bends).
     flank_depth : the cones of a ridge piece reach at most ``flank_depth * (peak - saddle)``
         below its saddle (None: no limit; far from ridges steep cones dug canyons).
     """
@@ -73,6 +79,8 @@ class RenderParams:
     flank_slope: float = 0.05
     flank_ratio: float = 1.5
     profiles: str = "linear"
+    surface: str = "tin"
+    field_smooth_m: float = 200.0
     flank_depth: float | None = None
     keep_hill_ratio: float = 0.0
     cut_slope: float = 0.0
@@ -94,6 +102,8 @@ class RenderParams:
 
         if self.profiles not in ("learned", "linear"):
             raise InputError(f"profiles must be 'learned' or 'linear', got {self.profiles!r}")
+        if self.surface not in ("tin", "field"):
+            raise InputError(f"surface must be 'tin' or 'field', got {self.surface!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}

@@ -23,8 +23,10 @@ from orokit._typing import SeedLike
 from orokit.errors import CRSError, DivideTreeError, InputError, OrokitWarning
 from orokit.raster.enforce import enforce_orometry
 from orokit.raster.erosion import erode_multiscale
+from orokit.raster.interpolate import field_elevation, valley_width
 from orokit.raster.noise import falloff, fractal_noise, spectral_noise
 from orokit.raster.params import RenderParams
+from orokit.raster.profiles import hillslope_profile
 from orokit.raster.rasterize import MAX_CELLS, as_extent, burn_max, make_grid, rasterize_tin, set_cells
 from orokit.raster.refine import densify
 from orokit.raster.skeleton import build_skeleton, tree_extent
@@ -92,6 +94,19 @@ def _median_relief(z: np.ndarray, res: float, window_m: float = 1000.0) -> float
         return float(np.ptp(z))
     b = z[:ny, :nx].reshape(ny // f, f, nx // f, f)
     return float(np.median(b.max(axis=(1, 3)) - b.min(axis=(1, 3))))
+
+
+def _field(grid, rxy: np.ndarray, rz: np.ndarray, rivers, params: RenderParams) -> np.ndarray:
+    """The ``surface="field"`` raster: nearest ridge and river cells by distance transforms."""
+    vxy, vz, va = densify(rivers, 0.5 * grid.cell_size_m)
+    rr, rc, rok = grid.cell_of(rxy)
+    vr, vc, vok = grid.cell_of(vxy)
+    if not rok.any() or not vok.any():
+        raise InputError("no ridge or no river of the Divide Tree crosses the extent; use surface='tin'")
+    return field_elevation((grid.ny, grid.nx), grid.cell_size_m, (rr[rok], rc[rok]), rz[rok], (vr[vok], vc[vok]), vz[vok],
+                           valley_width(va[vok], coef=params.valley_coef),
+                           profile=hillslope_profile if params.profiles == "learned" else None,
+                           smooth_m=params.field_smooth_m, beyond_depth_m=params.min_prominence_m)
 
 
 def _check_crs(tree) -> Any:
@@ -184,8 +199,11 @@ def render_elevation(
     timings = dict(skel.timings)
 
     t0 = time.perf_counter()
-    z = rasterize_tin(skel.tin, grid)
     rxy, rz, _, rorig = densify(skel.ridges, 0.5 * grid.cell_size_m, origin=True)
+    if params.surface == "field" and skel.rivers.segments.size:
+        z = _field(grid, rxy, rz, skel.rivers, params)
+    else:
+        z = rasterize_tin(skel.tin, grid)
     burn_max(z, grid, rxy, rz)
     label = np.full(z.shape, -1, np.int32)  # saddle of the ridge of every burnt cell
     row, col, ok = grid.cell_of(rxy)
