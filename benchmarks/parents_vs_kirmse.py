@@ -18,8 +18,16 @@ takes the first peak at least as high, orokit the first strictly higher one in i
 raster-order tie rule, and Kirmse's line tree and island tree may order equal peaks
 differently), or when either parent is on a flat summit. It is an *edge* case when
 either walk, or P's key saddle, touches the raster's border (Kirmse's finalized tree
-drops the runoffs there; orokit keeps the border as unknown ground). Every other
-disagreement is counted as unexplained and printed.
+drops the runoffs there; orokit keeps the border as unknown ground). It is a *kirmse_walk*
+case when, at P's key saddle or at a saddle of orokit's unpruned tree where the walks to the
+two parents have not parted yet, Kirmse's uphill walk from the saddle (``TreeBuilder::walkUpToPeak``,
+simulated by :func:`kirmse_walk_up`) reaches another peak than orokit's steepest ascent
+(:func:`orokit_walk_up`): his walk leaves a saddle cell it steps on by that saddle's first rise
+(the highest cell of a group of higher neighbours that is not the highest group), and takes the
+last of equal highest neighbours in our raster order where orokit takes the first, so his divide
+tree ties the saddle to a peak on another branch (both trees keep every prominence; the walks
+differ). ``tests/benchmarks/test_vs_kirmse.py`` reproduces one on an 11 x 11 grid with Kirmse's
+own programs. Every other disagreement is counted as unexplained and printed.
 
 Run:  .venv/bin/python benchmarks/parents_vs_kirmse.py --kirmse-bin DIR [--dems gobi alaska my.tif]
 """
@@ -82,8 +90,9 @@ def kirmse_parents(path: Path, s: int, shape: tuple[int, int]) -> pd.DataFrame:
                          "prominence_parent_row": pr, "prominence_parent_col": pc})
 
 
-def compare(kirmse: pd.DataFrame, ours: pd.DataFrame, z_ft: np.ndarray) -> dict:
-    """Parent agreement of the peaks both programs find (see the module docstring)."""
+def compare(kirmse: pd.DataFrame, ours: pd.DataFrame, z_ft: np.ndarray, tree=None) -> dict:
+    """Parent agreement of the peaks both programs find (see the module docstring); ``tree`` is
+    orokit's unpruned Divide Tree, needed for the ``kirmse_walk`` class."""
     def first(r: int, c: int) -> tuple[int, int]:
         return (r, c) if r < 0 else _plateau_first_cell(z_ft, r, c)
 
@@ -92,7 +101,8 @@ def compare(kirmse: pd.DataFrame, ours: pd.DataFrame, z_ft: np.ndarray) -> dict:
     kk = kk[~kk.index.duplicated()]
     out = {"kirmse_peaks": len(kirmse), "orokit_peaks": len(ours), "matched": 0}
     for kind in ("line_parent", "prominence_parent"):
-        out[kind] = {"agree": 0, "tie": 0, "edge": 0, "unexplained": 0, "examples": []}
+        out[kind] = {"agree": 0, "tie": 0, "edge": 0, "kirmse_walk": 0, "unexplained": 0, "examples": [],
+                     "kirmse_walk_examples": []}
     for rec in kirmse.itertuples(index=False):
         cell = first(rec.row, rec.col)
         if cell not in o.index:
@@ -118,6 +128,11 @@ def compare(kirmse: pd.DataFrame, ours: pd.DataFrame, z_ft: np.ndarray) -> dict:
                 out[kind]["tie"] += 1
             elif on_edge:
                 out[kind]["edge"] += 1
+            elif tree is not None and _walk_diverges(z_ft, tree, cell, theirs, ours_cell,
+                                                     (int(mine["saddle_row"]), int(mine["saddle_col"]))):
+                out[kind]["kirmse_walk"] += 1
+                if len(out[kind]["kirmse_walk_examples"]) < 5:
+                    out[kind]["kirmse_walk_examples"].append({"peak": cell, "kirmse": theirs, "orokit": ours_cell})
             else:
                 out[kind]["unexplained"] += 1
                 if len(out[kind]["examples"]) < 5:
@@ -145,18 +160,175 @@ def _is_flat_summit(z: np.ndarray, r: int, c: int) -> bool:
     return int((win == z[r, c]).sum()) > 1
 
 
-def unpruned_walk_check(tif: Path, ours: pd.DataFrame, eps_m: float) -> dict:
+_RING = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
+
+
+def _flat_area(z: np.ndarray, cell: tuple[int, int]) -> tuple[list, list]:
+    """The 8-connected equal-elevation area of ``cell`` and the higher cells around it."""
+    h, w = z.shape
+    v = z[cell]
+    area, seen, stack, higher = [], {cell}, [cell], set()
+    while stack:
+        r, c = stack.pop()
+        area.append((r, c))
+        for dr, dc in _RING:
+            n = (r + dr, c + dc)
+            if not (0 <= n[0] < h and 0 <= n[1] < w) or np.isnan(z[n]):
+                continue
+            if z[n] == v and n not in seen:
+                seen.add(n)
+                stack.append(n)
+            elif z[n] > v:
+                higher.add(n)
+    return area, sorted(higher, reverse=True)  # Kirmse's order: his raster order is ours reversed (half turn)
+
+
+def _segments(higher: list) -> list[list]:
+    """8-connected groups of the higher cells around a flat area, in Kirmse's discovery order."""
+    left, out = list(higher), []
+    while left:
+        seg, stack = [], [left.pop(0)]
+        while stack:
+            p = stack.pop()
+            seg.append(p)
+            nb = [q for q in left if abs(q[0] - p[0]) <= 1 and abs(q[1] - p[1]) <= 1]
+            for q in nb:
+                left.remove(q)
+            stack.extend(nb)
+        out.append(seg)
+    return out
+
+
+def _highest(z: np.ndarray, cells: list) -> tuple[int, int]:
+    """Highest cell; among equal ones the first in Kirmse's order (the largest flat index here)."""
+    return max(cells, key=lambda c: (z[c], c))
+
+
+def kirmse_walk_up(z: np.ndarray, start: tuple[int, int], *, saddle_exit: bool = True) -> tuple[int, int]:
+    """The peak (first cell of its flat summit) an uphill walk from ``start`` reaches, by the rules
+    of Kirmse's ``TreeBuilder::walkUpToPeak`` (read in ../shared/baselines/mountains/code/tree_builder.cpp):
+    the highest cell of the 3 x 3 window; on a flat area without a higher neighbour, its highest
+    boundary cell; and (``saddle_exit``) on a cell whose flat area is a saddle (two or more
+    8-connected groups of higher cells around it), the highest cell of the first group that is not
+    the highest one (his ``rise1``), whatever the direction the walk came from. Without
+    ``saddle_exit`` it is the plain steepest ascent the tree builder's comment describes.
+    """
+    cell = start
+    for _ in range(z.size):
+        area, higher = _flat_area(z, cell)
+        if not higher:
+            return min(area)
+        if saddle_exit:
+            segs = _segments(higher)
+            if len(segs) >= 2:
+                tops = [_highest(z, g) for g in segs]
+                best = max(range(len(tops)), key=lambda i: (z[tops[i]], -i))
+                cell = tops[next(i for i in range(len(tops)) if i != best)]
+                continue
+        r, c = cell
+        win = [(r + dr, c + dc) for dr, dc in _RING if 0 <= r + dr < z.shape[0] and 0 <= c + dc < z.shape[1]
+               and not np.isnan(z[r + dr, c + dc])]
+        nxt = _highest(z, win)
+        cell = nxt if z[nxt] > z[cell] else _highest(z, higher)
+    raise RuntimeError(f"no peak reached from {start}")
+
+
+def orokit_walk_up(z: np.ndarray, start: tuple[int, int]) -> tuple[int, int]:
+    """The peak (first cell of its flat summit) orokit's steepest ascent reaches from ``start``:
+    the highest 8-neighbour in the total order (elevation, then the earlier cell in raster order)
+    while it is above the current cell in that order."""
+    h, w = z.shape
+    cell = start
+    for _ in range(z.size):
+        r, c = cell
+        best = cell
+        for dr, dc in _RING:
+            n = (r + dr, c + dc)
+            if 0 <= n[0] < h and 0 <= n[1] < w and not np.isnan(z[n]) and (
+                    z[n] > z[best] or (z[n] == z[best] and n < best)):
+                best = n
+        if best == cell:
+            return min(_flat_area(z, cell)[0])
+        cell = best
+    raise RuntimeError(f"no peak reached from {start}")
+
+
+def saddle_exit_divergence(z: np.ndarray, saddle: tuple[int, int]) -> bool:
+    """True when, from some rise of ``saddle``'s flat area (the highest cell of a group of higher
+    cells around it), Kirmse's walk (:func:`kirmse_walk_up`) and orokit's steepest ascent
+    (:func:`orokit_walk_up`) reach different peaks: the two divide trees then tie the saddle to
+    different peaks. Two rules of his walk cause it: leaving an intermediate saddle by its first
+    rise, and taking the *last* of equal highest neighbours in our raster order (the half turn that
+    aligns flat summits reverses his neighbour scan), where orokit takes the first."""
+    _, higher = _flat_area(z, saddle)
+    for seg in _segments(higher):
+        top = _highest(z, seg)
+        if kirmse_walk_up(z, top) != orokit_walk_up(z, top):
+            return True
+    return False
+
+
+def _walk_diverges(z: np.ndarray, tree, p: tuple[int, int], theirs: tuple[int, int], ours: tuple[int, int],
+                   key_saddle: tuple[int, int]) -> bool:
+    """True when Kirmse's uphill walk leaves the steepest ascent at a saddle where the two walks
+    (P to orokit's parent, P to Kirmse's, on orokit's unpruned tree) have not parted yet: P's key
+    saddle, the saddles of their common part and the first saddle of each branch."""
+    a = tree_path_saddles(tree, p, ours) if ours[0] >= 0 else []
+    b = tree_path_saddles(tree, p, theirs) if theirs[0] >= 0 else []
+    common = 0
+    while common < min(len(a), len(b)) and a[common] == b[common]:
+        common += 1
+    cand = {key_saddle} if key_saddle[0] >= 0 else set()
+    cand.update(a[:common + 1])
+    cand.update(b[:common + 1])
+    return any(saddle_exit_divergence(z, s) for s in cand)
+
+
+def tree_path_saddles(tree, a: tuple[int, int], b: tuple[int, int]) -> list[tuple[int, int]]:
+    """Saddle cells on the path between peaks ``a`` and ``b`` of a Divide Tree (empty if none)."""
+    pk, sd, e = tree.peaks, tree.saddles, tree.edges
+    key = {(int(r), int(c)): i for i, (r, c) in enumerate(zip(pk["row"], pk["col"]))}
+    if a not in key or b not in key:
+        return []
+    adj: dict[int, list] = {}
+    for x, y, s in zip(e["peak_a"], e["peak_b"], e["saddle"]):
+        adj.setdefault(int(x), []).append((int(y), int(s)))
+        adj.setdefault(int(y), []).append((int(x), int(s)))
+    prev = {key[a]: None}
+    stack = [key[a]]
+    while stack:
+        u = stack.pop()
+        for v, s in adj.get(u, []):
+            if v not in prev:
+                prev[v] = (u, s)
+                stack.append(v)
+    out, u = [], key[b]
+    if u not in prev:
+        return []
+    while prev[u] is not None:
+        u, s = prev[u]
+        out.append((int(sd["row"].iloc[s]), int(sd["col"].iloc[s])))
+    return out[::-1]  # from a
+
+
+def unpruned_analysis(tif: Path):
+    """orokit's analysis of ``tif`` at threshold 0 (every peak; its tree is the unpruned Divide Tree)."""
+    import orokit
+    from orokit.io.dem import read_dem
+
+    return orokit.analyze(read_dem(tif), min_prominence_m=0.0, isolation=False)
+
+
+def unpruned_walk_check(tif: Path, ours: pd.DataFrame, eps_m: float, full=None) -> dict:
     """orokit's parents on the tree pruned at ``eps_m`` against the walk on the *unpruned* tree.
 
     On the tree of every peak (threshold 0), follow the chain of line parents from P: the
     line parent among the kept peaks is the first peak on it with prominence >= eps, the
     prominence parent the first more prominent than P. Returns the number of kept peaks
-    whose pruned-tree parents differ (0 when pruning does not change the walk).
+    whose pruned-tree parents differ (0 when pruning does not change the walk). ``full``:
+    :func:`unpruned_analysis` of ``tif`` if already done.
     """
-    import orokit
-    from orokit.io.dem import read_dem
-
-    full = orokit.analyze(read_dem(tif), min_prominence_m=0.0, isolation=False).peaks
+    full = (full if full is not None else unpruned_analysis(tif)).peaks
     cell = list(zip(full["row"].tolist(), full["col"].tolist()))
     lp = dict(zip(cell, zip(full["line_parent_row"].tolist(), full["line_parent_col"].tolist())))
     prom = dict(zip(cell, full["prominence"].tolist()))
@@ -199,8 +371,9 @@ def run(name: str, bin_dir: Path, work: Path, eps_ft: float) -> dict:
     ours = pd.read_parquet(folder / "orokit" / "peaks.parquet",
                            columns=["row", "col", "elevation", "prominence", "saddle_row", "saddle_col", "line_parent_row", "line_parent_col",
                                     "prominence_parent_row", "prominence_parent_col"])
-    res = compare(kirmse_parents(out / "parents.txt", s, z_ft.shape), ours, z_ft)
-    res["orokit_vs_unpruned_walk"] = unpruned_walk_check(tif, ours, eps_ft * FT)
+    full = unpruned_analysis(tif)
+    res = compare(kirmse_parents(out / "parents.txt", s, z_ft.shape), ours, z_ft, full.tree)
+    res["orokit_vs_unpruned_walk"] = unpruned_walk_check(tif, ours, eps_ft * FT, full)
     res["dem"] = name
     return res
 
@@ -218,15 +391,15 @@ def main() -> None:
     try:
         bin_dir = a.kirmse_bin or build_kirmse(work)
         rows = []
-        print(f"{'dem':<20} {'peaks K/o':>11} {'matched':>7}  line parent agree/tie/edge/other   "
-              "prominence parent agree/tie/edge/other")
+        print(f"{'dem':<20} {'peaks K/o':>11} {'matched':>7}  line parent agree/tie/edge/walk/other   "
+              "prominence parent agree/tie/edge/walk/other")
         for name in a.dems:
             r = run(name, bin_dir, work, a.min_prominence_ft)
             rows.append(r)
             lp, pp = r["line_parent"], r["prominence_parent"]
             print(f"{r['dem']:<20} {r['kirmse_peaks']:>5}/{r['orokit_peaks']:<5} {r['matched']:>7}  "
-                  f"{lp['agree']:>6}/{lp['tie']:>3}/{lp['edge']:>3}/{lp['unexplained']:<4}            "
-                  f"{pp['agree']:>6}/{pp['tie']:>3}/{pp['edge']:>3}/{pp['unexplained']:<4}")
+                  f"{lp['agree']:>6}/{lp['tie']:>3}/{lp['edge']:>3}/{lp['kirmse_walk']:>3}/{lp['unexplained']:<4}       "
+                  f"{pp['agree']:>6}/{pp['tie']:>3}/{pp['edge']:>3}/{pp['kirmse_walk']:>3}/{pp['unexplained']:<4}")
             u = r["orokit_vs_unpruned_walk"]
             print(f"{'':<20} orokit vs the walk on its unpruned tree ({u['unpruned_peaks']} peaks): "
                   f"{u['line_parent_differs']} line / {u['prominence_parent_differs']} prominence parents differ")

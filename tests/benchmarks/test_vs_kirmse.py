@@ -112,3 +112,48 @@ def test_parents_agree_with_kirmse_compute_parents(real_data, kirmse_bin, tmp_pa
         assert c["agree"] + c["tie"] + c["edge"] + c["unexplained"] == r["matched"]
         assert c["agree"] >= 0.95 * r["matched"]
         assert c["unexplained"] <= 0.02 * r["matched"], c["examples"]
+
+
+def _fork_grid() -> np.ndarray:
+    """Integer feet: peak P (500) at (3, 1), its key saddle S (100) at (3, 3); the cell R (120) just
+    past S is itself a saddle: its higher neighbours are (2, 5) = 400, climbing to X (800) at (1, 6),
+    and (4, 5) = 200, climbing to K (600) at (5, 6); Y (900) at (1, 8) is the highest peak, X's
+    neighbour across a 700 saddle. The background falls in raster order."""
+    z = -np.arange(121, dtype=np.float64).reshape(11, 11)
+    for cell, v in {(3, 1): 500, (3, 2): 300, (3, 3): 100, (3, 4): 120, (2, 5): 400, (1, 6): 800,
+                    (4, 5): 200, (5, 6): 600, (1, 7): 700, (1, 8): 900}.items():
+        z[cell] = v
+    return z
+
+
+def test_kirmse_walk_leaves_a_saddle_by_its_first_rise():
+    """The class ``kirmse_walk`` of parents_vs_kirmse.py on a small grid: the steepest ascent from S
+    climbs through R to X (orokit's parents), Kirmse's walk leaves R by its lower rise to K."""
+    import parents_vs_kirmse as pk
+
+    z = _fork_grid()
+    assert pk.orokit_walk_up(z, (3, 4)) == (1, 6)
+    assert pk.kirmse_walk_up(z, (3, 4)) == (5, 6)
+    assert pk.kirmse_walk_up(z, (3, 4), saddle_exit=False) == (1, 6)
+    assert pk.saddle_exit_divergence(z, (3, 3)) and not pk.saddle_exit_divergence(z, (3, 2))
+    from helpers.orometry_oracles import make_dem
+
+    peaks = orokit.analyze(make_dem(z * FT), min_prominence_m=vk.EPS_FT * FT, isolation=False).peaks
+    p = peaks[(peaks["row"] == 3) & (peaks["col"] == 1)].iloc[0]
+    assert (p["saddle_row"], p["saddle_col"]) == (3, 3)
+    assert (p["line_parent_row"], p["line_parent_col"]) == (1, 6)
+    assert (p["prominence_parent_row"], p["prominence_parent_col"]) == (1, 8)  # X: prominence 100 < 400
+
+
+@pytest.mark.slow
+def test_kirmse_compute_parents_takes_the_first_rise(kirmse_bin, tmp_path):
+    """Kirmse's own programs on the fork grid: his line and prominence parent of P is K, orokit's
+    X (line) and Y (prominence), and the benchmark counts the peak in the class ``kirmse_walk``."""
+    import parents_vs_kirmse as pk
+
+    tif = vk.write_geotiff_m(_fork_grid(), tmp_path / "fork.tif")
+    r = pk.run(str(tif), kirmse_bin, tmp_path / "work", vk.EPS_FT)
+    for kind, ours in (("line_parent", (1, 6)), ("prominence_parent", (1, 8))):
+        c = r[kind]
+        assert c["kirmse_walk"] == 1 and c["unexplained"] == 0, c
+        assert c["kirmse_walk_examples"] == [{"peak": (3, 1), "kirmse": (5, 6), "orokit": ours}]
