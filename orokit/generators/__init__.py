@@ -10,10 +10,10 @@ rivers and records generator, parameters, seed, version and input hash in the at
 name       paper                                         status
 =========  ============================================  ========================
 argudo     Argudo et al. 2019 (orokit's renderer)        complete
-belhadj    Belhadj 2007 (skeleton, MDI, MD)              tree skeleton only
+belhadj    Belhadj 2007 (skeleton, MDI, MD)              tree or particle skeleton
 rusnell    Rusnell 2009 (least-cost fields, blending)    no pareidolia mode
-guerin     Guérin 2016 (sparse construction tree)        amplification from a tree
-michel     Michel 2015 (plates, warped fBm, watershed)   peak positions only
+guerin     Guérin 2016 (sparse construction tree)        amplification (tree or DEM)
+michel     Michel 2015 (plates, warped fBm, watershed)   peak positions or vector map
 =========  ============================================  ========================
 """
 from __future__ import annotations
@@ -60,7 +60,8 @@ GENERATORS: dict[str, GeneratorSpec] = {
                             "orokit.generators.argudo", "ArgudoParams", ("tree",), "complete"),
     "belhadj": GeneratorSpec("belhadj", "Belhadj 2007, doi:10.1145/1294685.1294717",
                              "orokit.generators.belhadj", "BelhadjParams", ("tree", "rivers"),
-                             "tree skeleton (the paper's particle skeleton is not implemented)"),
+                             "skeleton = the tree's ridges and the rivers, or the paper's particles (skeleton=particles); "
+                             "MDI then MD"),
     "rusnell": GeneratorSpec("rusnell", "Rusnell et al. 2009, doi:10.1007/s00371-009-0350-5",
                              "orokit.generators.rusnell", "RusnellParams", ("tree", "exemplar", "rivers"),
                              "Algorithm 1 with profile fit (exemplar) or w_s = 1, secondary ridges, halting at "
@@ -71,8 +72,8 @@ GENERATORS: dict[str, GeneratorSpec] = {
                             "(coarse=DEM), with a complete, constrained or K-SVD dictionary of exemplar patches"),
     "michel": GeneratorSpec("michel", "Michel et al. 2015, doi:10.2312/egsh.20151011",
                             "orokit.generators.michel", "MichelParams", ("tree", "rivers"),
-                            "peak positions + rivers (no vector-map mode); orokit's defaults for T1, T2, blur, k, "
-                            "slopes"),
+                            "peak positions + rivers, or the paper's vector map (map=FILE); orokit's defaults for T1, "
+                            "T2, blur, k, slopes"),
 }
 
 

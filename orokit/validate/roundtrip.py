@@ -57,7 +57,7 @@ class PeakComparison:
             "recovered_share": self.recovered_share,
             "extra_peaks": int(len(self.extra)),
             "extra_share": self.extra_share,
-            "median_abs_prominence_error_m": float(np.nanmedian(np.abs(d))) if len(d) else float("nan"),
+            "median_abs_prominence_error_m": float(np.nanmedian(np.abs(d))) if np.isfinite(d).any() else float("nan"),
             "distance_tol_m": self.distance_tol_m,
             "prominence_tol_abs_m": self.prominence_tol[0],
             "prominence_tol_rel": self.prominence_tol[1],
