@@ -121,11 +121,14 @@ def main() -> None:
                       "nan_pattern_identical": bool(np.array_equal(fin, np.isfinite(y))),
                       "area_max_rel_diff": float(np.max(np.abs(y[fin] - x[fin]) / np.maximum(x[fin], 1e-300)))
                       if fin.any() else 0.0,
+                      "area_max_abs_diff_m2": float(np.max(np.abs(y[fin] - x[fin]))) if fin.any() else 0.0,
                       "areas_compared": int(fin.sum())})
         rows.append(m)
         print(json.dumps(m), flush=True)
     if args.json:
-        args.json.write_text(json.dumps({"dem": args.dem, "eps_ft": args.eps_ft, "runs": rows}, indent=1) + "\n")
+        rec = {"benchmark": "depression_area", "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+               "command": " ".join(sys.argv), "dem": args.dem, "eps_ft": args.eps_ft, "runs": rows}
+        args.json.write_text(json.dumps(rec, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -18,7 +18,9 @@ takes the first peak at least as high, orokit the first strictly higher one in i
 raster-order tie rule, and Kirmse's line tree and island tree may order equal peaks
 differently), or when either parent is on a flat summit. It is an *edge* case when
 either walk, or P's key saddle, touches the raster's border (Kirmse's finalized tree
-drops the runoffs there; orokit keeps the border as unknown ground). It is a *kirmse_walk*
+drops the runoffs there; orokit keeps the border as unknown ground). It is a *key_saddle_tie*
+when the lowest saddles on the walks to the two parents (orokit's unpruned tree) are different cells
+of the same elevation: P's key saddle is a tie between two sides. It is a *kirmse_walk*
 case when, at P's key saddle or at a saddle of orokit's unpruned tree where the walks to the
 two parents have not parted yet, Kirmse's uphill walk from the saddle (``TreeBuilder::walkUpToPeak``,
 simulated by :func:`kirmse_walk_up`) reaches another peak than orokit's steepest ascent
@@ -101,7 +103,8 @@ def compare(kirmse: pd.DataFrame, ours: pd.DataFrame, z_ft: np.ndarray, tree=Non
     kk = kk[~kk.index.duplicated()]
     out = {"kirmse_peaks": len(kirmse), "orokit_peaks": len(ours), "matched": 0}
     for kind in ("line_parent", "prominence_parent"):
-        out[kind] = {"agree": 0, "tie": 0, "edge": 0, "kirmse_walk": 0, "unexplained": 0, "examples": [],
+        out[kind] = {"agree": 0, "tie": 0, "edge": 0, "key_saddle_tie": 0, "kirmse_walk": 0, "unexplained": 0,
+                     "examples": [],
                      "kirmse_walk_examples": []}
     for rec in kirmse.itertuples(index=False):
         cell = first(rec.row, rec.col)
@@ -128,6 +131,8 @@ def compare(kirmse: pd.DataFrame, ours: pd.DataFrame, z_ft: np.ndarray, tree=Non
                 out[kind]["tie"] += 1
             elif on_edge:
                 out[kind]["edge"] += 1
+            elif tree is not None and _key_saddle_tie(z_ft, tree, cell, theirs, ours_cell):
+                out[kind]["key_saddle_tie"] += 1
             elif tree is not None and _walk_diverges(z_ft, tree, cell, theirs, ours_cell,
                                                      (int(mine["saddle_row"]), int(mine["saddle_col"]))):
                 out[kind]["kirmse_walk"] += 1
@@ -268,6 +273,20 @@ def saddle_exit_divergence(z: np.ndarray, saddle: tuple[int, int]) -> bool:
     return False
 
 
+def _key_saddle_tie(z: np.ndarray, tree, p: tuple[int, int], theirs: tuple[int, int],
+                    ours: tuple[int, int]) -> bool:
+    """True when the lowest saddles on the two walks (orokit's unpruned tree, P to each parent) are
+    different cells of the same elevation: P has two equally low ways to higher ground, so its key
+    saddle, and the side the walk takes, is a tie between them."""
+    if ours[0] < 0 or theirs[0] < 0:
+        return False
+    a, b = tree_path_saddles(tree, p, ours), tree_path_saddles(tree, p, theirs)
+    if not a or not b:
+        return False
+    la, lb = min(a, key=lambda c: z[c]), min(b, key=lambda c: z[c])
+    return bool(z[la] == z[lb] and la != lb)
+
+
 def _walk_diverges(z: np.ndarray, tree, p: tuple[int, int], theirs: tuple[int, int], ours: tuple[int, int],
                    key_saddle: tuple[int, int]) -> bool:
     """True when Kirmse's uphill walk leaves the steepest ascent at a saddle where the two walks
@@ -391,15 +410,15 @@ def main() -> None:
     try:
         bin_dir = a.kirmse_bin or build_kirmse(work)
         rows = []
-        print(f"{'dem':<20} {'peaks K/o':>11} {'matched':>7}  line parent agree/tie/edge/walk/other   "
-              "prominence parent agree/tie/edge/walk/other")
+        print(f"{'dem':<20} {'peaks K/o':>11} {'matched':>7}  line parent agree/tie/edge/stie/walk/other   "
+              "prominence parent agree/tie/edge/stie/walk/other")
         for name in a.dems:
             r = run(name, bin_dir, work, a.min_prominence_ft)
             rows.append(r)
             lp, pp = r["line_parent"], r["prominence_parent"]
             print(f"{r['dem']:<20} {r['kirmse_peaks']:>5}/{r['orokit_peaks']:<5} {r['matched']:>7}  "
-                  f"{lp['agree']:>6}/{lp['tie']:>3}/{lp['edge']:>3}/{lp['kirmse_walk']:>3}/{lp['unexplained']:<4}       "
-                  f"{pp['agree']:>6}/{pp['tie']:>3}/{pp['edge']:>3}/{pp['kirmse_walk']:>3}/{pp['unexplained']:<4}")
+                  f"{lp['agree']:>6}/{lp['tie']:>3}/{lp['edge']:>3}/{lp['key_saddle_tie']:>3}/{lp['kirmse_walk']:>3}/{lp['unexplained']:<4}       "
+                  f"{pp['agree']:>6}/{pp['tie']:>3}/{pp['edge']:>3}/{pp['key_saddle_tie']:>3}/{pp['kirmse_walk']:>3}/{pp['unexplained']:<4}")
             u = r["orokit_vs_unpruned_walk"]
             print(f"{'':<20} orokit vs the walk on its unpruned tree ({u['unpruned_peaks']} peaks): "
                   f"{u['line_parent_differs']} line / {u['prominence_parent_differs']} prominence parents differ")

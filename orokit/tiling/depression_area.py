@@ -70,10 +70,10 @@ def _chunk_sweep(g, order, nvalid, node, row_area, lake_of_node, lake_par, lake_
     h, w = g.shape
     n = h * w
     assign = lake_of_node.size > 0
-    uf = np.full(n, -1, np.int64)
-    size = np.zeros(n, np.int64)
-    anchor = np.full(n, -1, np.int64)
-    cursor = np.full(n, -1, np.int64)
+    uf = np.full(n, -1, np.int32)  # int32: a chunk has < 2**31 cells (and 4 bytes less per cell each)
+    size = np.zeros(n, np.int32)
+    anchor = np.full(n, -1, np.int32)
+    cursor = np.full(n, -1, np.int32)
     pend = np.zeros(n)
     nn = 0
     for k in range(n):
@@ -246,7 +246,7 @@ def _chunk_nodes(block: np.ndarray, region, shape, pit_keys: np.ndarray) -> tupl
     lr, lc = keys // W - r0, keys % W - c0
     keep = ~np.isnan(block[lr, lc])
     keys, lr, lc = keys[keep], lr[keep], lc[keep]
-    node = np.full(block.shape, -1, np.int64)
+    node = np.full(block.shape, -1, np.int32)
     node[lr, lc] = np.arange(keys.size)
     return keys, node
 

@@ -157,3 +157,17 @@ def test_kirmse_compute_parents_takes_the_first_rise(kirmse_bin, tmp_path):
         c = r[kind]
         assert c["kirmse_walk"] == 1 and c["unexplained"] == 0, c
         assert c["kirmse_walk_examples"] == [{"peak": (3, 1), "kirmse": (5, 6), "orokit": ours}]
+
+
+@pytest.mark.parametrize("s2, tie", [(100, True), (110, False)])
+def test_key_saddle_tie_class(s2, tie):
+    """P (500) between X (800) and Y (900): saddles of 100 and ``s2`` on the two sides. With equal
+    saddles P's key saddle is a tie between the sides (class ``key_saddle_tie``)."""
+    import parents_vs_kirmse as pk
+    from helpers.orometry_oracles import make_dem
+
+    z = -np.arange(45, dtype=np.float64).reshape(5, 9)
+    z[2, 1:8] = [800, 300, 100, 500, s2, 300, 900]
+    tree = orokit.analyze(make_dem(z * FT), min_prominence_m=0.0, isolation=False).tree
+    assert pk._key_saddle_tie(z, tree, (2, 4), (2, 1), (2, 7)) is tie
+    assert pk._key_saddle_tie(z, tree, (2, 4), (2, 7), (2, 1)) is tie
