@@ -3,8 +3,9 @@
 Mosaics of n x n copies of a 648 x 648 real DEM (mirrored so seams are continuous):
 the four mirror images are written once as GeoTIFF tiles and a VRT places them n * n
 times, so nothing large is written (49 x 49: 1.0 G cells, 98 x 98: 4.0 G cells).
-Each is analysed with ``orokit.analyze(read_dem(VRT, chunks=C), chunks=C)``, isolation
-on, in a fresh subprocess so its peak resident memory (all threads) is its own.
+Each is analysed with ``orokit.analyze(read_dem(VRT, chunks=C), chunks=C, geometry=False)``
+and written with ``orokit.write_analysis`` (what ``orokit analyze VRT -o OUT --chunks C`` does),
+isolation on, in a fresh subprocess so its peak resident memory (all threads) is its own.
 Prints M cells/s, peak RSS, the summed time of chunk tasks and of merge tasks, time per
 cell against the in-memory run of the largest mosaic both handle, and (``--chunk-sweep``)
 the merge cost against the number of chunks; chunked and in-memory peak tables are
@@ -113,17 +114,23 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None) -> dict:
     tiling_engine._tile_task = timed(tiling_engine._tile_task, "chunk")
     t0 = time.perf_counter()
     dem = read_dem(vrt, chunks=chunks)
-    r = orokit.analyze(dem, min_prominence_m=eps, chunks=chunks)
-    dt = time.perf_counter() - t0
+    # as `orokit analyze VRT -o OUT --chunks N`: tables without point geometries, every file written
+    r = orokit.analyze(dem, min_prominence_m=eps, chunks=chunks, geometry=False)
+    t_analyze = time.perf_counter() - t0
+    rss_analyze = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    del dem
     if out:
-        r.peaks.drop(columns="geometry").to_parquet(out)
+        orokit.write_analysis(r, out, overwrite=True)
+    dt = time.perf_counter() - t0
     return {
         "cells": int(dem.shape[0] * dem.shape[1]),
         "seconds": dt,
+        "seconds_write": dt - t_analyze,
         "peaks": int(len(r.peaks)),
         "timings": r.attrs["timings_s"],
         "task_costs": cost,
         "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "rss_mb_before_writing": rss_analyze,
         "load_average_1min": os.getloadavg()[0],
     }
 
@@ -171,7 +178,7 @@ def main() -> None:
         vrt = write_mosaic(n, args.workdir, args.dem)
         modes = [("chunked", args.chunks)] + ([("in-memory", None)] if n <= args.in_memory_max else [])
         for mode, ch in modes:
-            out = args.workdir / f"peaks_{n}_{mode}.parquet"
+            out = args.workdir / f"analysis_{n}_{mode}"
             m = measure(vrt, ch, eps, out)
             rows[n, mode] = m
             tc = m["task_costs"]
@@ -185,8 +192,8 @@ def main() -> None:
     if both:
         n = max(both)
         c, i = rows[n, "chunked"], rows[n, "in-memory"]
-        a = pd.read_parquet(args.workdir / f"peaks_{n}_chunked.parquet")
-        b = pd.read_parquet(args.workdir / f"peaks_{n}_in-memory.parquet")
+        a = pd.read_parquet(args.workdir / f"analysis_{n}_chunked" / "peaks.parquet")
+        b = pd.read_parquet(args.workdir / f"analysis_{n}_in-memory" / "peaks.parquet")
         print(f"largest raster both handle ({n}x{n}, {c['cells'] / 1e6:.1f} M cells): chunked/in-memory time "
               f"{c['seconds'] / i['seconds']:.2f}x, memory {c['rss_mb'] / i['rss_mb']:.2f}x; "
               f"peak tables identical: {a.equals(b)}")

@@ -59,6 +59,7 @@ def analyze(
     error_corr_m: float = 0.0,
     samples: int = 0,
     seed: int | None = None,
+    geometry: bool = True,
 ) -> AnalysisResult:
     """Peaks, key saddles, prominence, dominance, isolation and the Divide Tree.
 
@@ -96,6 +97,9 @@ def analyze(
         (seeded by ``seed``; None = fresh entropy, recorded in ``attrs["seed"]``) add
         ``p_exists`` (share of realisations with a peak of prominence >= the threshold
         within one correlation length, at least one cell) and ``prominence_median``.
+    geometry : False: ``peaks`` and ``saddles`` are plain DataFrames without point
+        geometries (``x``/``y`` hold the places), about half the memory per peak;
+        :func:`write_analysis` writes the same files from them.
 
     Returns
     -------
@@ -195,7 +199,8 @@ def analyze(
             iso = _isolation(z, core.peak_row, core.peak_col, transform=transform, crs=crs)
         t_iso = time.perf_counter()
         _advance(bar)
-    result = engine.build_result(core, transform=transform, crs=crs, isolation=iso)
+    result = engine.build_result(core, transform=transform, crs=crs, isolation=iso, geometry=geometry)
+    del iso
     t_end = time.perf_counter()
     _advance(bar)
     if bar is not None:

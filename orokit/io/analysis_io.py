@@ -66,8 +66,8 @@ def _write(result: AnalysisResult, out: Path) -> Path:
 
     def tables() -> None:
         _write_csv(peaks, out / "peaks.csv")
-        _write_parquet(peaks, out / "peaks.parquet")
-        _write_parquet(result.saddles, out / "saddles.parquet")
+        _write_parquet(peaks, out / "peaks.parquet", result.crs)
+        _write_parquet(result.saddles, out / "saddles.parquet", result.crs)
         if result.depressions is not None:
             _write_parquet(result.depressions, out / "depressions.parquet")
 
@@ -84,9 +84,61 @@ def _write(result: AnalysisResult, out: Path) -> Path:
     return out
 
 
-def _write_parquet(frame, path: Path) -> None:
+def _write_parquet(frame, path: Path, crs: Any = None, batch_rows: int | None = None) -> None:
+    """A table as GeoParquet (point geometry from ``x``/``y``), written in batches of rows.
+
+    ``frame``: a GeoDataFrame, or a DataFrame without geometry (points are made from
+    ``x``/``y`` in ``crs``, one batch at a time). The file is that of
+    ``GeoDataFrame.to_parquet`` (the same bytes while the table fits in one batch; beyond,
+    the same table in row groups of ``batch_rows``).
+    """
+    import geopandas as gpd
+    import pyarrow.parquet as pq
+    from geopandas.io.arrow import _geopandas_to_arrow
+
+    from orokit.io.divide_tree_gpkg import WRITE_BATCH_ROWS
+
+    step = batch_rows or WRITE_BATCH_ROWS
+    n = len(frame)
+    has_geometry = isinstance(frame, gpd.GeoDataFrame)
+    if has_geometry:
+        crs = frame.crs
     with atomic_path(path) as tmp:
-        frame.to_parquet(tmp)
+        writer = None
+        try:
+            for start in range(0, max(n, 1), step):
+                part = frame.iloc[start:start + step]
+                if not has_geometry:
+                    part = gpd.GeoDataFrame(part, geometry=gpd.points_from_xy(part["x"], part["y"]), crs=crs)
+                table = _geopandas_to_arrow(part)
+                if writer is None:
+                    schema = table.schema.with_metadata(_whole_table_metadata(table.schema.metadata, frame, n))
+                    writer = pq.ParquetWriter(str(tmp), schema, compression="snappy")
+                writer.write_table(table.replace_schema_metadata(writer.schema.metadata))
+                del part, table
+        finally:
+            if writer is not None:
+                writer.close()
+
+
+def _whole_table_metadata(meta: dict, frame, n: int) -> dict:
+    """A batch's Arrow metadata made that of the whole table: the index range and the bounding box."""
+    meta = dict(meta)
+    pandas_meta = json.loads(meta[b"pandas"])
+    for index in pandas_meta.get("index_columns", []):
+        if isinstance(index, dict) and index.get("kind") == "range":
+            index["start"], index["stop"] = 0, n
+    meta[b"pandas"] = json.dumps(pandas_meta).encode()
+    geo = json.loads(meta[b"geo"])
+    column = geo["columns"]["geometry"]
+    if n and "bbox" in column:
+        if "geometry" in frame.columns:
+            column["bbox"] = frame.total_bounds.tolist()
+        else:
+            x, y = frame["x"].to_numpy(), frame["y"].to_numpy()
+            column["bbox"] = [float(np.nanmin(x)), float(np.nanmin(y)), float(np.nanmax(x)), float(np.nanmax(y))]
+    meta[b"geo"] = json.dumps(geo).encode()
+    return meta
 
 
 def _write_csv(frame, path: Path, batch_rows: int | None = None) -> None:

@@ -83,8 +83,8 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
         for start in range(0, max(len(frame), 1), WRITE_BATCH_ROWS):
             f = frame.iloc[start:start + WRITE_BATCH_ROWS].reset_index(drop=True)
             if extra is not None:
-                f = pd.concat([f, pd.DataFrame(extra.iloc[start:start + WRITE_BATCH_ROWS]).reset_index(drop=True)],
-                              axis=1)
+                more = pd.DataFrame(extra.iloc[start:start + WRITE_BATCH_ROWS][added]).reset_index(drop=True)
+                f = pd.concat([f, more], axis=1)
             f.insert(0, id_name, np.arange(start, start + len(f), dtype=np.int64))
             g = gpd.GeoDataFrame(f, geometry=gpd.points_from_xy(f["x"], f["y"]), crs=tree.crs)
             g.to_file(tmp, layer=layer, append=start > 0, **kw, **_GPKG)
@@ -92,12 +92,13 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
     with atomic_path(path) as tmp, warnings.catch_warnings():
         # a tree on a local grid has no CRS: that is recorded in attrs, not a problem
         warnings.filterwarnings("ignore", message="'crs' was not provided", category=UserWarning)
-        points(tree.peaks, "peak_id", "peaks", None if peaks is None else peaks[added])
+        points(tree.peaks, "peak_id", "peaks", peaks)
         points(tree.saddles, "saddle_id", "saddles")
-        ridges = tree.ridges()
-        if ridges.crs is None and tree.crs is not None:
-            ridges = ridges.set_crs(tree.crs)
-        ridges.to_file(tmp, layer="ridges", geometry_type="LineString", **_GPKG)
+        for start in range(0, max(len(tree.edges), 1), WRITE_BATCH_ROWS):
+            ridges = tree.ridges(start, start + WRITE_BATCH_ROWS).reset_index(drop=True)
+            if ridges.crs is None and tree.crs is not None:
+                ridges = ridges.set_crs(tree.crs)
+            ridges.to_file(tmp, layer="ridges", geometry_type="LineString", append=start > 0, **_GPKG)
         for key in ("runoffs", "basin_saddles"):
             extra = tree.attrs.get(key)
             if isinstance(extra, pd.DataFrame):

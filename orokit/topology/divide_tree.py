@@ -283,19 +283,19 @@ class DivideTree:
                 )
 
     # ---------------------------------------------------------------- geometry
-    def ridges(self):
-        """GeoDataFrame of ridge lines peak_a -> saddle -> peak_b."""
+    def ridges(self, start: int = 0, stop: int | None = None):
+        """GeoDataFrame of ridge lines peak_a -> saddle -> peak_b (of the edges ``start:stop``)."""
         import geopandas as gpd
         from shapely import linestrings
 
-        a, b, s = self._edge_arrays()
+        a, b, s = (v[start:stop] for v in self._edge_arrays())
         px, py = self.peaks["x"].to_numpy(float), self.peaks["y"].to_numpy(float)
         sx, sy = self.saddles["x"].to_numpy(float), self.saddles["y"].to_numpy(float)
         coords = np.stack(
             [np.stack([px[a], sx[s], px[b]], axis=1), np.stack([py[a], sy[s], py[b]], axis=1)], axis=2
         )
         geom = linestrings(coords) if len(a) else []
-        frame = self.edges.copy()
+        frame = self.edges.iloc[start:stop].copy()
         frame["saddle_elevation"] = self.saddles["elevation"].to_numpy(float)[s]
         return gpd.GeoDataFrame(frame, geometry=geom, crs=self.crs)
 

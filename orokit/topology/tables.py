@@ -174,8 +174,9 @@ class AnalysisResult:
 
     Attributes
     ----------
-    peaks : GeoDataFrame indexed by ``peak_id`` with :data:`PEAK_COLUMNS` (:data:`PEAK_SCHEMA`).
-    saddles : GeoDataFrame indexed by ``saddle_id`` with :data:`SADDLE_COLUMNS`.
+    peaks : GeoDataFrame indexed by ``peak_id`` with :data:`PEAK_COLUMNS` (:data:`PEAK_SCHEMA`);
+        a plain DataFrame (no point geometry) from ``analyze(geometry=False)``.
+    saddles : GeoDataFrame (or DataFrame) indexed by ``saddle_id`` with :data:`SADDLE_COLUMNS`.
     tree : the Divide Tree pruned at the threshold (same ids).
     crs : CRS of x/y (None for a local metric grid without CRS).
     attrs : metadata (threshold, outside convention, units, source, dataset, shape,

@@ -113,9 +113,57 @@ def test_tables_written_in_batches_equal_one_batch(result, tmp_path, monkeypatch
     write_analysis(result, tmp_path / "many")
     one, many = tmp_path / "one", tmp_path / "many"
     assert (one / "peaks.csv").read_bytes() == (many / "peaks.csv").read_bytes()
+    import pyarrow.parquet as pq
+
+    for name in ("peaks.parquet", "saddles.parquet"):
+        a, b = gpd.read_parquet(one / name), gpd.read_parquet(many / name)
+        assert a.equals(b) and a.crs == b.crs, name
+        assert pq.read_schema(one / name).metadata == pq.read_schema(many / name).metadata, name
+        assert pq.ParquetFile(many / name).metadata.num_row_groups == -(-len(a) // 3)
     for layer in ("peaks", "saddles", "ridges"):
         a = gpd.read_file(one / "dividetree.gpkg", layer=layer)
         b = gpd.read_file(many / "dividetree.gpkg", layer=layer)
         assert len(b) == (n if layer == "peaks" else len(b))
         assert a.equals(b), layer
     assert gpd.read_file(many / "dividetree.gpkg", layer="peaks")["peak_id"].tolist() == list(range(n))
+
+
+def test_geoparquet_files_are_those_of_geopandas(result, tmp_path):
+    """peaks/saddles.parquet (written by batches, points made per batch) are byte for byte
+    ``GeoDataFrame.to_parquet``'s files, from the GeoDataFrames and from plain tables."""
+    from orokit.io.analysis_io import _write_parquet
+
+    for name, table in (("peaks", result.peaks), ("saddles", result.saddles)):
+        table.to_parquet(tmp_path / f"{name}_geopandas.parquet")
+        _write_parquet(table, tmp_path / f"{name}_orokit.parquet")
+        plain = table.drop(columns="geometry")
+        assert type(plain).__name__ == "DataFrame"
+        _write_parquet(plain, tmp_path / f"{name}_plain.parquet", result.crs)
+        want = (tmp_path / f"{name}_geopandas.parquet").read_bytes()
+        assert (tmp_path / f"{name}_orokit.parquet").read_bytes() == want, name
+        assert (tmp_path / f"{name}_plain.parquet").read_bytes() == want, name
+
+
+def test_tables_without_geometry_write_the_same_files(result, tmp_path):
+    """``analyze(geometry=False)`` (what the CLI runs): plain DataFrames, the same files."""
+    import geopandas as gpd
+    import xarray as xr
+
+    from orokit.analysis import write_analysis
+
+    rng = np.random.default_rng(3)  # the grid of the ``result`` fixture
+    z = rng.integers(0, 40, (30, 40)).astype(np.float32)
+    z[5:8, 5:9] = np.nan
+    dem = xr.DataArray(z, dims=("y", "x"), coords={"y": 30.0 * np.arange(30)[::-1] + 15, "x": 30.0 * np.arange(40) + 15})
+    lean = orokit.analyze(dem.rio.write_crs("EPSG:32633"), min_prominence_m=5.0, geometry=False)
+    assert not isinstance(lean.peaks, gpd.GeoDataFrame) and not isinstance(lean.saddles, gpd.GeoDataFrame)
+    assert lean.peaks.equals(result.peaks.drop(columns="geometry"))
+    assert lean.saddles.equals(result.saddles.drop(columns="geometry"))
+    lean.attrs = dict(result.attrs)  # the same metadata (timings differ between runs)
+    write_analysis(lean, tmp_path / "lean")
+    write_analysis(result, tmp_path / "geo")
+    for name in ("peaks.csv", "peaks.parquet", "saddles.parquet", "analysis.json"):
+        assert (tmp_path / "lean" / name).read_bytes() == (tmp_path / "geo" / name).read_bytes(), name
+    for layer in ("peaks", "saddles", "ridges"):
+        a = gpd.read_file(tmp_path / "lean" / "dividetree.gpkg", layer=layer)
+        assert a.equals(gpd.read_file(tmp_path / "geo" / "dividetree.gpkg", layer=layer)), layer
