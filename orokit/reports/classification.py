@@ -218,8 +218,10 @@ _FEATURE_SETS = {"paper": "the paper's Table 1 histograms at R ({n} numbers, `--
                              "made cumulative (dominance, dominance groups, isolation distance, key-saddle distance, "
                              "prominence; the direction and disk-relative histograms left out); disk summaries "
                              "(peak density, prominence spectrum, maximum and quantiles of prominence, isolation, "
-                             "key-saddle distance, dominance); quantiles of peak and key-saddle elevation. Chosen "
-                             "on the spatial hold-out: see `ablation.md`"}
+                             "key-saddle distance, dominance); quantiles of peak and key-saddle elevation; the key "
+                             "saddles against their peaks (relief peaks to key saddles, col ratio, key-saddle height "
+                             "in the disk). Chosen on the spatial hold-out: see `ablation.md` and `layouts.md` (mean "
+                             "over three disk layouts)"}
 
 
 def _readme(t2: pd.DataFrame, evals: Mapping[float, Mapping[str, Any]], meta: dict[str, Any]) -> str:

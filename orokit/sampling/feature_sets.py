@@ -17,7 +17,10 @@ of new ground exactly as it was trained (and refuses a table made otherwise).
   histograms throw away: peak density (peaks >= eps per km2), a prominence spectrum
   (density of peaks >= 60 ... 800 m), the maximum prominence and quantiles of
   prominence, isolation (relative and in metres), key-saddle distance and dominance;
-  and quantiles of the elevation of the peaks and of their key saddles (130 numbers).
+  quantiles of the elevation of the peaks and of their key saddles; and (session 5) the
+  key saddles against their peaks (:data:`SADDLE_GROUPS`: relief, col ratio, saddle
+  height; elevation and prominence only, so peak lists and synthetic trees have them):
+  141 numbers.
 
 Column names: ``<feature>_<bin>`` for histograms and ``log_density``,
 ``log_max_prominence``, ``q<percent>_<quantity>`` for summaries at R; at another radius
@@ -44,7 +47,7 @@ from orokit.metrics.disk import (
 )
 from orokit.sampling.histograms import HistogramSpec
 
-__all__ = ["FeatureSet", "FEATURE_SET_NAMES", "SUMMARY_QUANTILES", "disk_feature_vector"]
+__all__ = ["FeatureSet", "FEATURE_SET_NAMES", "SUMMARY_QUANTILES", "disk_feature_vector", "saddle_features"]
 
 FEATURE_SET_NAMES = ("orometry", "paper")
 #: histograms the default set leaves out: direction ones rotate with the DEM and drift between parts of a
@@ -81,6 +84,15 @@ PATTERN_GROUPS: dict[str, list[str]] = {
     "elevation_prominence_correlation": ["elevation_prominence_rank_correlation"],
 }
 
+#: key saddles against their peaks (rotation invariant, need only elevation and prominence, so they work on
+#: every peak list): relief between the peaks and the key saddles, how high each key col sits between the
+#: disk's lowest key saddle and its peak, and the key saddles' height within the disk's relief
+SADDLE_GROUPS: dict[str, list[str]] = {
+    "relief": ["relief_max_km", "relief_median_km", "relief_q90_q10_km"],
+    "col_ratio": [f"{q}_col_ratio" for q in _Q],
+    "saddle_height": [f"{q}_saddle_height" for q in _Q],
+}
+
 #: human-readable names of the summary groups (Table 2 rows)
 SUMMARY_TITLES: dict[str, str] = {
     "density": "Peak density", "prominence_summary": "Prominence quantiles",
@@ -90,6 +102,8 @@ SUMMARY_TITLES: dict[str, str] = {
     "spacing": "Peak spacing", "alignment": "Key saddle direction alignment",
     "steepness": "Steepness to the key saddle",
     "elevation_prominence_correlation": "Elevation-prominence correlation",
+    "relief": "Relief peaks to key saddles", "col_ratio": "Key col height ratio",
+    "saddle_height": "Key saddle height in the disk",
 }
 
 
@@ -114,6 +128,13 @@ class FeatureSet:
         quantiles of their key saddles' elevation (km).
     cumulative : bool
         Cumulative instead of plain normalized histograms (direction histograms stay plain).
+    saddles : bool
+        Add the key saddles against their peaks (:data:`SADDLE_GROUPS`), with ``s = h - p``
+        the key-saddle elevation and ``b`` the lowest key saddle of the disk: the relief
+        ``max h - b``, ``median h - median s`` and ``q90 h - q10 s`` (km); quantiles of the
+        col ratio ``(s - b) / (h - b)`` (0: the peak's col is the disk's lowest, near 1: a
+        shallow col high on its parent's flank); quantiles of the saddle height
+        ``(s - b) / (max h - b)``. They use elevation and prominence only.
     pattern : bool
         Add the spatial pattern of the peaks (:data:`PATTERN_GROUPS`): quantiles of the
         distance to the nearest other counted peak and the Clark-Evans ratio (mean of that
@@ -133,6 +154,7 @@ class FeatureSet:
     elevation: bool = False
     cumulative: bool = False
     pattern: bool = False
+    saddles: bool = False
 
     def __post_init__(self) -> None:
         if not self.radii or any(not (0 < f <= 1.0) for f in self.radii) or len(set(self.radii)) != len(self.radii):
@@ -153,7 +175,7 @@ class FeatureSet:
     def orometry(cls) -> FeatureSet:
         """orokit's default: chosen by the spatial hold-out (see the module docstring)."""
         spec = HistogramSpec.paper()
-        return cls("orometry", spec, radii=(1.0,), summaries=True, elevation=True, cumulative=True,
+        return cls("orometry", spec, radii=(1.0,), summaries=True, elevation=True, cumulative=True, saddles=True,
                    histograms=tuple(n for n in spec.names if n not in UNSTABLE_HISTOGRAMS))
 
     @classmethod
@@ -180,6 +202,8 @@ class FeatureSet:
             g.update(SUMMARY_GROUPS)
         if self.elevation:
             g.update(ELEVATION_GROUPS)
+        if self.saddles:
+            g.update(SADDLE_GROUPS)
         if self.pattern:
             g.update(PATTERN_GROUPS)
         return g
@@ -199,7 +223,8 @@ class FeatureSet:
         return {"name": self.name, "spec": self.spec.to_dict(), "radii": list(self.radii),
                 "histograms": None if self.histograms is None else list(self.histograms),
                 "summaries": self.summaries, "elevation": self.elevation, "cumulative": self.cumulative,
-                **({"pattern": True} if self.pattern else {})}  # absent when False: older files compare equal
+                **({"saddles": True} if self.saddles else {}),  # absent when False: older files compare equal
+                **({"pattern": True} if self.pattern else {})}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> FeatureSet:
@@ -209,7 +234,8 @@ class FeatureSet:
                        radii=tuple(float(f) for f in d.get("radii", (1.0,))),
                        histograms=None if h is None else tuple(str(x) for x in h),
                        summaries=bool(d.get("summaries", False)), elevation=bool(d.get("elevation", False)),
-                       cumulative=bool(d.get("cumulative", False)), pattern=bool(d.get("pattern", False)))
+                       cumulative=bool(d.get("cumulative", False)), pattern=bool(d.get("pattern", False)),
+                       saddles=bool(d.get("saddles", False)))
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise SchemaError(f"not a feature set dictionary ({exc!r}): {str(d)[:200]}") from exc
 
@@ -288,9 +314,34 @@ def disk_feature_vector(elevation: NDArray, prominence: NDArray, saddle_distance
         parts.append(_elevation_quantiles(h))
         parts.append(np.array([np.nanmax(h) / 1000.0 if n else 0.0]))
         parts.append(_elevation_quantiles(h - p))  # key-saddle elevations
+    if feature_set.saddles:
+        parts.append(saddle_features(h, p))
     if feature_set.pattern:
         parts.append(_pattern(h, p, saddle_distance_m, saddle_direction_deg, spacing_m, radius_m))
     return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def saddle_features(elevation: NDArray, prominence: NDArray) -> NDArray[np.float64]:
+    """The :data:`SADDLE_GROUPS` values of the peaks of one disk (see :class:`FeatureSet`); zeros when empty.
+
+    Examples
+    --------
+    >>> saddle_features(np.array([1000.0, 600.0]), np.array([800.0, 200.0])).round(2).tolist()[:3]
+    [0.8, 0.5, 0.74]
+    """
+    h = np.asarray(elevation, dtype=float)
+    p = np.asarray(prominence, dtype=float)
+    ok = np.isfinite(h) & np.isfinite(p)
+    h, p = h[ok], p[ok]
+    if len(h) == 0:
+        return np.zeros(sum(len(c) for c in SADDLE_GROUPS.values()))
+    s = h - p
+    base = float(s.min())
+    top = float(h.max())
+    relief = np.array([top - base, np.median(h) - np.median(s), np.quantile(h, 0.9) - np.quantile(s, 0.1)]) / 1000.0
+    col = (s - base) / np.maximum(h - base, 1.0)
+    height = (s - base) / max(top - base, 1.0)
+    return np.concatenate([relief, _quantiles(col), _quantiles(height)])
 
 
 def _pattern(h: NDArray, p: NDArray, saddle_distance_m: NDArray, saddle_direction_deg: NDArray,

@@ -11,7 +11,7 @@ from orokit.classify.features import feature_table, nearest_peak_distance
 from orokit.metrics.disk import axial_resultant
 from orokit.sampling.feature_sets import PATTERN_GROUPS, FeatureSet, disk_feature_vector
 
-FS = dataclasses.replace(FeatureSet.orometry(), name="p", histograms=(), summaries=False, elevation=False,
+FS = dataclasses.replace(FeatureSet.orometry(), name="p", histograms=(), summaries=False, elevation=False, saddles=False,
                          pattern=True)
 
 
