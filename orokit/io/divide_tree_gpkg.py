@@ -41,7 +41,7 @@ def _json_attrs(attrs: dict) -> dict:
 #: how every layer is written: through GDAL's Arrow interface, without spatial index (GIS tools
 #: build one on demand; it would double the writing time)
 #: rows per batch when writing large tables (peaks, saddles, CSV): bounds the copies made for a write
-WRITE_BATCH_ROWS = 250_000
+WRITE_BATCH_ROWS = 65_536
 _GPKG = {"driver": "GPKG", "engine": "pyogrio", "use_arrow": True, "layer_options": {"SPATIAL_INDEX": "NO"}}
 
 
