@@ -60,6 +60,7 @@ class RenderParams:
         steps where the cone set changes).
     field_smooth_m : the ``"field"`` surface blurs its nearest ridge and river heights over this
         many metres (Gaussian sigma; they jump on the inner side of bends).
+    field_weight : the ``"field"`` surface is ``field_weight`` x the field + the rest x the TIN.
     flank_depth : the cones of a ridge piece reach at most ``flank_depth * (peak - saddle)``
         below its saddle (None: no limit; far from ridges steep cones dug canyons).
     """
@@ -81,6 +82,7 @@ class RenderParams:
     profiles: str = "linear"
     surface: str = "tin"
     field_smooth_m: float = 200.0
+    field_weight: float = 1.0
     flank_depth: float | None = None
     keep_hill_ratio: float = 0.0
     cut_slope: float = 0.0

@@ -103,10 +103,11 @@ def _field(grid, rxy: np.ndarray, rz: np.ndarray, rivers, params: RenderParams) 
     vr, vc, vok = grid.cell_of(vxy)
     if not rok.any() or not vok.any():
         raise InputError("no ridge or no river of the Divide Tree crosses the extent; use surface='tin'")
-    return field_elevation((grid.ny, grid.nx), grid.cell_size_m, (rr[rok], rc[rok]), rz[rok], (vr[vok], vc[vok]), vz[vok],
-                           valley_width(va[vok], coef=params.valley_coef),
+    return field_elevation((grid.ny, grid.nx), grid.cell_size_m, (rr[rok], rc[rok]), rz[rok], (vr[vok], vc[vok]),
+                           vz[vok], valley_width(va[vok], coef=params.valley_coef),
                            profile=hillslope_profile if params.profiles == "learned" else None,
-                           smooth_m=params.field_smooth_m, beyond_depth_m=params.min_prominence_m)
+                           smooth_m=params.field_smooth_m,
+                           beyond_depth_m=params.min_prominence_m)
 
 
 def _check_crs(tree) -> Any:
@@ -202,6 +203,9 @@ def render_elevation(
     rxy, rz, _, rorig = densify(skel.ridges, 0.5 * grid.cell_size_m, origin=True)
     if params.surface == "field" and skel.rivers.segments.size:
         z = _field(grid, rxy, rz, skel.rivers, params)
+        if params.field_weight < 1.0:
+            tin = rasterize_tin(skel.tin, grid)
+            z = np.where(np.isnan(tin), z, params.field_weight * z + (1.0 - params.field_weight) * tin)
     else:
         z = rasterize_tin(skel.tin, grid)
     burn_max(z, grid, rxy, rz)

@@ -79,9 +79,11 @@ def test_field_needs_ridges_and_rivers():
                         (np.array([], int), np.array([], int)), np.array([]), np.array([]))
 
 
-def test_field_render_keeps_the_tree_orometry():
+@pytest.mark.parametrize("weight", [1.0, 0.5])
+def test_field_render_keeps_the_tree_orometry(weight):
     tree = small_tree()
-    dem = render_elevation(tree, cell_size_m=50.0, erosion=False, params=RenderParams(surface="field"), rng=7)
+    dem = render_elevation(tree, cell_size_m=50.0, erosion=False,
+                           params=RenderParams(surface="field", field_weight=weight), rng=7)
     res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
     comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
     assert comp.recovered_share == 1.0 and len(comp.extra) == 0
