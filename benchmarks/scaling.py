@@ -118,12 +118,13 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None) -> dict:
     r = orokit.analyze(dem, min_prominence_m=eps, chunks=chunks, geometry=False)
     t_analyze = time.perf_counter() - t0
     rss_analyze = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    cells = int(dem.shape[0] * dem.shape[1])
     del dem
     if out:
         orokit.write_analysis(r, out, overwrite=True)
     dt = time.perf_counter() - t0
     return {
-        "cells": int(dem.shape[0] * dem.shape[1]),
+        "cells": cells,
         "seconds": dt,
         "seconds_write": dt - t_analyze,
         "peaks": int(len(r.peaks)),
