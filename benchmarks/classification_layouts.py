@@ -89,7 +89,8 @@ def main() -> None:
     seeds = ", ".join(str(s) for s in a.seeds)
     lines = ["# The classifier's main choices over several disk layouts (R = 10 km, shared DEMs)", "",
              f"`python benchmarks/classification_layouts.py --seeds {' '.join(str(s) for s in a.seeds)} --runs "
-             f"{a.runs} --block-runs {a.block_runs}`: every row on the disk layouts drawn with seeds {seeds}. "
+             f"{a.runs} --block-runs {a.block_runs}"
+             f"{'' if a.rows is None else ' --rows ' + ' '.join(str(i) for i in a.rows)}`: every row on the disk layouts drawn with seeds {seeds}. "
              f"Strip = held-out strip per region ({a.runs} runs), blocks = spatial k-fold with blocks of R/2 "
              f"({a.block_runs} run), training disks > 20 km from the held-out disks in both; terrain = share of "
              f"held-out strips whose disks together get the right region. Mean over the layouts, then the "
