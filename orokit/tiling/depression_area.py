@@ -252,9 +252,11 @@ def _chunk_nodes(block: np.ndarray, region, shape, pit_keys: np.ndarray) -> tupl
 
 
 def _sorted_cells(block: np.ndarray) -> tuple[np.ndarray, int]:
+    """Cells from high to low, NaN last. The order among equal values does not matter: the
+    sweep works by value (every cell above ``v`` is joined before any cell at ``v``)."""
     flat = block.ravel()
     valid = ~np.isnan(flat)
-    return np.argsort(-np.where(valid, flat, -np.inf), kind="stable"), int(valid.sum())
+    return np.argsort(np.where(valid, -flat, np.inf)), int(valid.sum())
 
 
 class _Block:
