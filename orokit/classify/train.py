@@ -394,7 +394,7 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
     -------
     Evaluation
     """
-    from joblib import Parallel, delayed
+    from sklearn.utils.parallel import Parallel, delayed  # propagates the sklearn config (and warning filters) to the workers
 
     if runs < 1:
         raise InputError(f"runs must be >= 1, got {runs}")
