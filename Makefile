@@ -229,7 +229,7 @@ INDEX_SRC := orokit/cli/report_index.py orokit/reports/index.py orokit/reports/d
 $(REPORTS)/README.md: $(DATASET_SUMMARIES) $(filter-out $(REPORTS)/README.md,$(REPORT_OUTPUTS)) $(INDEX_SRC) | $(INSTALLED)
 	$(OROKIT) -q report-index $(patsubst %/summary.md,%/summary.json,$(DATASET_SUMMARIES)) -o $@ --overwrite
 
-report: $(REPORT_OUTPUTS)  ## main pipeline: data, summaries, analysis, classification, synthesis, round trip
+report: $(REPORT_OUTPUTS)  ## main pipeline: data, summaries, analysis, classification, synthesis, round trip, generator ranking
 
 clean-reports:  ## delete generated reports (keeps data and .venv)
 	rm -rf $(REPORTS)/datasets $(REPORTS)/README.md
