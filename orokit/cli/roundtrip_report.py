@@ -97,6 +97,10 @@ def roundtrip_report(twins, per_class, model, output, table_path, renders, overw
               "classification report's per-region accuracy of the same region's real disks.")
     if per_class is not None:
         header += f" Real accuracies from `{per_class}`."
+    # render times change with the machine's load: to the git-ignored timings.csv, not the committed table
+    if "render_s" in table:
+        write_text_atomic(output.parent / "timings.csv", table[["region", "render_s"]].to_csv(index=False))
+        table = table.drop(columns="render_s")
     write_text_atomic(table_path, table.to_csv(index=False))
     write_text_atomic(output, render_roundtrip_markdown(table, header=header, model=model, landforms=landforms))
     click.echo(f"{len(table)} twins -> {output}, {table_path}")

@@ -121,13 +121,12 @@ def render_roundtrip_markdown(table: pd.DataFrame, *, header: str = "", model: s
     :func:`landform_table`) and the twin figures."""
     cols = [("region", 0), ("shape", 0), ("tree_peaks", 0), ("recovered_%", 1), ("extra_%", 1),
             ("max_bin_error", 3), ("max_emd_prominence_m", 1), ("disks", 0), ("synthetic_disk_acc_%", 0),
-            ("real_disk_acc_%", 0), ("real_disk_acc_spatial_%", 0), ("vote", 0), ("render_s", 1)]
+            ("real_disk_acc_%", 0), ("real_disk_acc_spatial_%", 0), ("vote", 0)]
     names = {"tree_peaks": "tree peaks >= eps", "recovered_%": "recovered %", "extra_%": "extra %",
              "max_bin_error": "max bin error", "max_emd_prominence_m": "EMD prominence (m)",
              "disks": "disks", "synthetic_disk_acc_%": "synthetic disks right %",
              "real_disk_acc_%": "real disks right % (random split)",
-             "real_disk_acc_spatial_%": "real disks right % (spatial)", "vote": "overall vote",
-             "render_s": "render (s)"}
+             "real_disk_acc_spatial_%": "real disks right % (spatial)", "vote": "overall vote"}
     lines = ["# Round trip: synthetic twins of the real DEMs", ""]
     if header:
         lines += [header, ""]
