@@ -32,23 +32,11 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from orokit.topology._kernels import _NEIGHBOURS_8, _find  # the in-memory kernels' union-find and neighbours
+
 logger = logging.getLogger(__name__)
 
 __all__ = ["tiled_spill_areas"]
-
-_NB8 = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
-
-
-@njit(cache=True, nogil=True)
-def _find(uf, x):
-    root = x
-    while uf[root] != root:
-        root = uf[root]
-    while uf[x] != root:
-        nxt = uf[x]
-        uf[x] = root
-        x = nxt
-    return root
 
 
 @njit(cache=True, nogil=True)
@@ -105,7 +93,7 @@ def _chunk_sweep(g, order, nvalid, node, row_area, lake_of_node, lake_par, lake_
         else:
             pend[c] = a
         nr = 0
-        for dr, dc in _NB8:
+        for dr, dc in _NEIGHBOURS_8:
             rr = r + dr
             cc = q + dc
             if rr < 0 or rr >= h or cc < 0 or cc >= w:

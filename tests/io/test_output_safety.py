@@ -278,10 +278,15 @@ def test_render_checks_free_space_before_writing(tmp_path, monkeypatch):
 
 # --- Ctrl-C ---------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("sig, status, word", [("SIGINT", 130, "interrupted"), ("SIGTERM", 143, "terminated")])
-def test_signal_during_the_numba_stage_exits_cleanly(tmp_path, dem_tif, sig, status, word):
+@pytest.mark.parametrize("sig, swallow, status, word", [("SIGINT", False, 130, "interrupted"),
+                                                          ("SIGTERM", False, 143, "terminated"),
+                                                          ("SIGINT", True, 130, "interrupted")],
+                         ids=["SIGINT", "SIGTERM", "SIGINT-swallowed"])
+def test_signal_during_the_numba_stage_exits_cleanly(tmp_path, dem_tif, sig, swallow, status, word):
     """SIGINT (Ctrl-C) or SIGTERM (kill) arrives while the engine's numba kernels run (injected there, so the test is
-    deterministic); the previous analysis stays and no temporary file is left."""
+    deterministic); the previous analysis stays and no temporary file is left. "swallowed": the injected wrapper
+    catches the KeyboardInterrupt (as a finalizer or a worker thread might), so the run goes on; the signal was
+    recorded, so nothing is replaced and the exit status still says "interrupted"."""
     out = tmp_path / "out"
     assert _analyze(dem_tif, out).exit_code == 0
     before = _snapshot(out)
@@ -295,7 +300,13 @@ def test_signal_during_the_numba_stage_exits_cleanly(tmp_path, dem_tif, sig, sta
             def g(*a, **kw):
                 if not fired:
                     fired.append(1)
-                    os.kill(os.getpid(), getattr(signal, sys.argv[1]))
+                    try:
+                        os.kill(os.getpid(), getattr(signal, sys.argv[1]))
+                        for _ in range(1000):  # the handler runs between bytecodes
+                            pass
+                    except KeyboardInterrupt:
+                        if sys.argv[2] != "swallow":
+                            raise
                 return f(*a, **kw)
             return g
         for mod in (k, e):
@@ -304,50 +315,13 @@ def test_signal_during_the_numba_stage_exits_cleanly(tmp_path, dem_tif, sig, sta
                 if hasattr(f, "py_func"):
                     setattr(mod, n, wrap(f))
         from orokit.cli.main import cli
-        cli(sys.argv[2:])
+        cli(sys.argv[3:])
     """)
-    proc = subprocess.run([sys.executable, "-c", code, sig, "analyze", str(dem_tif), "-o", str(out), "--overwrite",
-                           "--no-progress", "--min-prominence", "5"], capture_output=True, text=True, timeout=300)
+    proc = subprocess.run([sys.executable, "-c", code, sig, "swallow" if swallow else "raise", "analyze",
+                           str(dem_tif), "-o", str(out), "--overwrite", "--no-progress", "--min-prominence", "5"],
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == status, proc.stderr
     assert word in proc.stderr and "Traceback" not in proc.stderr
-    assert _snapshot(out) == before
-    assert _leftovers(out, tmp_path) == []
-
-
-def test_a_swallowed_interrupt_still_keeps_the_old_outputs(tmp_path, dem_tif):
-    """Ctrl-C whose KeyboardInterrupt is swallowed on the way (here by the injected kernel wrapper, as a
-    finalizer or a worker thread might): the run goes on, but the signal was recorded, so nothing is
-    replaced and the exit status still says "interrupted"."""
-    out = tmp_path / "out"
-    assert _analyze(dem_tif, out).exit_code == 0
-    before = _snapshot(out)
-    code = textwrap.dedent("""
-        import os, signal, sys
-        import orokit.topology._kernels as k
-        fired = []
-        def wrap(f):
-            def g(*a, **kw):
-                if not fired:
-                    fired.append(1)
-                    try:
-                        os.kill(os.getpid(), signal.SIGINT)
-                        for _ in range(1000):  # the handler runs between bytecodes
-                            pass
-                    except KeyboardInterrupt:
-                        pass  # swallowed
-                return f(*a, **kw)
-            return g
-        for n in dir(k):
-            f = getattr(k, n)
-            if hasattr(f, "py_func"):
-                setattr(k, n, wrap(f))
-        from orokit.cli.main import cli
-        cli(sys.argv[1:])
-    """)
-    proc = subprocess.run([sys.executable, "-c", code, "analyze", str(dem_tif), "-o", str(out), "--overwrite",
-                           "--no-progress", "--min-prominence", "5"], capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 130, proc.stderr
-    assert "interrupted" in proc.stderr and "Traceback" not in proc.stderr
     assert _snapshot(out) == before
     assert _leftovers(out, tmp_path) == []
 
