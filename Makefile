@@ -44,7 +44,7 @@ STAMPS := .cache/stamps
 DATA_STAMP := $(STAMPS)/data-verified
 
 # stage: per-dataset DEM summary (summary.md is written last, after hillshade.png and summary.json)
-SUMMARY_SRC := orokit/io/dem.py orokit/data/fetch.py orokit/reports/dem_summary.py orokit/cli/report_dataset.py
+SUMMARY_SRC := orokit/io/dem.py orokit/io/fetch.py orokit/reports/dem_summary.py orokit/cli/report_dataset.py
 DATASET_SUMMARIES := $(DATASETS:%=$(REPORTS)/datasets/%/summary.md)
 
 # stage: classification (issue 6). Reads the analysis folders reports/analysis/<name>/.

@@ -1,10 +1,12 @@
 """Real datasets: the manifest, fetching into a cache (or from a mirror), verification.
 
-See ``datasets_manifest/datasets.yaml`` and :mod:`orokit.data.fetch`.
+A public facade: the files are read and written by :mod:`orokit.io.manifest` and :mod:`orokit.io.fetch`.
+
+The manifest itself is ``datasets_manifest/datasets.yaml``.
 """
 from __future__ import annotations
 
-from orokit.data.fetch import (
+from orokit.io.fetch import (
     FileStatus,
     data_dir,
     dataset_path,
@@ -16,7 +18,7 @@ from orokit.data.fetch import (
     sha256_file,
     verify,
 )
-from orokit.data.manifest import DataFile, Dataset, Manifest, default_manifest_path, load_manifest
+from orokit.io.manifest import DataFile, Dataset, Manifest, default_manifest_path, load_manifest
 
 __all__ = [
     "DataFile", "Dataset", "Manifest", "FileStatus", "load_manifest", "default_manifest_path", "data_dir",

@@ -329,7 +329,7 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
     from orokit.classify.features import concat_features
     from orokit.classify.inputs import default_label, features_for_input
     from orokit.classify.model import model_metadata, save_model
-    from orokit.data.fetch import sha256_file
+    from orokit.io.fetch import sha256_file
     from orokit.io.model_io import write_feature_table
     from orokit.classify.train import evaluate, train_classifier
     from orokit.errors import OrokitWarning

@@ -23,7 +23,7 @@ if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
     from matplotlib.axes import Axes
 
-    from orokit.data.manifest import Dataset
+    from orokit.io.manifest import Dataset
 
 logger = logging.getLogger(__name__)
 

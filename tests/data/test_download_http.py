@@ -12,8 +12,8 @@ import threading
 
 import pytest
 
-from orokit.data.fetch import fetch_file
-from orokit.data.manifest import DataFile
+from orokit.io.fetch import fetch_file
+from orokit.io.manifest import DataFile
 from orokit.errors import DataError
 
 GOOD = b"orokit test payload\n" * 2000
@@ -76,7 +76,7 @@ def test_altered_bytes_are_refused_and_nothing_lands(server, tmp_path):
 def test_interrupted_body_leaves_nothing_and_keeps_an_older_good_copy(server, tmp_path, monkeypatch):
     import sys
 
-    fetch_module = sys.modules["orokit.data.fetch"]  # (orokit.data.fetch is also a function name)
+    fetch_module = sys.modules["orokit.io.fetch"]  # (orokit.io.fetch is also a function name)
     monkeypatch.setattr(fetch_module.time, "sleep", lambda s: None)  # retries without waiting
     with pytest.raises(DataError, match="cannot download|sha256 mismatch"):
         fetch_file(_entry(f"{server}/truncated.bin"), cache_dir=tmp_path, mirror=False)

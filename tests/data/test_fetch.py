@@ -14,7 +14,7 @@ from orokit.cli.main import cli
 from orokit.data import fetch, fetch_file, load_manifest, verify
 from orokit.errors import DataError
 
-fetch_mod = importlib.import_module("orokit.data.fetch")  # the package re-exports a function named fetch
+fetch_mod = importlib.import_module("orokit.io.fetch")  # the package re-exports a function named fetch
 
 FILES = {"dems/a.txt": b"alpha " * 1000, "dems/b.bin": bytes(range(256)) * 64, "shared/LICENSE": b"MIT\n"}
 

@@ -119,7 +119,7 @@ def test_8x_amplification_beats_bicubic(real_data):
     from scipy.ndimage import map_coordinates
     from scipy.stats import wasserstein_distance
 
-    from orokit.data.manifest import load_manifest
+    from orokit.io.manifest import load_manifest
     from orokit.io.dem import read_dem
 
     ds = load_manifest()["norway"]

@@ -13,7 +13,7 @@ import orokit
 
 @pytest.fixture(scope="module")
 def everest(real_data):
-    from orokit.data.manifest import load_manifest
+    from orokit.io.manifest import load_manifest
     from orokit.io.dem import read_dem
 
     ds = load_manifest()["himalaya-everest"]

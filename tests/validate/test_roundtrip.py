@@ -94,7 +94,7 @@ def test_cli_render_bad_resolution(tmp_path, res):
 @pytest.mark.slow
 def test_real_tree_round_trip(real_data):
     """The Divide Tree of a real DEM, rendered on the DEM's grid, keeps >= 95 % of its peaks."""
-    from orokit.data.manifest import load_manifest
+    from orokit.io.manifest import load_manifest
     from orokit.io.dem import read_dem
     from orokit.raster.render import render_elevation
 

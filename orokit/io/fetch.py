@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
 from orokit._typing import PathLike
-from orokit.data.manifest import DataFile, Manifest, load_manifest
+from orokit.io.manifest import DataFile, Manifest, load_manifest
 from orokit.errors import DataError
 from orokit.io.atomic import atomic_path
 from orokit.io.hashing import sha256_file
