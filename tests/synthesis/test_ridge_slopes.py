@@ -1,0 +1,71 @@
+"""Ridge slopes of synthesized trees (issue 11): neighbouring peaks of similar height, saddles
+not squeezed against a peak. Measured on the tree, not by the synthesis."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from orokit.errors import InputError
+from orokit.synthesis.fidelity import compare_to_type
+from orokit.synthesis.saddles import key_saddles, place_key_saddles
+from orokit.synthesis.tree import SynthesisParams, synthesize_divide_tree
+
+SIZE = 30_000.0
+
+
+def _neighbour_gradient(tree) -> float:
+    """Median |dz| / distance between every peak and its nearest peak (KD-tree)."""
+    xy = tree.peaks[["x", "y"]].to_numpy(float)
+    z = tree.peaks["elevation"].to_numpy(float)
+    d, j = cKDTree(xy).query(xy, k=2)
+    return float(np.median(np.abs(z - z[j[:, 1]]) / d[:, 1]))
+
+
+def test_elevation_tolerance_makes_neighbouring_peaks_alike(small_type):
+    """A tighter C_H acceptance gives neighbouring peaks closer elevations (the real trees' nearest-
+    neighbour gradient is half the one of the session-5 twins); the histograms stay matched."""
+    loose, tight = [], []
+    for seed in range(3):
+        loose.append(_neighbour_gradient(synthesize_divide_tree(
+            small_type, size_m=SIZE, rng=seed, params=SynthesisParams(elevation_tolerance=0.05))))
+        t = synthesize_divide_tree(small_type, size_m=SIZE, rng=seed, params=SynthesisParams(elevation_tolerance=0.0125))
+        tight.append(_neighbour_gradient(t))
+        assert compare_to_type(t, small_type)["max_bin_error"].max() < 0.2
+    assert np.mean(tight) < 0.8 * np.mean(loose)
+
+
+def _half_slope_excess(tree, small_type, ratio):
+    """Largest (half-ridge slope) / (even-split slope) over the owned saddles placed by
+    :func:`place_key_saddles` on the straight ridge (no perpendicular offset)."""
+    px, py, pz = (tree.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
+    a, b = tree.edges["peak_a"].to_numpy(), tree.edges["peak_b"].to_numpy()
+    sz = tree.saddles["elevation"].to_numpy(float)[tree.edges["saddle"].to_numpy()]
+    h = small_type.histograms
+    sx, sy = place_key_saddles(px, py, pz, a, b, sz, np.zeros(pz.size, np.int64), [h["saddle_distance"]],
+                               [h["saddle_direction"]], max_offset=0.0, max_slope_ratio=ratio, rng=0)
+    key = key_saddles(pz, a, b, sz)
+    owned = np.zeros(a.size, bool)
+    owned[key[key >= 0]] = True
+    L = np.hypot(px[a] - px[b], py[a] - py[b])
+    even = (pz[a] + pz[b] - 2 * sz) / L
+    worst = 0.0
+    for end in (a, b):
+        half = (pz[end] - sz) / np.hypot(px[end] - sx, py[end] - sy)
+        worst = max(worst, float(np.max(half[owned] / even[owned])))
+    return worst
+
+
+def test_saddle_slope_ratio_bounds_both_halves_of_a_ridge(small_type):
+    tree = synthesize_divide_tree(small_type, size_m=SIZE, rng=3)
+    assert _half_slope_excess(tree, small_type, 1.5) <= 1.5 + 1e-6
+    assert _half_slope_excess(tree, small_type, 3.0) <= 3.0 + 1e-6
+    # without the bound the key-saddle distances alone squeeze some saddles against a peak
+    assert _half_slope_excess(tree, small_type, None) > 3.0
+
+
+@pytest.mark.parametrize("kw, msg", [({"elevation_tolerance": 0.0}, "elevation_tolerance"),
+                                     ({"saddle_slope_ratio": 0.5}, "saddle_slope_ratio")])
+def test_ridge_slope_params_are_checked(kw, msg):
+    with pytest.raises(InputError, match=msg):
+        SynthesisParams(**kw)
