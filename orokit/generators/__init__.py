@@ -125,7 +125,10 @@ def render_terrain(
     exemplar : a real DEM (metres) for generators whose inputs include ``exemplar`` (each
         backend says when it needs one).
     inputs : data of file-valued parameters (``metadata={"file": ...}`` fields, e.g. Guérin's
-        ``coarse``), already read by the caller; passed to the backend by name.
+        ``coarse``), already read by the caller, or ``learned``: what a backend with an
+        exemplar learns from it (its module's ``learn(exemplar, grid, params, rng)``: Guérin's
+        dictionary, Rusnell's profile), to render several trees without learning again;
+        passed to the backend by name.
     seed : int seed; None draws fresh entropy. The int is recorded in ``attrs['seed']``
         and the same seed gives the same raster.
 

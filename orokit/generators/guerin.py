@@ -33,7 +33,7 @@ from orokit.raster.rasterize import Grid
 logger = logging.getLogger(__name__)
 
 __all__ = ["GuerinParams", "Dictionary", "build_dictionary", "sparse_codes", "synthesize", "amplify",
-           "coarse_from_tree", "weight_kernel", "render"]
+           "coarse_from_tree", "weight_kernel", "learn", "render"]
 
 _DICTIONARIES = ("complete", "constrained", "ksvd")
 
@@ -390,9 +390,8 @@ def coarse_from_tree(tree, rivers, grid: Grid) -> np.ndarray:
     return out
 
 
-def _exemplar_at(exemplar: xr.DataArray, cell_m: float) -> tuple[np.ndarray, float]:
-    """The exemplar's values and its cell size (m); block-averaged/resampled to ``cell_m``
-    when its cells are finer."""
+def _exemplar_cell(exemplar: xr.DataArray) -> float:
+    """The exemplar's cell size in metres (the larger of dx, dy)."""
     t = exemplar.rio.transform() if hasattr(exemplar, "rio") else None
     cell = exemplar.attrs.get("cell_size_m")  # a number, or (dx, dy) since the attrs rename
     if cell is None and t is not None and not (exemplar.rio.crs is not None and exemplar.rio.crs.is_geographic):
@@ -400,6 +399,13 @@ def _exemplar_at(exemplar: xr.DataArray, cell_m: float) -> tuple[np.ndarray, flo
     res = float(np.max(np.abs(np.atleast_1d(np.asarray(cell, float))))) if cell is not None else 0.0
     if not (res > 0):
         raise InputError("the exemplar DEM has no cell size in metres; read it with a cell size (--cell-size)")
+    return res
+
+
+def _exemplar_at(exemplar: xr.DataArray, cell_m: float) -> tuple[np.ndarray, float]:
+    """The exemplar's values and its cell size (m); block-averaged/resampled to ``cell_m``
+    when its cells are finer."""
+    res = _exemplar_cell(exemplar)
     z = np.asarray(exemplar.values, float)
     if res < cell_m * (1 - 1e-6):
         from scipy.ndimage import gaussian_filter, zoom
@@ -413,8 +419,17 @@ def _exemplar_at(exemplar: xr.DataArray, cell_m: float) -> tuple[np.ndarray, flo
     return z, res
 
 
+def learn(exemplar: xr.DataArray, grid: Grid, params: GuerinParams, rng: np.random.Generator) -> Dictionary:
+    """The dictionary :func:`render` learns from ``exemplar`` for ``grid`` (at the working cell
+    ``max(grid cell, exemplar cell)``); pass it back as ``render(..., learned=...)`` to render
+    several trees without learning again (same raster as learning inside)."""
+    ex, _ = _exemplar_at(exemplar, grid.cell_size_m)
+    return build_dictionary(ex, params, rng)
+
+
 def render(tree, rivers, grid: Grid, rng: np.random.Generator, params: GuerinParams | None = None, *,
-           exemplar: xr.DataArray | None = None, coarse: xr.DataArray | None = None) -> xr.DataArray:
+           exemplar: xr.DataArray | None = None, coarse: xr.DataArray | None = None,
+           learned: Dictionary | None = None) -> xr.DataArray:
     """Elevation raster of a Divide Tree by Guérin 2016 amplification (pure: no file IO).
 
     Notes
@@ -439,10 +454,14 @@ def render(tree, rivers, grid: Grid, rng: np.random.Generator, params: GuerinPar
         raise InputError("generator guerin needs an exemplar DEM to build its dictionary (CLI: --exemplar DEM)")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    ex, h = _exemplar_at(exemplar, grid.cell_size_m)
-    h = max(h, grid.cell_size_m)
-    d = build_dictionary(ex, params, rng)
-    timings["dictionary"] = time.perf_counter() - t0
+    if learned is None:
+        learned = learn(exemplar, grid, params, rng)
+        timings["dictionary"] = time.perf_counter() - t0
+    elif (learned.radius, learned.factor) != (params.radius, params.factor):
+        raise InputError(f"the learned dictionary has radius {learned.radius}, factor {learned.factor}; the "
+                         f"parameters ask for radius {params.radius}, factor {params.factor}: learn it again")
+    d = learned
+    h = max(_exemplar_cell(exemplar), grid.cell_size_m)
     t0 = time.perf_counter()
     x0, y0, x1, y1 = grid.extent
     f = params.factor

@@ -123,6 +123,27 @@ def ranking_tables(runs: list[dict]) -> tuple[Any, Any, Any]:
     return per_run, agg, mean_rank
 
 
+def landform_target_counts(runs: list[dict]) -> Any:
+    """Per generator (rows) and landform statistic (columns): how many of its successful runs
+    meet the region's target (distance <= target), as ``"k/n"`` strings."""
+    import pandas as pd
+
+    counts: dict[str, dict[str, list[int]]] = {}
+    for r in runs:
+        if r.get("failed") or not r.get("landform") or not r.get("landform_target"):
+            continue
+        row = counts.setdefault(r["generator"], {})
+        for k, d in r["landform"].items():
+            t = r["landform_target"].get(k)
+            if t is None:
+                continue
+            c = row.setdefault(k, [0, 0])
+            c[0] += int(float(d) <= float(t))
+            c[1] += 1
+    table = pd.DataFrame({g: {k: f"{a}/{n}" for k, (a, n) in row.items()} for g, row in counts.items()}).T
+    return table.sort_index()
+
+
 def _fmt(v: float, pct: bool) -> str:
     if v != v:  # NaN
         return "–"
@@ -171,6 +192,14 @@ def ranking_markdown(runs: list[dict], note: str | None = None) -> str:
                 v = target.get(k.split(".", 1)[1]) if k.startswith("landform.") else None
                 cells.append(_fmt(float(v), False) if v is not None else "")
             lines.append("| " + " | ".join(cells) + " |")
+    met = landform_target_counts(runs)
+    if len(met):
+        lines += ["", "## Landform targets met (runs within the region's target / successful runs)", "",
+                  "All nine statistics of `compare_landforms`, over every region and seed; the tables above show "
+                  "six of them.", "",
+                  "| generator | " + " | ".join(met.columns) + " |", "|" + "---|" * (len(met.columns) + 1)]
+        for g, row in met.iterrows():
+            lines.append(f"| {g} | " + " | ".join(str(v) if v == v else "–" for v in row) + " |")
     failed = per_run[per_run["failed"]]
     lines += ["", "## Failed runs", ""]
     if len(failed):

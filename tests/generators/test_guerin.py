@@ -165,6 +165,29 @@ def test_render_from_a_tree_follows_the_coarse_relief():
     assert again.values.tobytes() == dem.values.tobytes()
 
 
+@pytest.mark.parametrize("kind", ["complete", "constrained"])
+def test_a_learned_dictionary_passed_in_gives_the_same_raster(kind):
+    """`learn` + `inputs={"learned": ...}` (the benchmark's cached learning) renders the same bytes."""
+    import xarray as xr
+
+    from orokit.generators.guerin import learn
+    from orokit.raster.rasterize import make_grid
+
+    tree = small_tree()
+    exemplar = xr.DataArray(fractal(160, 7), dims=("y", "x"), attrs={"cell_size_m": 50.0})
+    p = GuerinParams(radius=8, factor=4, dictionary=kind, n_atoms=64, iterations=1)
+    grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 50.0)
+    direct = render_terrain(tree, generator="guerin", grid=grid, exemplar=exemplar, seed=3, params=p)
+    d = learn(exemplar, grid, p, np.random.default_rng(3))
+    cached = render_terrain(tree, generator="guerin", grid=grid, exemplar=exemplar, seed=3, params=p,
+                            inputs={"learned": d})
+    assert cached.values.tobytes() == direct.values.tobytes()
+    assert "dictionary" in direct.attrs["timings"] and "dictionary" not in cached.attrs["timings"]
+    with pytest.raises(InputError, match="learn it again"):
+        render_terrain(tree, generator="guerin", grid=grid, exemplar=exemplar, seed=3,
+                       params=GuerinParams(radius=16, factor=4), inputs={"learned": d})
+
+
 @pytest.mark.parametrize("kv, msg", [
     ({"radius": 7}, "radius must be an even"), ({"radius": 16, "factor": 3}, "must divide"),
     ({"sparsity": 0}, "sparsity must be"), ({"radius": 4, "factor": 8}, "at least 2 cells"),

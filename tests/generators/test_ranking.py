@@ -48,6 +48,23 @@ def test_mean_and_range_over_seeds():
     assert "Seeds 1 and 2 missing." in ranking_markdown(runs, note="Seeds 1 and 2 missing.")
 
 
+def test_landform_targets_met_are_counted_per_generator_and_statistic():
+    def run(gen, seed, slope, flat):
+        r = _run(gen, seed)
+        r["landform"] = {"slope_deg": slope, "flat_share": flat}
+        r["landform_target"] = {"slope_deg": 4.0, "flat_share": 0.06}
+        return r
+
+    runs = [run("a", 0, 3.0, 0.1), run("a", 1, 4.0, 0.01), run("a", 2, 5.0, 0.2), run("b", 0, 9.0, 0.0),
+            _run("b", 1, failed=True)]
+    from orokit.reports.generators import landform_target_counts
+
+    met = landform_target_counts(runs)
+    assert met.loc["a", "slope_deg"] == "2/3" and met.loc["a", "flat_share"] == "1/3"
+    assert met.loc["b", "slope_deg"] == "0/1" and met.loc["b", "flat_share"] == "1/1"
+    assert "| a | 2/3 | 1/3 |" in ranking_markdown(runs)
+
+
 @pytest.fixture()
 def setup(tmp_path):
     """A tree file and a 'real' DEM of its domain (a smooth bump) at 100 m."""

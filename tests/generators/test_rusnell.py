@@ -164,6 +164,44 @@ def test_render_with_an_exemplar_profile():
     assert np.isfinite(dem.values).all() and dem.values.max() <= 1500.0 + 1e-3
 
 
+def test_a_fitted_profile_passed_in_gives_the_same_raster():
+    """`learn` + `inputs={"learned": ...}` (the benchmark's cached profile fit) renders the same bytes."""
+    from orokit.generators.base import as_dataarray
+
+    tree = small_tree()
+    grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 100.0)
+    x, y = grid.centres()
+    bumps = sum(h * np.exp(-((x[None, :] - cx) ** 2 + (y[:, None] - cy) ** 2) / 6e5)
+                for cx, cy, h in ((2000, 2000, 600), (6000, 5000, 500), (3000, 6500, 400)))
+    ex = as_dataarray(300 + bumps, grid, None)
+    direct = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=2)
+    prof = R.learn(ex, grid, R.RusnellParams(), np.random.default_rng(2))
+    cached = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=2, inputs={"learned": prof})
+    assert cached.values.tobytes() == direct.values.tobytes()
+
+
+def test_sea_level_puts_the_plain_at_the_exemplar_floor_or_s_reliefs_down():
+    """`sea_level`: the plain (cells no feature reaches) at the exemplar's 1st percentile (auto
+    with an exemplar) or at highest peak - s x the largest generator cost (preset, the paper)."""
+    from orokit.generators.base import as_dataarray
+
+    tree = small_tree()  # peaks 1500 .. 1000 m, lowest saddle 900 m
+    grid = make_grid((0.0, 0.0, 16000.0, 16000.0), 100.0)  # room beyond the features' reach
+    x, y = grid.centres()
+    ex = as_dataarray(200 + 600 * np.exp(-((x[None, :] - 3000) ** 2 + (y[:, None] - 3000) ** 2) / 4e6), grid, None)
+    floor = float(np.quantile(ex.values, 0.01))
+    auto = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=0, params={"profile": "none"})
+    preset = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=0,
+                            params={"profile": "none", "sea_level": "preset"})
+    top = float(tree.peaks["elevation"].max())
+    cmax = top - float(tree.saddles["elevation"].min())
+    assert float(auto.values.min()) == pytest.approx(top - max(top - floor, 1.05 * cmax), abs=0.01)
+    assert float(preset.values.min()) == pytest.approx(top - 2.5 * cmax, abs=0.01)  # foothills s = 2.5
+    assert float(auto.values.max()) == pytest.approx(top, abs=1e-3)
+    with pytest.raises(InputError, match="sea_level"):
+        R.RusnellParams(sea_level="lake")
+
+
 def test_water_halts_the_search():
     """A river row is reached but never crossed: the cells beyond it stay unreached."""
     w = R.edge_weights(15, 12, 1.0, 0.0, np.random.default_rng(0))
