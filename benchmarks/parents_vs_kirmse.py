@@ -20,7 +20,8 @@ differently), or when either parent is on a flat summit. It is an *edge* case wh
 either walk, or P's key saddle, touches the raster's border (Kirmse's finalized tree
 drops the runoffs there; orokit keeps the border as unknown ground). It is a *key_saddle_tie*
 when the lowest saddles on the walks to the two parents (orokit's unpruned tree) are different cells
-of the same elevation: P's key saddle is a tie between two sides. It is a *kirmse_walk*
+of the same elevation, or when Kirmse's key saddle of P and orokit's are different cells of the same
+elevation: P's key saddle is a tie between two saddles. It is a *kirmse_walk*
 case when, at P's key saddle or at a saddle of orokit's unpruned tree where the walks to the
 two parents have not parted yet, Kirmse's uphill walk from the saddle (``TreeBuilder::walkUpToPeak``,
 simulated by :func:`kirmse_walk_up`) reaches another peak than orokit's steepest ascent
@@ -29,7 +30,16 @@ simulated by :func:`kirmse_walk_up`) reaches another peak than orokit's steepest
 last of equal highest neighbours in our raster order where orokit takes the first, so his divide
 tree ties the saddle to a peak on another branch (both trees keep every prominence; the walks
 differ). ``tests/benchmarks/test_vs_kirmse.py`` reproduces one on an 11 x 11 grid with Kirmse's
-own programs. Every other disagreement is counted as unexplained and printed.
+own programs. It is *kirmse_line_tree* (checked right after the ties) when the walk on
+*Kirmse's own* divide tree (:func:`kirmse_tree_walk`: orokit's ``DivideTree.parents`` on his ``.dvt``)
+gives orokit's parent: his ``compute_parents`` disagrees with his own tree because his ``LineTree``
+walks towards the root stored in the file, which ``merge_divide_trees -f`` leaves at a peak that
+is not the highest (:func:`reroot_kirmse_tree` roots the same tree at its highest peak, and his
+``compute_parents`` on it is run and compared too: ``kirmse_rerooted_agree``). It is a *saddle_fork*
+when a saddle of the walks (as for *kirmse_walk*) has higher neighbours climbing to three or more
+peaks (:func:`saddle_fork`): the ridge beyond it forks at the saddle cell, both trees are maximum
+spanning trees, and the programs take different branches. Every other disagreement is counted as
+unexplained and printed with the walk on Kirmse's tree.
 
 Run:  .venv/bin/python benchmarks/parents_vs_kirmse.py --kirmse-bin DIR [--dems gobi alaska my.tif]
 """
@@ -84,28 +94,87 @@ def kirmse_parents(path: Path, s: int, shape: tuple[int, int]) -> pd.DataFrame:
         return r, c
 
     row, col = cells(k["lat"], k["lon"])
+    sr, sc = cells(k["saddle_lat"], k["saddle_lon"])
     lr, lc = cells(k["line_parent_lat"], k["line_parent_lon"])
     pr, pc = cells(k["prominence_parent_lat"], k["prominence_parent_lon"])
     return pd.DataFrame({"row": row, "col": col, "elevation": np.rint(k["elevation"].to_numpy() * SCALE),
                          "prominence": np.rint(k["prominence"].to_numpy() * SCALE),
-                         "line_parent_row": lr, "line_parent_col": lc,
+                         "saddle_row": sr, "saddle_col": sc, "line_parent_row": lr, "line_parent_col": lc,
                          "prominence_parent_row": pr, "prominence_parent_col": pc})
 
 
-def compare(kirmse: pd.DataFrame, ours: pd.DataFrame, z_ft: np.ndarray, tree=None) -> dict:
+def kirmse_tree_walk(dvt: Path, shape: tuple[int, int]) -> pd.DataFrame:
+    """The walk of :meth:`orokit.topology.divide_tree.DivideTree.parents` on *Kirmse's own* divide
+    tree (the ``.dvt`` that ``compute_parents`` reads): row, col and both parents' cells of every
+    peak of it (-1 for none), turned back by 180 degrees like :func:`kirmse_parents`."""
+    from orokit.io.kirmse_io import read_kirmse_tree
+
+    t = read_kirmse_tree(dvt)
+    h, w = shape
+    row = h - 1 - t.peaks["y"].to_numpy(np.int64)
+    col = w - 1 - t.peaks["x"].to_numpy(np.int64)
+    par = t.parents()
+    out = {"row": row, "col": col}
+    for kind in ("line_parent", "prominence_parent"):
+        i = par[kind].to_numpy(np.int64)
+        out[f"{kind}_row"] = np.where(i >= 0, row[i], -1)
+        out[f"{kind}_col"] = np.where(i >= 0, col[i], -1)
+    return pd.DataFrame(out)
+
+
+def reroot_kirmse_tree(src: Path, dst: Path) -> None:
+    """Write Kirmse's divide tree ``src`` to ``dst`` rooted at its highest peak (same peaks, saddles
+    and edges; only the direction of the ``N`` parent records changes). ``merge_divide_trees -f``
+    stores trees rooted at other peaks; his ``LineTree`` (what ``compute_parents`` walks) assumes
+    the root is the highest peak, so running ``compute_parents`` on both files shows which of his
+    parents come from the stored root (class ``kirmse_line_tree``)."""
+    lines = src.read_text().splitlines()
+    elev, adj = {}, {}
+    for ln in lines:
+        f = ln.split(",")
+        if f[0] == "P":
+            elev[int(f[1])] = float(f[4])
+        elif f[0] == "N" and int(f[1]) > 0 and int(f[2]) > 0:
+            adj.setdefault(int(f[1]), []).append((int(f[2]), int(f[3])))
+            adj.setdefault(int(f[2]), []).append((int(f[1]), int(f[3])))
+    parent: dict[int, tuple[int, int]] = {}
+    for top in sorted(elev, key=lambda i: (-elev[i], i)):  # every connected part from its highest peak
+        if top in parent:
+            continue
+        parent[top] = (-1, -1)
+        stack = [top]
+        while stack:
+            u = stack.pop()
+            for v, sid in adj.get(u, []):
+                if v not in parent:
+                    parent[v] = (u, sid)
+                    stack.append(v)
+    out = [ln for ln in lines if not ln.startswith("N,")] + ["N,0,-1,-1"]
+    out += [f"N,{i},{parent[i][0]},{parent[i][1]}" for i in sorted(elev)]
+    dst.write_text("\n".join(out) + "\n")
+
+
+def compare(kirmse: pd.DataFrame, ours: pd.DataFrame, z_ft: np.ndarray, tree=None,
+            kirmse_walk_table: pd.DataFrame | None = None) -> dict:
     """Parent agreement of the peaks both programs find (see the module docstring); ``tree`` is
-    orokit's unpruned Divide Tree, needed for the ``kirmse_walk`` class."""
+    orokit's unpruned Divide Tree, needed for the ``kirmse_walk`` class; ``kirmse_walk_table``
+    (:func:`kirmse_tree_walk`) the walk on Kirmse's own tree, needed for ``kirmse_line_tree``."""
     def first(r: int, c: int) -> tuple[int, int]:
         return (r, c) if r < 0 else _plateau_first_cell(z_ft, r, c)
 
     o = ours.set_index(["row", "col"])
     kk = kirmse.set_index(["row", "col"])
     kk = kk[~kk.index.duplicated()]
+    kw = None
+    if kirmse_walk_table is not None:
+        kw = {first(r, c): tuple(first(int(getattr(rec, f"{k}_row")), int(getattr(rec, f"{k}_col")))
+                                  for k in ("line_parent", "prominence_parent"))
+              for rec in kirmse_walk_table.itertuples(index=False) for r, c in [(int(rec.row), int(rec.col))]}
     out = {"kirmse_peaks": len(kirmse), "orokit_peaks": len(ours), "matched": 0}
     for kind in ("line_parent", "prominence_parent"):
-        out[kind] = {"agree": 0, "tie": 0, "edge": 0, "key_saddle_tie": 0, "kirmse_walk": 0, "unexplained": 0,
-                     "examples": [],
-                     "kirmse_walk_examples": []}
+        out[kind] = {"agree": 0, "tie": 0, "kirmse_line_tree": 0, "edge": 0, "key_saddle_tie": 0, "kirmse_walk": 0,
+                     "saddle_fork": 0, "unexplained": 0, "examples": [], "kirmse_walk_examples": [],
+                     "kirmse_line_tree_examples": [], "saddle_fork_examples": []}
     for rec in kirmse.itertuples(index=False):
         cell = first(rec.row, rec.col)
         if cell not in o.index:
@@ -127,21 +196,34 @@ def compare(kirmse: pd.DataFrame, ours: pd.DataFrame, z_ft: np.ndarray, tree=Non
             h, w = z_ft.shape
             on_edge = [c for c in chain + kchain + [(int(mine["saddle_row"]), int(mine["saddle_col"]))]
                        if c[0] >= 0 and (c[0] in (0, h - 1) or c[1] in (0, w - 1))]
+            walk_on_his = kw.get(cell) if kw is not None else None
+            his_walk = walk_on_his[0 if kind == "line_parent" else 1] if walk_on_his else None
             if tie or flat:
                 out[kind]["tie"] += 1
+            elif his_walk == ours_cell:
+                out[kind]["kirmse_line_tree"] += 1
+                if len(out[kind]["kirmse_line_tree_examples"]) < 5:
+                    out[kind]["kirmse_line_tree_examples"].append({"peak": cell, "kirmse": theirs, "orokit": ours_cell})
             elif on_edge:
                 out[kind]["edge"] += 1
-            elif tree is not None and _key_saddle_tie(z_ft, tree, cell, theirs, ours_cell):
+            elif tree is not None and (_key_saddle_tie(z_ft, tree, cell, theirs, ours_cell)
+                                       or _key_saddles_differ_at_one_level(z_ft, rec, mine)):
                 out[kind]["key_saddle_tie"] += 1
             elif tree is not None and _walk_diverges(z_ft, tree, cell, theirs, ours_cell,
                                                      (int(mine["saddle_row"]), int(mine["saddle_col"]))):
                 out[kind]["kirmse_walk"] += 1
                 if len(out[kind]["kirmse_walk_examples"]) < 5:
                     out[kind]["kirmse_walk_examples"].append({"peak": cell, "kirmse": theirs, "orokit": ours_cell})
+            elif tree is not None and _walk_forks(z_ft, tree, cell, theirs, ours_cell,
+                                                  (int(mine["saddle_row"]), int(mine["saddle_col"]))):
+                out[kind]["saddle_fork"] += 1
+                if len(out[kind]["saddle_fork_examples"]) < 5:
+                    out[kind]["saddle_fork_examples"].append({"peak": cell, "kirmse": theirs, "orokit": ours_cell})
             else:
                 out[kind]["unexplained"] += 1
                 if len(out[kind]["examples"]) < 5:
-                    out[kind]["examples"].append({"peak": cell, "kirmse": theirs, "orokit": ours_cell})
+                    out[kind]["examples"].append({"peak": cell, "kirmse": theirs, "orokit": ours_cell,
+                                                  "walk_on_kirmse_tree": his_walk})
     return out
 
 
@@ -273,6 +355,17 @@ def saddle_exit_divergence(z: np.ndarray, saddle: tuple[int, int]) -> bool:
     return False
 
 
+def saddle_fork(z: np.ndarray, saddle: tuple[int, int]) -> bool:
+    """True when the steepest ascent (:func:`orokit_walk_up`) from the cells just above ``saddle``'s
+    flat area (every higher 8-neighbour, not one per group) reaches three or more peaks: the saddle
+    joins P's side to two peaks of a part that is already connected above it, so the ridge beyond
+    the saddle forks at the saddle cell itself. Both trees are valid maximum spanning trees; orokit
+    takes the branch whose kept end is highest (:func:`orokit.topology._kernels.prune_edges`),
+    Kirmse the one his walk from the saddle reaches."""
+    _, higher = _flat_area(z, saddle)
+    return len({orokit_walk_up(z, c) for c in higher}) >= 3
+
+
 def _key_saddle_tie(z: np.ndarray, tree, p: tuple[int, int], theirs: tuple[int, int],
                     ours: tuple[int, int]) -> bool:
     """True when the lowest saddles on the two walks (orokit's unpruned tree, P to each parent) are
@@ -285,6 +378,15 @@ def _key_saddle_tie(z: np.ndarray, tree, p: tuple[int, int], theirs: tuple[int, 
         return False
     la, lb = min(a, key=lambda c: z[c]), min(b, key=lambda c: z[c])
     return bool(z[la] == z[lb] and la != lb)
+
+
+def _key_saddles_differ_at_one_level(z: np.ndarray, rec, mine) -> bool:
+    """True when Kirmse's key saddle of P (his ``compute_parents`` column) and orokit's are different
+    cells of the same elevation: two equally low saddles join P to higher ground and each tree keeps
+    one of them (which one is a tie in the saddle order)."""
+    theirs = (int(getattr(rec, "saddle_row", -1)), int(getattr(rec, "saddle_col", -1)))
+    ours = (int(mine["saddle_row"]), int(mine["saddle_col"]))
+    return theirs[0] >= 0 and ours[0] >= 0 and theirs != ours and bool(z[theirs] == z[ours])
 
 
 def _walk_diverges(z: np.ndarray, tree, p: tuple[int, int], theirs: tuple[int, int], ours: tuple[int, int],
@@ -301,6 +403,20 @@ def _walk_diverges(z: np.ndarray, tree, p: tuple[int, int], theirs: tuple[int, i
     cand.update(a[:common + 1])
     cand.update(b[:common + 1])
     return any(saddle_exit_divergence(z, s) for s in cand)
+
+
+def _walk_forks(z: np.ndarray, tree, p: tuple[int, int], theirs: tuple[int, int], ours: tuple[int, int],
+                key_saddle: tuple[int, int]) -> bool:
+    """True when one of the saddles of :func:`_walk_diverges` is a :func:`saddle_fork`."""
+    a = tree_path_saddles(tree, p, ours) if ours[0] >= 0 else []
+    b = tree_path_saddles(tree, p, theirs) if theirs[0] >= 0 else []
+    common = 0
+    while common < min(len(a), len(b)) and a[common] == b[common]:
+        common += 1
+    cand = {key_saddle} if key_saddle[0] >= 0 else set()
+    cand.update(a[:common + 1])
+    cand.update(b[:common + 1])
+    return any(saddle_fork(z, s) for s in cand)
 
 
 def tree_path_saddles(tree, a: tuple[int, int], b: tuple[int, int]) -> list[tuple[int, int]]:
@@ -385,13 +501,19 @@ def run(name: str, bin_dir: Path, work: Path, eps_ft: float) -> dict:
         raise RuntimeError(f"expected one merged tree results*.dvt in {out}, found {dvt}")
     subprocess.run([str(bin_dir / "compute_parents"), "-m", repr(eps_ft / SCALE), str(dvt[0]),
                     str(out / "parents.txt")], check=True, capture_output=True, text=True)
+    reroot_kirmse_tree(dvt[0], out / "rerooted.dvt")
+    subprocess.run([str(bin_dir / "compute_parents"), "-m", repr(eps_ft / SCALE), str(out / "rerooted.dvt"),
+                    str(out / "parents_rerooted.txt")], check=True, capture_output=True, text=True)
     subprocess.run(orokit_command(tif, folder / "orokit", isolation=False, eps_ft=eps_ft), check=True,
                    capture_output=True, text=True)
     ours = pd.read_parquet(folder / "orokit" / "peaks.parquet",
                            columns=["row", "col", "elevation", "prominence", "saddle_row", "saddle_col", "line_parent_row", "line_parent_col",
                                     "prominence_parent_row", "prominence_parent_col"])
     full = unpruned_analysis(tif)
-    res = compare(kirmse_parents(out / "parents.txt", s, z_ft.shape), ours, z_ft, full.tree)
+    res = compare(kirmse_parents(out / "parents.txt", s, z_ft.shape), ours, z_ft, full.tree,
+                  kirmse_tree_walk(dvt[0], z_ft.shape))
+    rr = compare(kirmse_parents(out / "parents_rerooted.txt", s, z_ft.shape), ours, z_ft)
+    res["kirmse_rerooted_agree"] = {k: rr[k]["agree"] for k in ("line_parent", "prominence_parent")}
     res["orokit_vs_unpruned_walk"] = unpruned_walk_check(tif, ours, eps_ft * FT, full)
     res["dem"] = name
     return res
@@ -410,15 +532,20 @@ def main() -> None:
     try:
         bin_dir = a.kirmse_bin or build_kirmse(work)
         rows = []
-        print(f"{'dem':<20} {'peaks K/o':>11} {'matched':>7}  line parent agree/tie/edge/stie/walk/other   "
-              "prominence parent agree/tie/edge/stie/walk/other")
+        print(f"{'dem':<20} {'peaks K/o':>11} {'matched':>7}  line parent agree/tie/ltree/edge/stie/walk/fork/other  "
+              "prominence parent agree/tie/ltree/edge/stie/walk/fork/other")
         for name in a.dems:
             r = run(name, bin_dir, work, a.min_prominence_ft)
             rows.append(r)
             lp, pp = r["line_parent"], r["prominence_parent"]
             print(f"{r['dem']:<20} {r['kirmse_peaks']:>5}/{r['orokit_peaks']:<5} {r['matched']:>7}  "
-                  f"{lp['agree']:>6}/{lp['tie']:>3}/{lp['edge']:>3}/{lp['key_saddle_tie']:>3}/{lp['kirmse_walk']:>3}/{lp['unexplained']:<4}       "
-                  f"{pp['agree']:>6}/{pp['tie']:>3}/{pp['edge']:>3}/{pp['key_saddle_tie']:>3}/{pp['kirmse_walk']:>3}/{pp['unexplained']:<4}")
+                  f"{lp['agree']:>6}/{lp['tie']:>3}/{lp['kirmse_line_tree']:>3}/{lp['edge']:>3}/{lp['key_saddle_tie']:>3}/"
+                  f"{lp['kirmse_walk']:>3}/{lp['saddle_fork']:>3}/{lp['unexplained']:<4}       "
+                  f"{pp['agree']:>6}/{pp['tie']:>3}/{pp['kirmse_line_tree']:>3}/{pp['edge']:>3}/{pp['key_saddle_tie']:>3}/"
+                  f"{pp['kirmse_walk']:>3}/{pp['saddle_fork']:>3}/{pp['unexplained']:<4}")
+            ra = r["kirmse_rerooted_agree"]
+            print(f"{'':<20} Kirmse's compute_parents on his tree rooted at its highest peak: agree "
+                  f"{ra['line_parent']} line / {ra['prominence_parent']} prominence parents")
             u = r["orokit_vs_unpruned_walk"]
             print(f"{'':<20} orokit vs the walk on its unpruned tree ({u['unpruned_peaks']} peaks): "
                   f"{u['line_parent_differs']} line / {u['prominence_parent_differs']} prominence parents differ")

@@ -6,20 +6,26 @@ value in ``g`` (the in-memory :func:`orokit.topology.depressions.spill_areas`). 
 of the kept pits are nested, so a cell lies in a chain of lakes; its area goes to the
 smallest one and each lake's area is the sum over its sub-lakes.
 
-Chunk by chunk, with memory of one chunk plus the chunk borders:
+Chunk by chunk, in one pass over the raster, with memory of one chunk plus the chunk
+borders:
 
 1. Every chunk sweeps its cells from high to low (union-find) and keeps a
    bottleneck tree over its *nodes*: the kept pits in it and its cells on sides
-   facing other chunks (edge weight = the lowest value on the best path).
+   facing other chunks (edge weight = the lowest value on the best path). The same
+   sweep charges every cell's area to a node: a cell of value ``v`` connected
+   (through cells >= v) to node ``y`` is charged to ``(y, v)``; a chunk component
+   without a node holds no kept pit, so its cells wait until it meets a node at value
+   ``u`` and are charged to ``(y, u)``. The lakes close at the spill values of the
+   kept pits, which are known before the pass, so a charge only needs the *bucket*
+   of its value among those levels: the chunk returns the sums per (node, bucket).
 2. The chunk trees and the seam edges between facing border cells (weight = the
    lower cell) form a graph whose Kruskal sweep from high to low gives the exact
    bottleneck between any two nodes of the raster. Closing each lake at ``s_p``
    (after the edges above ``s_p``, before the ones at ``s_p``) tells, for every
    node, the smallest lake holding it, and every lake's parent lake.
-3. Every chunk sweeps again. A cell of value ``v`` connected (through cells >= v)
-   to a node ``y`` lies in exactly the lakes of ``y`` with ``s < v``; a chunk
-   component without a node holds no kept pit, so its cells wait until it meets one
-   at value ``u`` and then go to the lakes of that node with ``s < u``.
+3. A charge ``(y, bucket of v)`` belongs to the first lake on ``y``'s chain whose
+   level is below ``v`` (the bucket decides that comparison for every level); each
+   lake's area is then the sum over its sub-lakes.
 
 Sums run in another order than the in-memory flooding, so areas agree with it up to
 floating-point rounding of the sum.
@@ -40,29 +46,49 @@ __all__ = ["tiled_spill_areas"]
 
 
 @njit(cache=True, nogil=True)
-def _advance(q, t, lake_par, lake_s):
-    """First lake on the chain from ``q`` (itself, then parents) whose level is below ``t``."""
-    while q >= 0 and lake_s[q] >= t:
+def _advance(q, b, lake_par, lake_b):
+    """First lake on the chain from ``q`` (itself, then parents) whose level is below the
+    values of bucket ``b`` (``lake_b``: the bucket index of each lake's level)."""
+    while q >= 0 and lake_b[q] >= b:
         q = lake_par[q]
     return q
 
 
 @njit(cache=True, nogil=True)
-def _chunk_sweep(g, order, nvalid, node, row_area, lake_of_node, lake_par, lake_s, acc):
+def _push(rn, rb, ra, nrec, y, b, a):
+    """Append the charge (node y, bucket b, area a), growing the arrays when full."""
+    if nrec == rn.size:
+        cap = 2 * rn.size
+        rn2 = np.empty(cap, np.int64)
+        rb2 = np.empty(cap, np.int64)
+        ra2 = np.empty(cap)
+        rn2[:nrec] = rn[:nrec]
+        rb2[:nrec] = rb[:nrec]
+        ra2[:nrec] = ra[:nrec]
+        rn, rb, ra = rn2, rb2, ra2
+    rn[nrec] = y
+    rb[nrec] = b
+    ra[nrec] = a
+    return rn, rb, ra, nrec + 1
+
+
+@njit(cache=True, nogil=True)
+def _chunk_sweep(g, order, nvalid, node, row_area, levels):
     """One high-to-low sweep of a chunk (``g``: its cells, NaN = nodata).
 
-    ``node``: local node index of each cell (-1 if none). Returns the bottleneck tree
-    over the nodes as (a, b, w) arrays. With a non-empty ``lake_of_node`` it also adds
-    every cell's area to the smallest kept lake holding it (``acc``).
+    ``node``: local node index of each cell (-1 if none); ``levels``: the lakes' closing
+    values, sorted. Returns the bottleneck tree over the nodes as (a, b, w) arrays and
+    the area charges as (node, bucket, area) arrays: the bucket of a value ``v`` is the
+    number of levels below ``v``; the charges of one node and bucket are summed while
+    they come in a row.
     """
     h, w = g.shape
     n = h * w
-    assign = lake_of_node.size > 0
     uf = np.full(n, -1, np.int32)  # int32: a chunk has < 2**31 cells (and 4 bytes less per cell each)
     size = np.zeros(n, np.int32)
     anchor = np.full(n, -1, np.int32)
-    cursor = np.full(n, -1, np.int32)
-    pend = np.zeros(n)
+    bucket = np.full(n, -1, np.int32)  # open bucket of an anchored root
+    pend = np.zeros(n)  # area waiting for a node (root without anchor) or open sum (anchored root)
     nn = 0
     for k in range(n):
         if node.ravel()[k] >= 0:
@@ -71,27 +97,28 @@ def _chunk_sweep(g, order, nvalid, node, row_area, lake_of_node, lake_par, lake_
     eb = np.empty(max(nn - 1, 0), np.int64)
     ew = np.empty(max(nn - 1, 0))
     ne = 0
+    rn = np.empty(max(2 * nn, 16), np.int64)
+    rb = np.empty(rn.size, np.int64)
+    ra = np.empty(rn.size)
+    nrec = 0
     gf = g.ravel()
     nf = node.ravel()
     roots = np.empty(8, np.int64)
+    p = levels.size  # bucket of the current value: levels[p - 1] < v <= levels[p]
     for k in range(nvalid):
         c = order[k]
         v = gf[c]
+        while p > 0 and levels[p - 1] >= v:
+            p -= 1
         r = c // w
         q = c % w
         uf[c] = c
         size[c] = 1
         nd = nf[c]
-        a = row_area[r]
+        pend[c] = row_area[r]
         if nd >= 0:
             anchor[c] = nd
-            if assign:
-                cur = _advance(lake_of_node[nd], v, lake_par, lake_s)
-                cursor[c] = cur
-                if cur >= 0:
-                    acc[cur] += a
-        else:
-            pend[c] = a
+            bucket[c] = p
         nr = 0
         for dr, dc in _NEIGHBOURS_8:
             rr = r + dr
@@ -122,22 +149,42 @@ def _chunk_sweep(g, order, nvalid, node, row_area, lake_of_node, lake_par, lake_
                 eb[ne] = anchor[y]
                 ew[ne] = v
                 ne += 1
+                if pend[y] != 0.0:  # y's open sum is complete
+                    rn, rb, ra, nrec = _push(rn, rb, ra, nrec, anchor[y], bucket[y], pend[y])
+                pend[y] = 0.0
             elif anchor[x] >= 0 or anchor[y] >= 0:
                 if anchor[x] < 0:
                     anchor[x] = anchor[y]
-                    cursor[x] = cursor[y]
+                    bucket[x] = bucket[y]
                     pend[x], pend[y] = pend[y], pend[x]
-                if assign:
-                    cur = _advance(cursor[x], v, lake_par, lake_s)
-                    cursor[x] = cur
-                    if cur >= 0:
-                        acc[cur] += pend[y]
+                # the waiting area of y meets node anchor[x] at level v (bucket p)
+                if bucket[x] != p:
+                    if pend[x] != 0.0:
+                        rn, rb, ra, nrec = _push(rn, rb, ra, nrec, anchor[x], bucket[x], pend[x])
+                    bucket[x] = p
+                    pend[x] = pend[y]
+                else:
+                    pend[x] += pend[y]
                 pend[y] = 0.0
             else:
                 pend[x] += pend[y]
+                pend[y] = 0.0
             uf[y] = x
             size[x] += size[y]
-    return ea[:ne], eb[:ne], ew[:ne]
+    for k in range(nvalid):
+        c = order[k]
+        if uf[c] == c and anchor[c] >= 0 and pend[c] != 0.0:
+            rn, rb, ra, nrec = _push(rn, rb, ra, nrec, anchor[c], bucket[c], pend[c])
+    return ea[:ne], eb[:ne], ew[:ne], rn[:nrec].copy(), rb[:nrec].copy(), ra[:nrec].copy()
+
+
+@njit(cache=True, nogil=True)
+def _assign(rec_node, rec_bucket, rec_area, lake_of_node, lake_par, lake_b, acc):
+    """Add every charge to the smallest lake of its node whose level is below its value."""
+    for i in range(rec_node.size):
+        q = _advance(lake_of_node[rec_node[i]], rec_bucket[i], lake_par, lake_b)
+        if q >= 0:
+            acc[q] += rec_area[i]
 
 
 @njit(cache=True, nogil=True)
@@ -255,30 +302,21 @@ class _Block:
         self.array = data[r0:r1, c0:c1]
 
     def read(self) -> np.ndarray:
-        return np.ascontiguousarray(np.asarray(self.array.compute(scheduler="sync"), np.float64))
+        """The chunk's values as float32 when stored so (exact, and a faster sort), else float64."""
+        a = np.asarray(self.array.compute(scheduler="sync"))
+        return np.ascontiguousarray(a if a.dtype == np.float32 else a.astype(np.float64))
 
 
-def _tree_task(data, region, shape, pit_keys, row_area) -> tuple:
-    """Pass 1 of a chunk: node keys, bottleneck tree (global keys), seam values."""
+def _chunk_task(data, region, shape, pit_keys, row_area, levels) -> tuple:
+    """The pass over one chunk: node keys, bottleneck tree (global keys), the nodes' values
+    and the area charges (global node keys, buckets, areas)."""
     r0, r1, c0, c1 = region
     block = data.read()
     keys, node = _chunk_nodes(block, region, shape, pit_keys)
     order, nvalid = _sorted_cells(block)
-    empty = np.empty(0, np.int64)
-    a, b, w = _chunk_sweep(block, order, nvalid, node, row_area[r0:r1], empty, empty, np.empty(0), np.empty(0))
-    return keys, keys[a], keys[b], w, block.ravel()[(keys // shape[1] - r0) * (c1 - c0) + keys % shape[1] - c0]
-
-
-def _area_task(data, region, shape, pit_keys, row_area, lake_of_node, lake_par, lake_s) -> tuple:
-    """Pass 2 of a chunk: (lake ids, area added to each) for the cells of the chunk."""
-    r0, r1, c0, c1 = region
-    block = data.read()
-    keys, node = _chunk_nodes(block, region, shape, pit_keys)
-    order, nvalid = _sorted_cells(block)
-    acc = np.zeros(lake_s.size)
-    _chunk_sweep(block, order, nvalid, node, row_area[r0:r1], lake_of_node, lake_par, lake_s, acc)
-    idx = np.flatnonzero(acc)
-    return idx, acc[idx]
+    a, b, w, rn, rb, ra = _chunk_sweep(block, order, nvalid, node, row_area[r0:r1], levels)
+    vals = block.ravel()[(keys // shape[1] - r0) * (c1 - c0) + keys % shape[1] - c0].astype(np.float64)
+    return keys, keys[a], keys[b], w, vals, keys[rn], rb, ra
 
 
 def _seam_edges(keys: np.ndarray, vals: np.ndarray, W: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -334,34 +372,34 @@ def tiled_spill_areas(g, pit_row: np.ndarray, pit_col: np.ndarray, pit_value: np
         for j in range(len(cb) - 1):
             regions.append((int(rb[i]), int(rb[i + 1]), int(cb[j]), int(cb[j + 1])))
             pits.append(np.sort(pit_keys[(cbi == i) & (cbj == j)]))
-    ra = dask.delayed(row_area)
-    trees = compute([dask.delayed(_tree_task)(_Block(g, reg), reg, (H, W), pk, ra) for reg, pk in zip(regions, pits)])
-    chunk_keys = [t[0] for t in trees]
-    keys = np.concatenate(chunk_keys)
-    vals = np.concatenate([t[4] for t in trees])
-    keys, first = np.unique(keys, return_index=True)
-    vals = vals[first]
-    ea = np.searchsorted(keys, np.concatenate([t[1] for t in trees]))
-    eb = np.searchsorted(keys, np.concatenate([t[2] for t in trees]))
-    ew = np.concatenate([t[3] for t in trees])
-    del trees
-    sa, sb, sw = _seam_edges(keys, vals, W)
-    ea, eb, ew = np.concatenate([ea, sa]), np.concatenate([eb, sb]), np.concatenate([ew, sw])
     # a lake closes at its spill value; a pit at its spill value has an empty lake
     closes = np.isfinite(spill_value) & (pit_value > spill_value)
+    levels = np.unique(spill_value[closes])
+    ra, lv = dask.delayed(row_area), dask.delayed(levels)
+    chunks = compute([dask.delayed(_chunk_task)(_Block(g, reg), reg, (H, W), pk, ra, lv)
+                      for reg, pk in zip(regions, pits)])
+    keys = np.concatenate([t[0] for t in chunks])
+    vals = np.concatenate([t[4] for t in chunks])
+    keys, first = np.unique(keys, return_index=True)
+    vals = vals[first]
+    ea = np.searchsorted(keys, np.concatenate([t[1] for t in chunks]))
+    eb = np.searchsorted(keys, np.concatenate([t[2] for t in chunks]))
+    ew = np.concatenate([t[3] for t in chunks])
+    rec_node = np.searchsorted(keys, np.concatenate([t[5] for t in chunks]))
+    rec_bucket = np.concatenate([t[6] for t in chunks])
+    rec_area = np.concatenate([t[7] for t in chunks])
+    del chunks
+    sa, sb, sw = _seam_edges(keys, vals, W)
+    ea, eb, ew = np.concatenate([ea, sa]), np.concatenate([eb, sb]), np.concatenate([ew, sw])
     close_node = np.where(closes, np.searchsorted(keys, pit_keys), -1).astype(np.int64)
     close_s = np.where(closes, spill_value, -np.inf)
     lake_of_node, lake_par, closed = _lake_forest(keys.size, ea, eb, ew, close_node, close_s)
     del ea, eb, ew, sa, sb, sw
-    logger.info("depression areas: %d chunk-border nodes, %d lakes", keys.size, int(closes.sum()))
-    lp, ls = dask.delayed(lake_par), dask.delayed(close_s)
-    tasks = []
-    for reg, pk, ck in zip(regions, pits, chunk_keys):
-        lon = lake_of_node[np.searchsorted(keys, ck)]  # the chunk's nodes, in its own order
-        tasks.append(dask.delayed(_area_task)(_Block(g, reg), reg, (H, W), pk, ra, lon, lp, ls))
+    logger.info("depression areas: %d chunk-border nodes, %d lakes, %d area charges", keys.size,
+                int(closes.sum()), rec_node.size)
+    lake_b = np.where(closes, np.searchsorted(levels, np.where(closes, spill_value, 0.0)), -1).astype(np.int64)
     acc = np.zeros(pit_keys.size)
-    for idx, val in compute(tasks):
-        np.add.at(acc, idx, val)
+    _assign(rec_node, rec_bucket, rec_area, lake_of_node, lake_par, lake_b, acc)
     for k in closed:  # children close before their parents
         if lake_par[k] >= 0:
             acc[lake_par[k]] += acc[k]

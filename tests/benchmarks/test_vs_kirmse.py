@@ -109,7 +109,8 @@ def test_parents_agree_with_kirmse_compute_parents(real_data, kirmse_bin, tmp_pa
     assert r["orokit_vs_unpruned_walk"]["prominence_parent_differs"] == 0
     for kind in ("line_parent", "prominence_parent"):
         c = r[kind]
-        assert c["agree"] + c["tie"] + c["edge"] + c["unexplained"] == r["matched"]
+        assert sum(c[k] for k in ("agree", "tie", "kirmse_line_tree", "edge", "key_saddle_tie", "kirmse_walk",
+                                  "unexplained")) == r["matched"]
         assert c["agree"] >= 0.95 * r["matched"]
         assert c["unexplained"] <= 0.02 * r["matched"], c["examples"]
 
@@ -171,3 +172,120 @@ def test_key_saddle_tie_class(s2, tie):
     tree = orokit.analyze(make_dem(z * FT), min_prominence_m=0.0, isolation=False).tree
     assert pk._key_saddle_tie(z, tree, (2, 4), (2, 1), (2, 7)) is tie
     assert pk._key_saddle_tie(z, tree, (2, 4), (2, 7), (2, 1)) is tie
+
+
+def _line_tree_grid() -> np.ndarray:
+    """Integer feet along one ridge: P (772) -248- A (535) -357- B (755) -237- Q (905), the
+    background falling in raster order. P's key saddle (237) lies beyond A and B."""
+    z = -np.arange(45, dtype=np.float64).reshape(5, 9)
+    z[2, 1:8] = [772, 248, 535, 357, 755, 237, 905]
+    return z
+
+
+# Kirmse's .dvt of the grid above (x, y: his half-turned samples; elevations in feet / 32), as
+# merge_divide_trees -f writes it: rooted at P (peak 4), not at the highest peak Q (peak 1)
+_LINE_TREE_DVT = """G,0.000000,0.000000,9,9,1.000000,1.000000
+P,1,1,2,28.28
+P,2,3,2,23.59
+P,3,5,2,16.72
+P,4,7,2,24.12
+S,1,p,2,2,7.41
+S,2,p,4,2,11.16
+S,3,p,6,2,7.75
+N,0,-1,-1
+N,1,2,1
+N,2,3,2
+N,3,4,3
+N,4,-1,-1
+"""
+
+
+def test_walk_on_kirmse_tree_and_reroot(tmp_path):
+    """The walk on Kirmse's own tree (class ``kirmse_line_tree``) gives orokit's parents on the
+    grid above, whatever peak the file is rooted at; rerooting keeps peaks, saddles and edges."""
+    import parents_vs_kirmse as pk
+
+    src, dst = tmp_path / "t.dvt", tmp_path / "rerooted.dvt"
+    src.write_text(_LINE_TREE_DVT)
+    pk.reroot_kirmse_tree(src, dst)
+    n = [ln for ln in dst.read_text().splitlines() if ln.startswith("N,")]
+    assert n == ["N,0,-1,-1", "N,1,-1,-1", "N,2,1,1", "N,3,2,2", "N,4,3,3"]
+    for f in (src, dst):
+        w = pk.kirmse_tree_walk(f, (5, 9)).set_index(["row", "col"])
+        assert tuple(w.loc[(2, 1), ["line_parent_row", "line_parent_col"]]) == (2, 7)  # P -> Q
+        assert tuple(w.loc[(2, 5), ["line_parent_row", "line_parent_col"]]) == (2, 1)  # B -> P
+        assert tuple(w.loc[(2, 3), ["line_parent_row", "line_parent_col"]]) == (2, 5)  # A -> B
+        assert tuple(w.loc[(2, 7), ["line_parent_row", "prominence_parent_row"]]) == (-1, -1)
+    peaks = orokit.analyze(read_dem_ft(_line_tree_grid()), min_prominence_m=vk.EPS_FT * FT, isolation=False).peaks
+    got = {(r.row, r.col): (r.line_parent_row, r.line_parent_col) for r in peaks.itertuples()}
+    assert got == {(2, 1): (2, 7), (2, 3): (2, 5), (2, 5): (2, 1), (2, 7): (-1, -1)}
+
+
+def read_dem_ft(z_ft: np.ndarray):
+    from helpers.orometry_oracles import make_dem
+
+    return make_dem(z_ft * FT)
+
+
+@pytest.mark.slow
+def test_kirmse_line_tree_depends_on_the_stored_root(kirmse_bin, tmp_path):
+    """Kirmse's own programs on the grid above: merge_divide_trees -f roots the tree at P, and his
+    compute_parents then gives P no parent at all (its prominence, 535 ft, is not its elevation)
+    and B the highest peak Q instead of P. The walk on his own tree gives orokit's parents, and so
+    does his compute_parents once the same tree is rooted at Q: class ``kirmse_line_tree``."""
+    import parents_vs_kirmse as pk
+
+    tif = vk.write_geotiff_m(_line_tree_grid(), tmp_path / "line_tree.tif")
+    r = pk.run(str(tif), kirmse_bin, tmp_path / "work", vk.EPS_FT)
+    assert r["matched"] == 4
+    for kind in ("line_parent", "prominence_parent"):
+        c = r[kind]
+        assert c["kirmse_line_tree"] == 2 and c["agree"] == 2 and c["unexplained"] == 0, c
+        assert sorted(map(str, c["kirmse_line_tree_examples"])) == sorted(map(str, [
+            {"peak": (2, 5), "kirmse": (2, 7), "orokit": (2, 1)},
+            {"peak": (2, 1), "kirmse": (-1, -1), "orokit": (2, 7)}]))
+        assert r["kirmse_rerooted_agree"][kind] == 4
+
+
+def _saddle_fork_grid() -> np.ndarray:
+    """Integer feet: P (500) at (3, 1), its key saddle S (100) at (3, 3). Above S, (2, 4) = 160 climbs
+    to B1 (800) at (1, 5) and (3, 4) = 150 through (4, 5) to B2 (900) at (5, 6); B1 and B2 are joined
+    above S (saddle 500 at (3, 7)), so the ridge beyond S forks at S itself."""
+    z = -np.arange(63, dtype=np.float64).reshape(7, 9)
+    for cell, v in {(3, 1): 500, (3, 2): 300, (3, 3): 100, (2, 4): 160, (3, 4): 150, (1, 5): 800, (4, 5): 400,
+                    (5, 6): 900, (1, 6): 700, (2, 7): 600, (3, 7): 500, (4, 7): 600}.items():
+        z[cell] = v
+    return z
+
+
+def test_saddle_fork_class():
+    """``saddle_fork``: S's higher neighbours climb to P, B1 and B2; orokit ties S to the highest
+    end B2 (its documented rule), so P's line parent is B2; the saddle between B1 and B2 is no fork."""
+    import parents_vs_kirmse as pk
+
+    z = _saddle_fork_grid()
+    assert pk.orokit_walk_up(z, (2, 4)) == (1, 5) and pk.orokit_walk_up(z, (3, 4)) == (5, 6)
+    assert pk.saddle_fork(z, (3, 3)) and not pk.saddle_fork(z, (3, 7)) and not pk.saddle_fork(z, (3, 2))
+    peaks = orokit.analyze(read_dem_ft(z), min_prominence_m=vk.EPS_FT * FT, isolation=False).peaks
+    p = peaks[(peaks["row"] == 3) & (peaks["col"] == 1)].iloc[0]
+    assert (p["saddle_row"], p["saddle_col"]) == (3, 3)
+    assert (p["line_parent_row"], p["line_parent_col"]) == (5, 6)
+
+
+@pytest.mark.slow
+def test_kirmse_takes_the_other_branch_of_a_saddle_fork(kirmse_bin, tmp_path):
+    """Kirmse's programs on the fork grid: his tree ties S to B1 (the highest cell above S climbs
+    there), so even on his tree rooted at its highest peak his line parent of P is B1, orokit's B2;
+    the benchmark counts it as ``saddle_fork`` (the prominence parent, B2, agrees once rerooted)."""
+    import parents_vs_kirmse as pk
+
+    z = _saddle_fork_grid()
+    tif = vk.write_geotiff_m(z, tmp_path / "fork.tif")
+    r = pk.run(str(tif), kirmse_bin, tmp_path / "work", vk.EPS_FT)
+    assert r["line_parent"]["saddle_fork"] == 1 and r["line_parent"]["unexplained"] == 0
+    assert r["line_parent"]["saddle_fork_examples"][0]["peak"] == (3, 1)
+    assert r["prominence_parent"]["unexplained"] == 0
+    rerooted = pk.kirmse_parents(tmp_path / "work" / "fork" / "kirmse" / "parents_rerooted.txt", 9, z.shape)
+    p = rerooted[(rerooted["row"] == 3) & (rerooted["col"] == 1)].iloc[0]
+    assert (p["line_parent_row"], p["line_parent_col"]) == (1, 5)
+    assert (p["prominence_parent_row"], p["prominence_parent_col"]) == (5, 6)

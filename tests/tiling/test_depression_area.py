@@ -31,6 +31,10 @@ def test_chunked_equals_in_memory(z, rows, cols, eps, seed):
     got = tiled_spill_areas(da.from_array(g, chunks=(rows, cols)), r, c, v, s, row_area)
     assert np.array_equal(np.isnan(want), np.isnan(got))
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=0)  # sums in another order
+    if np.array_equal(g.astype(np.float32), g):  # a float32 raster is swept as float32 (same order, same levels)
+        got32 = tiled_spill_areas(da.from_array(g.astype(np.float32), chunks=(rows, cols)), r, c, v, s, row_area)
+        assert np.array_equal(np.isnan(want), np.isnan(got32))
+        np.testing.assert_allclose(got32, want, rtol=1e-12, atol=0)
 
 
 def test_nested_lakes_by_hand():
