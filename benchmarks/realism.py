@@ -14,6 +14,7 @@ two fixed groups: ``tune`` (used while choosing renderer defaults) and ``hold`` 
 checked), reported apart. Results: ``reports/benchmarks/realism.json``.
 
     python benchmarks/realism.py [--regions a,b] [--group tune|hold|all] [--figures DIR] [--no-erosion]
+        [--seed N] [--twin-only] [--synthesis NAME=VALUE ...] [--render NAME=VALUE ...]
 """
 from __future__ import annotations
 
@@ -55,6 +56,7 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
     from orokit.raster.params import RenderParams
     from orokit.raster.render import render_elevation
     from orokit.raster.skeleton import tree_extent
+    from orokit.synthesis.fidelity import ridge_statistics
     from orokit.synthesis.terrain_type import TerrainType
     from orokit.synthesis.tree import synthesize_divide_tree
     from orokit.validate.landform import compare_landforms, landform_statistics, split_halves
@@ -101,6 +103,8 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
                    "disk_accuracy": rt2.get("disk_accuracy"), "n_disks": rt2.get("n_disks"),
                    "vote": rt2.get("predicted"),
                    "disk_drift": disk_drift(dem, result, twin, twin_analysis)}
+    # steepness of the trees themselves, before rendering (the real tree vs the twin's)
+    out["ridges"] = {"real": ridge_statistics(tree), "twin": ridge_statistics(ttree)}
     if figures is not None:
         panels = {"real DEM": dem, "render of its real tree": ren, "free twin": twin}
         _figure(figures / f"{name}.png", name, {k: v for k, v in panels.items() if v is not None})
@@ -219,6 +223,22 @@ def _drift_markdown(results: dict) -> str:
     return "\n".join(lines)
 
 
+def _ridges_markdown(results: dict) -> str:
+    """Per region: the real tree's and the twin tree's steepness (:func:`ridge_statistics`)."""
+    cols = ("neighbour_gradient", "half_ridge_slope", "ridge_slope")
+    lines = ["### trees before rendering, real / twin: median and 90th percentile (m/m) of the elevation gradient "
+             "to the nearest peak, of each ridge half's drop to its saddle, and of the ridge's drops over its length",
+             "", "| region | " + " | ".join(f"{c} median | {c} p90" for c in cols) + " |",
+             "|---|" + "---:|" * (2 * len(cols))]
+    for name, r in results.items():
+        rd = r.get("ridges")
+        if not rd:
+            continue
+        cells = [f"{rd['real'][c][i]:.2f} / {rd['twin'][c][i]:.2f}" for c in cols for i in (0, 1)]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def _reclassification(results: dict, real_accuracy: Path) -> dict:
     """Twins' disks classified as their own region vs the real disks' spatial hold-out accuracy."""
     import pandas as pd
@@ -241,10 +261,8 @@ def _reclassification(results: dict, real_accuracy: Path) -> dict:
     return {"met": met, "known": known, "markdown": md}
 
 
-def _synthesis_params(pairs: list[str]):
-    """SynthesisParams from ``NAME=VALUE`` strings (values parsed as JSON, else kept as text)."""
-    from orokit.synthesis.tree import SynthesisParams
-
+def _pairs(pairs: list[str]) -> dict:
+    """``NAME=VALUE`` strings as a dict (values parsed as JSON, else kept as text)."""
     kw = {}
     for pair in pairs:
         key, _, val = pair.partition("=")
@@ -252,7 +270,22 @@ def _synthesis_params(pairs: list[str]):
             kw[key] = json.loads(val)
         except json.JSONDecodeError:
             kw[key] = val
-    return SynthesisParams(**kw)
+    return kw
+
+
+def _synthesis_params(pairs: list[str]):
+    """SynthesisParams from ``NAME=VALUE`` strings."""
+    from orokit.synthesis.tree import SynthesisParams
+
+    return SynthesisParams(**_pairs(pairs))
+
+
+def _render_params(pairs: list[str]):
+    """RenderParams (eps 30 m) from ``NAME=VALUE`` strings; lists become tuples."""
+    from orokit.raster.params import RenderParams
+
+    kw = {k: tuple(v) if isinstance(v, list) else v for k, v in _pairs(pairs).items()}
+    return RenderParams(**{"min_prominence_m": EPS, **kw})
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -265,6 +298,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="skip the render of the real tree (synthesis experiments); never recorded")
     ap.add_argument("--synthesis", action="append", default=[], metavar="NAME=VALUE",
                     help="a SynthesisParams field for the twins (repeatable), e.g. void_weight=1.0")
+    ap.add_argument("--render", action="append", default=[], metavar="NAME=VALUE",
+                    help="a RenderParams field for both renders (repeatable), e.g. texture_gain=0.2; recorded "
+                    "as 'render' (empty: the defaults)")
     ap.add_argument("--figures", type=Path, default=None, help="write real / render / twin hillshades here")
     ap.add_argument("--no-record", dest="record", action="store_false",
                     help="do not write reports/benchmarks/realism.json")
@@ -289,29 +325,32 @@ def main(argv: list[str] | None = None) -> int:
     synthesis = _synthesis_params(a.synthesis)
     if a.combine:
         docs = [json.loads(p.read_text()) for p in a.combine]
-        keys = ("seed", "erosion", "synthesis", "model")
+        keys = ("seed", "erosion", "synthesis", "render", "model")
         if any(tuple(d.get(k) for k in keys) != tuple(docs[0].get(k) for k in keys) for d in docs):
             raise SystemExit(f"--combine: the runs differ in {', '.join(keys)}; combine only runs of one setting")
         a.seed, a.erosion = docs[0]["seed"], docs[0]["erosion"]
         synthesis = _synthesis_params([f"{k}={json.dumps(v)}" for k, v in docs[0]["synthesis"].items()])
+        a.render = [f"{k}={json.dumps(v)}" for k, v in (docs[0].get("render") or {}).items()]
         for d in docs:
             results.update(d["regions"])
         names = []
         a.render_real = all("render" in r for r in results.values())
+    render = _render_params(a.render)
     for name in names:
         t0 = time.perf_counter()
         r = run_region(name, seed=a.seed, erosion=a.erosion, figures=a.figures, model=model, synthesis=synthesis,
-                       render_real=a.render_real)
+                       render_real=a.render_real, params=render)
         r["group"] = "tune" if name in TUNE else "hold" if name in HOLD else "other"
         r["load_average_1_5_15"] = list(os.getloadavg())
         results[name] = r
         print(f"{name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
-    md = _markdown(results) + "\n\n" + _drift_markdown(results)
+    md = _markdown(results) + "\n\n" + _drift_markdown(results) + "\n\n" + _ridges_markdown(results)
     recl = _reclassification(results, a.real_accuracy) if model is not None else None
     if recl:
         md += "\n\n" + recl["markdown"]
     print(md)
-    doc = {"seed": a.seed, "erosion": a.erosion, "eps_m": EPS, "synthesis": synthesis.to_dict(), "tune": list(TUNE), "hold": list(HOLD),
+    doc = {"seed": a.seed, "erosion": a.erosion, "eps_m": EPS, "synthesis": synthesis.to_dict(),
+           "render": _pairs(a.render), "tune": list(TUNE), "hold": list(HOLD),
            "model": None if model is None else str(a.model.name), "regions": results,
            "reclassification": recl, "table_markdown": md}
     if a.json is not None:

@@ -8,7 +8,7 @@ from scipy.stats import wasserstein_distance
 from orokit.synthesis.terrain_type import FEATURES, TerrainType
 from orokit.topology.divide_tree import DivideTree
 
-__all__ = ["tree_feature_values", "compare_to_type"]
+__all__ = ["tree_feature_values", "compare_to_type", "ridge_statistics"]
 
 
 def tree_feature_values(tree: DivideTree) -> dict[str, np.ndarray]:
@@ -63,3 +63,35 @@ def compare_to_type(tree: DivideTree, terrain_type: TerrainType) -> pd.DataFrame
             "n": int(np.isfinite(values[name]).sum()),
         })
     return pd.DataFrame(rows).set_index("feature")
+
+
+def ridge_statistics(tree: DivideTree, quantiles: tuple[float, ...] = (0.5, 0.9, 0.99)) -> dict[str, list[float]]:
+    """How steep a tree's relief is, before any rendering (quantiles, unitless m/m).
+
+    ``neighbour_gradient``: ``|h_p - h_q| / d(p, q)`` from every peak p to its nearest peak q
+    (the smoothness of the peak elevations); ``half_ridge_slope``: ``(h_end - h_saddle) / d``
+    from each end of every ridge to its saddle (what the renderer's ridge profiles and
+    flank cones follow); ``ridge_slope``: ``(h_a + h_b - 2 h_saddle) / |AB|``, both drops over
+    the ridge's length (the slope at the even split of the ridge).
+    """
+    from scipy.spatial import cKDTree
+
+    x, y, z = (tree.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
+    a = tree.edges["peak_a"].to_numpy(np.int64)
+    b = tree.edges["peak_b"].to_numpy(np.int64)
+    s = tree.edges["saddle"].to_numpy(np.int64)
+    sx, sy, sz = (tree.saddles[c].to_numpy(float)[s] for c in ("x", "y", "elevation"))
+    out: dict[str, np.ndarray] = {}
+    if x.size >= 2:
+        d, j = cKDTree(np.column_stack([x, y])).query(np.column_stack([x, y]), k=2)
+        ok = d[:, 1] > 0
+        out["neighbour_gradient"] = np.abs(z - z[j[:, 1]])[ok] / d[ok, 1]
+    half = [(z[e] - sz) / np.hypot(x[e] - sx, y[e] - sy) for e in (a, b)]
+    h = np.concatenate(half)
+    out["half_ridge_slope"] = h[np.isfinite(h)]
+    length = np.hypot(x[a] - x[b], y[a] - y[b])
+    ok = length > 0
+    out["ridge_slope"] = (z[a] + z[b] - 2 * sz)[ok] / length[ok]
+    qs = list(quantiles)
+    return {k: [float(v) for v in np.quantile(out[k], qs)] if k in out and out[k].size else [float("nan")] * len(qs)
+            for k in ("neighbour_gradient", "half_ridge_slope", "ridge_slope")}

@@ -69,3 +69,23 @@ def test_saddle_slope_ratio_bounds_both_halves_of_a_ridge(small_type):
 def test_ridge_slope_params_are_checked(kw, msg):
     with pytest.raises(InputError, match=msg):
         SynthesisParams(**kw)
+
+
+def test_ridge_statistics_by_hand():
+    """Three peaks on a line: A (0 m, 1000 m high), B (1000 m, 800 m), C (3000 m, 900 m);
+    ridges A-B (saddle 600 m at x 400) and B-C (saddle 500 m at x 2000)."""
+    import pandas as pd
+
+    from orokit.synthesis.fidelity import ridge_statistics
+    from orokit.topology.divide_tree import DivideTree
+
+    tree = DivideTree(pd.DataFrame({"x": [0.0, 1000.0, 3000.0], "y": [0.0] * 3, "elevation": [1000.0, 800.0, 900.0]}),
+                      pd.DataFrame({"x": [400.0, 2000.0], "y": [0.0, 0.0], "elevation": [600.0, 500.0]}),
+                      pd.DataFrame({"peak_a": [0, 1], "peak_b": [1, 2], "saddle": [0, 1]}), None, {})
+    r = ridge_statistics(tree, quantiles=(0.0, 1.0))
+    # nearest peaks: A-B (200 / 1000), B-A (200 / 1000), C-B (100 / 2000)
+    assert r["neighbour_gradient"] == pytest.approx([0.05, 0.2])
+    # halves: A 400/400, B 200/600, B 300/1000, C 400/1000
+    assert r["half_ridge_slope"] == pytest.approx([0.3, 1.0])
+    # ridges: (1000 + 800 - 1200) / 1000, (800 + 900 - 1000) / 2000
+    assert r["ridge_slope"] == pytest.approx([0.35, 0.6])
