@@ -50,7 +50,8 @@ DATASET_SUMMARIES := $(DATASETS:%=$(REPORTS)/datasets/%/summary.md)
 # stage: classification (issue 6). Reads the analysis folders reports/analysis/<name>/.
 ANALYSIS_JSONS := $(DATASETS:%=$(REPORTS)/analysis/%/analysis.json)
 CLASSIFY_SRC := $(wildcard orokit/classify/*.py orokit/sampling/*.py orokit/metrics/disk.py) \
-                orokit/reports/classification.py orokit/cli/report.py orokit/io/model_io.py
+                orokit/reports/classification.py orokit/reports/classification_calibration.py orokit/cli/report.py \
+                orokit/io/model_io.py
 CLASSIFICATION_README := $(REPORTS)/classification/README.md
 CLASSIFICATION_PAPER_README := $(REPORTS)/classification/paper/README.md
 
@@ -114,7 +115,7 @@ analysis: $(ANALYSIS_README)  ## exact analysis of every DEM, table + Divide Tre
 REGION_MODEL := models/regions-10km.skops
 $(CLASSIFICATION_README) $(REGION_MODEL) &: $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
 	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(REPORTS)/classification --radius 10km \
-	  --features orometry --classifier et --runs 30 --feature-runs 5 --block-runs 3 --model $(REGION_MODEL) --overwrite
+	  --features orometry --classifier et --runs 30 --feature-runs 5 --block-runs 3 --open-set-runs 3 --model $(REGION_MODEL) --overwrite
 
 # the paper's protocol and feature set (reference mode), kept beside the default figures
 $(CLASSIFICATION_PAPER_README): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)

@@ -103,7 +103,8 @@ def protocol(folder: Path, names: list[str], *, feature_set: str, classifier: st
         rows.append(row)
     counted = [r for r in rows if r["enough_disks"]]
     return {"feature_set": feature_set, "classifier": classifier, "radius": radius,
-            "unknown_threshold": md.get("unknown_threshold"), "rows": rows,
+            "unknown_threshold": (md.get("calibration") or {}).get("terrain_threshold", md.get("unknown_threshold")),
+            "rows": rows,
             "regions_counted": len(counted), "right": sum(r["right"] for r in counted),
             "best_right": sum(r["best_right"] for r in counted),
             "mean_disk_accuracy": (sum(r["disk_accuracy"] for r in counted) / len(counted)) if counted else None,

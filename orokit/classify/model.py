@@ -3,7 +3,7 @@
 The metadata records what is needed to use a model safely: format version, orokit /
 scikit-learn / skops versions, disk radius, eps, min_peaks, relative-elevation
 convention, the feature set (bins, radii, summaries), feature names, classes, the
-"unknown" threshold, evaluation summary and the sha256 of the training feature table.
+calibration (temperatures and "unknown" thresholds), evaluation summary and the sha256 of the training feature table.
 Files (skops archive with the metadata inside, readable sidecar, checksums, refusal of
 corrupt or pickled files) are handled by :mod:`orokit.io.model_io`. A different orokit
 or scikit-learn version only warns; features computed otherwise are refused
@@ -21,6 +21,7 @@ import pandas as pd
 
 from orokit import __version__
 from orokit._typing import PathLike
+from orokit.classify.calibration import Calibration
 from orokit.errors import OrokitWarning, SchemaError
 from orokit.io.model_io import MODEL_FORMAT, load_model_file, metadata_path, save_model_file
 from orokit.sampling.feature_sets import FeatureSet
@@ -51,6 +52,19 @@ class RegionModel:
     @property
     def feature_names(self) -> list[str]:
         return list(self.metadata["feature_names"])
+
+    @property
+    def calibration(self) -> Calibration:
+        """Temperatures and 'unknown' thresholds (identity for models saved without them; their
+        terrain threshold is then the metadata's ``unknown_threshold``)."""
+        cal = Calibration.from_dict(self.metadata.get("calibration"))
+        if not self.metadata.get("calibration"):
+            cal = dataclasses.replace(cal, terrain_threshold=float(self.metadata.get("unknown_threshold") or 0.0))
+        return cal
+
+    def predict_proba(self, X: Any) -> Any:
+        """Calibrated class probabilities of feature rows (columns: :attr:`classes`)."""
+        return self.calibration.disk_proba(self.pipeline.predict_proba(X))
 
 
 def model_metadata(pipeline: Any, features: pd.DataFrame, *, evaluation: dict[str, Any] | None = None,

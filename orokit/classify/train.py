@@ -30,6 +30,15 @@ from numpy.typing import NDArray
 
 from orokit._typing import SeedLike
 from orokit.errors import InputError, OrokitWarning
+from orokit.classify.calibration import (
+    Calibration,
+    calibration_scores,
+    fit_calibration,
+    log_proba,
+    reliability,
+    softmax,
+    terrain_answers,
+)
 from orokit.classify.features import check_feature_table, feature_set_of
 
 logger = logging.getLogger(__name__)
@@ -283,17 +292,66 @@ class Evaluation:
     params: dict[str, Any]
     #: per run and held-out region: (true region, terrain-level answer, mean disk probability of that answer)
     terrain: list[tuple[str, str, float]] = dataclasses.field(default_factory=list)
+    #: held-out predictions of every fit (uncalibrated): the forest's probabilities (columns: ``classes``)
+    heldout_proba: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
+    #: the true class column of each held-out row
+    heldout_true: NDArray[np.int64] = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    #: which terrain answer each held-out row belongs to (one per fit and held-out region)
+    heldout_terrain: NDArray[np.int64] = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     @property
     def terrain_accuracy(self) -> float:
         """Share of held-out regions (per run) whose disks together get the right terrain label."""
         return float(np.mean([t == p for t, p, _ in self.terrain])) if self.terrain else float("nan")
 
-    def unknown_threshold(self, keep: float = 0.95) -> float:
-        """Confidence below which the terrain answer is 'unknown': the ``1 - keep`` quantile of the
-        confidences of right terrain answers, so ``keep`` of them stay answered."""
-        right = [c for t, p, c in self.terrain if t == p]
-        return float(np.quantile(right, 1.0 - keep)) if right else 0.0
+    def calibration(self, keep: float = 0.95) -> Calibration:
+        """Temperatures and 'unknown' thresholds fitted on all held-out predictions
+        (:func:`orokit.classify.calibration.fit_calibration`; ``keep`` of the right held-out
+        answers stay answered)."""
+        return fit_calibration(self.heldout_proba, self.heldout_true, self.heldout_terrain, keep=keep,
+                               fitted_on=f"{self.split} hold-out, {len(self.accuracies)} runs, "
+                                         f"{len(self.heldout_true)} held-out disks")
+
+    def calibration_check(self, keep: float = 0.95, n_bins: int = 10) -> dict[str, Any]:
+        """Calibration before and after, measured honestly: the held-out disks of each region are
+        calibrated with a :class:`Calibration` fitted on the held-out disks of the *other* regions.
+
+        Returns scores (:func:`~orokit.classify.calibration.calibration_scores`) and reliability
+        bins of the disks, raw and calibrated, the same for the terrain answers (raw terrain
+        posterior: the softmax of the summed floored log-probabilities), and the share of right
+        and wrong answers called unknown.
+        """
+        p, t, tid = self.heldout_proba, self.heldout_true, self.heldout_terrain
+        q = np.zeros_like(p)
+        disk_unknown = np.zeros(len(t), dtype=bool)
+        raw_t, cal_t, truth_t, unknown_t = [], [], [], []
+        for k in np.unique(t):
+            rows = t == k
+            cal = fit_calibration(p[~rows], t[~rows], tid[~rows], keep=keep)
+            q[rows] = cal.disk_proba(p[rows])
+            disk_unknown[rows] = q[rows].max(axis=1) < cal.disk_threshold
+            sums_raw, truth, _, _ = terrain_answers(log_proba(p[rows]), t[rows], tid[rows], p[rows])
+            sums, _, best, conf = terrain_answers(np.log(q[rows]), t[rows], tid[rows], q[rows])
+            raw_t.append(softmax(sums_raw))
+            cal_t.append(cal.terrain_posterior(sums))
+            truth_t.append(truth)
+            unknown_t.append(conf < cal.terrain_threshold)
+        right = np.argmax(p, axis=1) == t
+        tp_raw, tp_cal, tt = np.concatenate(raw_t), np.concatenate(cal_t), np.concatenate(truth_t)
+        t_unknown, t_right = np.concatenate(unknown_t), np.argmax(tp_cal, axis=1) == tt
+        return {
+            "disks": {"raw": calibration_scores(p, t, n_bins=n_bins), "calibrated": calibration_scores(q, t, n_bins=n_bins),
+                      "reliability_raw": reliability(p, t, n_bins=n_bins),
+                      "reliability_calibrated": reliability(q, t, n_bins=n_bins),
+                      "unknown_right": float(disk_unknown[right].mean()) if right.any() else float("nan"),
+                      "unknown_wrong": float(disk_unknown[~right].mean()) if (~right).any() else float("nan")},
+            "terrain": {"raw": calibration_scores(tp_raw, tt, n_bins=n_bins),
+                        "calibrated": calibration_scores(tp_cal, tt, n_bins=n_bins),
+                        "reliability_raw": reliability(tp_raw, tt, n_bins=n_bins),
+                        "reliability_calibrated": reliability(tp_cal, tt, n_bins=n_bins),
+                        "unknown_right": float(t_unknown[t_right].mean()) if t_right.any() else float("nan"),
+                        "unknown_wrong": float(t_unknown[~t_right].mean()) if (~t_right).any() else float("nan")},
+        }
 
     @property
     def mean_accuracy(self) -> float:
@@ -321,16 +379,20 @@ class Evaluation:
             "confusion": self.confusion.tolist(), "mean_train_disks": self.mean_train,
             "mean_validation_disks": self.mean_val, "params": self.params,
             "terrain_accuracy": self.terrain_accuracy,
-            "unknown_threshold": self.unknown_threshold() if self.terrain else None,
+            "calibration": self.calibration().to_dict() if len(self.heldout_true) else None,
         }
 
 
 def _fit_score(X: NDArray, y: NDArray, tr: NDArray, va: NDArray, cols: NDArray | None, seed: int,
                n_estimators: int, classes: list[str], kind: ClassifierKind = "rf", strict: bool = True
-               ) -> tuple[float, NDArray[np.int64], list[tuple[str, str, float]]]:
+               ) -> tuple[float, NDArray[np.int64], list[tuple[str, str, float]], NDArray[np.int64],
+                          NDArray[np.float64]]:
+    """One fit: accuracy, confusion, terrain answers, the validation rows it tested and their
+    probabilities (columns: ``classes``; 0 for a class without training disks)."""
     from sklearn.metrics import confusion_matrix
 
     empty = np.zeros((len(classes), len(classes)), dtype=np.int64)
+    none = (np.zeros(0, dtype=np.int64), np.zeros((0, len(classes))))
     if not strict and len(va):
         # a fold of the block split can leave a region without a training disk far enough from its
         # held-out block: those disks cannot be tested in this fold (they are counted as untested)
@@ -338,7 +400,7 @@ def _fit_score(X: NDArray, y: NDArray, tr: NDArray, va: NDArray, cols: NDArray |
     # a spatial split can leave a region with no training disk far enough from its held-out strip:
     # that run cannot test the region (its disks could only be misclassified), so it is not counted
     if len(va) == 0 or len(np.unique(y[tr])) < 2 or not np.isin(np.unique(y[va]), y[tr]).all():
-        return float("nan"), empty, []
+        return float("nan"), empty, [], *none
     Xs = X if cols is None else X[:, cols]
     clf = make_classifier(kind, n_estimators=n_estimators, n_jobs=1, random_state=seed)
     clf.fit(Xs[tr], y[tr])
@@ -352,7 +414,9 @@ def _fit_score(X: NDArray, y: NDArray, tr: NDArray, va: NDArray, cols: NDArray |
         p = proba[y[va] == c]
         k = int(np.argmax(np.log(np.clip(p, 1e-3, 1.0)).sum(axis=0)))
         terrain.append((str(c), known[k], float(p[:, k].mean())))
-    return acc, confusion_matrix(y[va], pred, labels=classes), terrain
+    full = np.zeros((len(va), len(classes)))
+    full[:, [classes.index(c) for c in known]] = proba
+    return acc, confusion_matrix(y[va], pred, labels=classes), terrain, va.astype(np.int64), full
 
 
 def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "random",
@@ -464,6 +528,13 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
 
     accs, run_confs = pooled(None, runs)
     terrain = [t for (name, _, _, _), r in zip(tasks, results) if name is None for t in r[2]]
+    main = [(j, r) for j, ((name, _, _, _), r) in enumerate(zip(tasks, results)) if name is None and len(r[3])]
+    if main:
+        h_proba = np.concatenate([r[4] for _, r in main])
+        h_true = np.concatenate([np.searchsorted(classes, y[r[3]]) for _, r in main]).astype(np.int64)
+        h_terrain = np.concatenate([j * nc + np.searchsorted(classes, y[r[3]]) for j, r in main]).astype(np.int64)
+    else:
+        h_proba, h_true, h_terrain = np.zeros((0, nc)), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     conf = sum(run_confs, np.zeros((nc, nc), dtype=np.int64))
     per_feature = {}
     for name in groups_cols:
@@ -489,10 +560,144 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
               "block_m": float(block_m) if split == "blocks" else None, "n_disks": int(len(f)),
               "untested_disks_per_run": float(len(f) - conf.sum() / runs) if split == "blocks" else None,
               "dropped_classes": sorted(set(features["label"].astype(str)[~keep]))}
-    ev = Evaluation(split, classes, accs, conf, per_class, per_feature, fr, mean_train, mean_val, params, terrain)
+    ev = Evaluation(split, classes, accs, conf, per_class, per_feature, fr, mean_train, mean_val, params, terrain,
+                    h_proba, h_true, h_terrain)
     logger.info("%s split, %d runs: mean accuracy %.3f, median %.3f", split, runs, ev.mean_accuracy,
                 ev.median_accuracy)
     return ev
+
+
+@dataclasses.dataclass
+class OpenSetEvaluation:
+    """Leave-one-region-out test of the "unknown" answer (:func:`evaluate_open_set`).
+
+    One row per left-out region: the share of its disks (and of its terrain answers, all its
+    disks together, one per run) answered unknown by models that never saw it, against the
+    share of the known regions' held-out disks (and strips) answered unknown by the same
+    models; ``auroc`` is the area under the ROC curve of the calibrated top probability for
+    telling the known regions' held-out disks from the left-out region's disks (0.5: no
+    better than chance). ``answered_as`` is the class most of its disks get.
+    """
+
+    rows: list[dict[str, Any]]
+    params: dict[str, Any]
+
+    def summary(self) -> dict[str, float]:
+        """Means over the left-out regions."""
+        keys = ("unknown_disks", "unknown_terrain", "known_unknown_disks", "known_unknown_terrain", "auroc")
+        return {k: float(np.nanmean([r[k] for r in self.rows])) if self.rows else float("nan") for k in keys}
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"rows": self.rows, "summary": self.summary(), "params": self.params}
+
+
+def _fit_predict(X: NDArray, y: NDArray, tr: NDArray, tests: list[NDArray], seed: int, n_estimators: int,
+                 kind: ClassifierKind) -> tuple[list[str], list[NDArray[np.float64]]]:
+    clf = make_classifier(kind, n_estimators=n_estimators, n_jobs=1, random_state=seed)
+    clf.fit(X[tr], y[tr])
+    return [str(c) for c in clf.classes_], [clf.predict_proba(X[t]) if len(t) else np.zeros((0, len(clf.classes_)))
+                                           for t in tests]
+
+
+def evaluate_open_set(features: pd.DataFrame, *, runs: int = 3, n_estimators: int = 100, max_train: int = 80,
+                      max_val: int = 20, val_fraction: float = 0.2, buffer_m: float | None = None, keep: float = 0.95,
+                      min_disks: int = 2, small_classes: Literal["error", "drop"] = "error", n_jobs: int = 2,
+                      classifier: ClassifierKind = "et", progress: bool = False, rng: SeedLike = None
+                      ) -> OpenSetEvaluation:
+    """Leave-one-region-out test of the calibrated "unknown" answer.
+
+    For every region ``r`` and run: a spatial hold-out split (:func:`spatial_split`, training
+    disks farther than ``buffer_m``, default 2 R) of the *other* regions; a model fitted on
+    their training disks predicts their held-out disks and all disks of ``r``. The
+    calibration (temperatures, thresholds keeping ``keep`` of the right answers) is fitted
+    on the known regions' held-out disks only, exactly as for a model
+    (:meth:`Evaluation.calibration`), and applied to ``r``'s disks; the known regions' own
+    unknown rates use a calibration fitted without the region measured. Nothing is tuned
+    on the left-out region.
+    """
+    from sklearn.metrics import roc_auc_score
+    from sklearn.utils.parallel import Parallel, delayed
+
+    if runs < 1:
+        raise InputError(f"runs must be >= 1, got {runs}")
+    cols = check_feature_table(features)
+    keep_rows = check_classes(features["label"].astype(str).to_numpy(), min_disks=min_disks,
+                              small_classes=small_classes)
+    f = features.loc[keep_rows].reset_index(drop=True)
+    X = f[cols].to_numpy(dtype=float)
+    y = f["label"].astype(str).to_numpy()
+    classes = sorted(pd.unique(y).tolist())
+    if len(classes) < 3:
+        raise InputError(f"the open-set test leaves one region out and needs >= 3 regions, got {classes}")
+    radius = float(np.nanmax(f["radius_m"]))
+    if buffer_m is None:
+        buffer_m = 2.0 * radius
+    groups = (f["label"].astype(str) + "|" + f["source"].astype(str)).to_numpy()
+    mx, my = metric_coordinates(f["x"].to_numpy(float), f["y"].to_numpy(float), groups,
+                                lon=f["lon"].to_numpy(float) if "lon" in f else None,
+                                lat=f["lat"].to_numpy(float) if "lat" in f else None)
+    rng = np.random.default_rng(rng)
+    tasks = []
+    for r in classes:
+        known = np.flatnonzero(y != r)
+        unknown = np.flatnonzero(y == r)
+        for s in rng.integers(0, 2**31 - 1, size=runs):
+            tr, va = spatial_split(y[known], mx[known], my[known], groups=groups[known], buffer_m=buffer_m,
+                                   max_train=max_train, max_val=max_val, val_fraction=val_fraction, rng=s)
+            tasks.append((r, known[tr], known[va], unknown, int(s)))
+    it = (delayed(_fit_predict)(X, y, tr, [va, u], s, n_estimators, classifier) for _, tr, va, u, s in tasks)
+    if progress:
+        from tqdm.auto import tqdm
+
+        it = tqdm(it, total=len(tasks), desc="open-set test (one region left out)", unit="fit")
+    results = Parallel(n_jobs=n_jobs, prefer="threads")(it)
+    rows = []
+    for r in classes:
+        kc = [c for c in classes if c != r]
+        kp, kt, kid, up, uid = [], [], [], [], []
+        for j, ((rr, tr, va, u, _), (fit_classes, (p_va, p_u))) in enumerate(zip(tasks, results)):
+            if rr != r or fit_classes != kc:  # a region without training disks: this run cannot test
+                continue
+            kp.append(p_va)
+            kt.append(np.searchsorted(kc, y[va]))
+            kid.append(j * len(classes) + np.searchsorted(kc, y[va]))
+            up.append(p_u)
+            uid.append(np.full(len(u), j))
+        if not kp:
+            continue
+        p, t, tid = np.concatenate(kp), np.concatenate(kt).astype(np.int64), np.concatenate(kid)
+        cal = fit_calibration(p, t, tid, keep=keep)
+        pu, uid_a = np.concatenate(up), np.concatenate(uid)
+        qu = cal.disk_proba(pu)
+        u_disk = qu.max(axis=1) < cal.disk_threshold
+        _, _, ubest, uconf = terrain_answers(np.log(qu), np.zeros(len(qu), dtype=np.int64), uid_a, qu)
+        # the known regions' held-out disks, each calibrated without its own region
+        qk = np.zeros_like(p)
+        k_disk = np.zeros(len(t), dtype=bool)
+        k_terrain = []
+        for k in np.unique(t):
+            m = t == k
+            ck = fit_calibration(p[~m], t[~m], tid[~m], keep=keep)
+            qk[m] = ck.disk_proba(p[m])
+            k_disk[m] = qk[m].max(axis=1) < ck.disk_threshold
+            _, _, _, kconf = terrain_answers(np.log(qk[m]), t[m], tid[m], qk[m])
+            k_terrain.append(kconf < ck.terrain_threshold)
+        score = np.concatenate([cal.disk_proba(p).max(axis=1), qu.max(axis=1)])  # one calibration: threshold-free
+        is_known = np.r_[np.ones(len(qk)), np.zeros(len(qu))]
+        answered = pd.Series(np.asarray(kc)[np.argmax(qu, axis=1)]).value_counts()
+        rows.append({"region": r, "runs": len(kp), "disks": int(np.sum(y == r)),
+                     "unknown_disks": float(u_disk.mean()), "unknown_terrain": float(np.mean(uconf < cal.terrain_threshold)),
+                     "terrain_confidence": float(np.mean(uconf)), "answered_as": str(answered.index[0]),
+                     "answered_as_share": float(answered.iloc[0] / len(qu)),
+                     "known_unknown_disks": float(k_disk.mean()),
+                     "known_unknown_terrain": float(np.mean(np.concatenate(k_terrain))),
+                     "known_accuracy": float(np.mean(np.argmax(qk, axis=1) == t)),
+                     "auroc": float(roc_auc_score(is_known, score)),
+                     "disk_threshold": cal.disk_threshold, "terrain_threshold": cal.terrain_threshold})
+    params = {"runs": runs, "classifier": classifier, "n_estimators": n_estimators, "max_train": max_train,
+              "buffer_m": float(buffer_m), "keep": keep, "radius_m": radius, "n_disks": int(len(f)),
+              "dropped_classes": sorted(set(features["label"].astype(str)[~keep_rows]))}
+    return OpenSetEvaluation(rows, params)
 
 
 def train_classifier(features: pd.DataFrame, *, n_estimators: int = 100, min_disks: int = 2,

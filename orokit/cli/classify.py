@@ -16,8 +16,11 @@ from orokit.cli.options import INPUT, common_input_options, overwrite_option, pr
 @click.option("--min-peaks", type=int, default=None,
               help="Skip disks with fewer peaks (default: the model's training value).")
 @click.option("--threshold", type=float, default=None,
-              help="Answer 'unknown' when the best region's mean disk probability is below this (default: the "
-                   "model's threshold, chosen on the spatial hold-out; 0 never answers unknown).")
+              help="Answer 'unknown' when the best region's mean calibrated disk probability is below this "
+                   "(default: the model's threshold, chosen on the spatial hold-out; 0 never answers unknown).")
+@click.option("--disk-threshold", type=float, default=None,
+              help="A disk's answer is 'unknown' when its top calibrated probability is below this (default: the "
+                   "model's; 0 never).")
 @click.option("--json", "as_json", is_flag=True, help="Print label, probabilities, votes and per-disk results as JSON.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write per-disk predictions to this CSV.")
@@ -27,13 +30,13 @@ from orokit.cli.options import INPUT, common_input_options, overwrite_option, pr
 @seed_option(what="the disk placement")
 @overwrite_option("existing --output / --map files")
 @progress_option()
-def classify(model_path, source, z_units, cell_size_m, region, isolation, min_peaks, threshold, as_json, output,
-             map_path, seed, overwrite, progress):
+def classify(model_path, source, z_units, cell_size_m, region, isolation, min_peaks, threshold, disk_threshold,
+             as_json, output, map_path, seed, overwrite, progress):
     """Classify INPUT (DEM file or manifest DEM name, `orokit analyze` folder, or peak list) with MODEL.
 
     Features are computed with the model's radius, eps and feature set; each disk is
-    predicted and the terrain label maximises the disks' summed log-probability
-    ('unknown' when the best region is not confident enough).
+    predicted with calibrated probabilities and the terrain label maximises the disks'
+    summed log-probability ('unknown' when the best region is not confident enough).
     """
     from orokit.classify.inputs import open_input_dem
     from orokit.classify.model import load_model
@@ -58,7 +61,8 @@ def classify(model_path, source, z_units, cell_size_m, region, isolation, min_pe
             raise click.UsageError("--map needs a DEM input (a raster file or a manifest DEM name)")
         bar.advance()
         pred = classify_input(model, str(source), z_units=z_units, cell_size_m=cell_size_m, region=region,
-                              isolation=isolation, min_peaks=min_peaks, threshold=threshold, dem=dem, rng=seed)
+                              isolation=isolation, min_peaks=min_peaks, threshold=threshold,
+                              disk_threshold=disk_threshold, dem=dem, rng=seed)
         bar.advance()
         if output is not None:
             with atomic_path(output) as tmp:
@@ -79,6 +83,7 @@ def classify(model_path, source, z_units, cell_size_m, region, isolation, min_pe
     else:
         top = sorted(pred.probabilities.items(), key=lambda kv: -kv[1])[:3]
         extra = f" (best: {pred.best})" if pred.label != pred.best else ""
-        click.echo(f"{source}: {pred.label}{extra} ({len(pred.disks)} disks, mean probability of the best region "
-                   f"{100 * pred.confidence:.0f} %; terrain posterior "
+        click.echo(f"{source}: {pred.label}{extra} ({len(pred.disks)} disks, {pred.unknown_disks} of them unknown; "
+                   f"mean calibrated probability of the best region {100 * pred.confidence:.0f} %, 'unknown' below "
+                   f"{100 * (pred.threshold or 0.0):.0f} %; terrain posterior "
                    + ", ".join(f"{k} {100 * v:.1f} %" for k, v in top) + ")")

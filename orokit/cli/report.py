@@ -44,13 +44,16 @@ from orokit.cli.options import (
 @click.option("--block-runs", type=click.IntRange(min=0), default=0, show_default=True,
               help="Also evaluate the spatial k-fold block split (blocks of R/2, every disk held out once) with "
                    "this many runs; 0 skips it.")
+@click.option("--open-set-runs", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Also test the 'unknown' answer by leaving each region out of training in turn, with this many "
+                   "runs per region (calibration.md); 0 skips it.")
 @seed_option(what="the disks, the splits and the forests")
 @click.option("--n-jobs", type=int, default=2, show_default=True, help="Parallel fits.")
 @overwrite_option("an existing report and model")
 @progress_option()
 def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominence_m, min_peaks, model_path, z_units,
-           cell_size_m, feature_set, classifier, separation, max_disks, max_train, block_runs, seed, n_jobs, overwrite,
-           progress):
+           cell_size_m, feature_set, classifier, separation, max_disks, max_train, block_runs, open_set_runs, seed, n_jobs,
+           overwrite, progress):
     """Classification report on INPUTs (DEMs, analysis folders or peak lists; one region each).
 
     Accuracies in the tables are percentages; radii in km.
@@ -77,6 +80,21 @@ def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominen
                                       cell_size_m=cell_size_m, feature_set=feature_set, classifier=classifier,
                                       separation=separation, max_disks=max_disks, max_train=max_train,
                                       block_runs=block_runs)
+    r0 = radii[0]
+    spatial = res["evaluations"][r0].get("spatial")
+    if spatial is not None and len(spatial.heldout_true):  # calibration.md: calibration and open-set test at R0
+        from orokit.classify.train import evaluate_open_set
+        from orokit.reports.classification_calibration import write_calibration_page
+
+        open_set = None
+        if open_set_runs > 0:
+            open_set = evaluate_open_set(res["features"][r0], runs=open_set_runs, max_train=max_train,
+                                         classifier=classifier, small_classes="drop", n_jobs=n_jobs,
+                                         progress=progress, rng=seed)
+        write_calibration_page(spatial, open_set, output, radius_m=r0,
+                               command=f"Made by `orokit report --features {feature_set} --classifier {classifier} "
+                                       f"--runs {runs} --open-set-runs {open_set_runs} --seed {seed}` (`make "
+                                       f"classification` for the default model).")
     for r, e in sorted(res["evaluations"].items()):
         sp = e["spatial"].mean_accuracy
         sp_text = f"{100 * sp:.1f} %" if sp == sp else "not measurable (crops too small for this radius)"

@@ -53,6 +53,7 @@ def train(features_path, output, runs, feature_runs, split, buffer_radii, block_
 
     Accuracies are fractions in [0, 1]. The saved model is fitted on all disks.
     """
+    from orokit.classify.calibration import Calibration
     from orokit.classify.features import check_feature_table
     from orokit.classify.model import metadata_path, model_metadata, save_model
     from orokit.classify.train import evaluate, train_classifier
@@ -90,11 +91,11 @@ def train(features_path, output, runs, feature_runs, split, buffer_radii, block_
                                progress=progress, rng=seed)
     model = train_classifier(feats, n_estimators=trees, small_classes=small, classifier=classifier, n_jobs=n_jobs,
                              rng=seed)
-    threshold = evals["spatial"].unknown_threshold() if "spatial" in evals and evals["spatial"].terrain else 0.0
+    cal = evals["spatial"].calibration() if "spatial" in evals else Calibration()
     summary = {k: {kk: v for kk, v in e.to_dict().items() if kk != "confusion"} for k, e in evals.items()}
     md = model_metadata(model, feats, evaluation=summary, features_sha256=sha256_file(features_path),
                         extra={"training_features": features_path.name, "seed": seed, "classifier": classifier,
-                               "unknown_threshold": threshold})
+                               "calibration": cal.to_dict()})
     save_model(model, output, md)
     if report_dir is not None:
         from orokit.reports.classification import write_training_report

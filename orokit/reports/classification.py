@@ -283,8 +283,13 @@ def _readme(t2: pd.DataFrame, evals: Mapping[float, Mapping[str, Any]], meta: di
             lines.append("  Lowest per-region accuracy (spatial hold-out): " +
                          ", ".join(f"{k} {100 * v:.0f} %" for k, v in worst) + f". Terrain level (the held-out "
                          f"disks of a region together, summed log-probability): {100 * sp.terrain_accuracy:.1f} % "
-                         f"of {len(sp.terrain)} held-out strips right; 'unknown' threshold (mean disk probability "
-                         f"keeping 95 % of right answers): {sp.unknown_threshold():.2f}.")
+                         f"of {len(sp.terrain)} held-out strips right.")
+            if r == meta["radii_m"][0] and len(sp.heldout_true):
+                cal = sp.calibration()
+                lines.append(f"  Calibrated probabilities (temperature {cal.temperature:.2f} on the disks, "
+                             f"{cal.terrain_temperature:.2f} on the terrain posterior, fitted on the spatial hold-out) "
+                             f"and 'unknown' thresholds keeping 95 % of the right held-out answers (disk "
+                             f"{cal.disk_threshold:.2f}, terrain {cal.terrain_threshold:.2f}): `calibration.md`.")
         if "blocks" in e and np.isfinite(e["blocks"].mean_accuracy):
             b = e["blocks"]
             worst = sorted(b.per_class.items(), key=lambda kv: kv[1])[:4]
@@ -322,10 +327,12 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
     With ``model_path``, a model trained on all disks at ``model_radius_m`` (default the
     first radius) is saved there (skops + metadata). ``block_runs`` > 0 adds the spatial
     k-fold block split (:func:`orokit.classify.train.block_folds`, blocks of ``block_m``,
-    default R / 2) with that many runs, without feature-group rows.
+    default R / 2) with that many runs, without feature-group rows. Returns the tables, the
+    evaluations per radius, the feature tables (``features``) and the metadata.
     """
     import warnings
 
+    from orokit.classify.calibration import Calibration
     from orokit.classify.features import concat_features
     from orokit.classify.inputs import default_label, features_for_input
     from orokit.classify.model import model_metadata, save_model
@@ -389,17 +396,17 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
         model = train_classifier(feats, n_estimators=trees, small_classes="drop", classifier=classifier,
                                  n_jobs=n_jobs, rng=seed)
         sp = evals[rm].get("spatial")
-        threshold = sp.unknown_threshold() if sp is not None and sp.terrain else 0.0
+        cal = sp.calibration() if sp is not None else Calibration()
         fpath = out / "features" / f"features_{rm / 1000:g}km.parquet"
         summary = {k: {kk: v for kk, v in e.to_dict().items() if kk != "confusion"} for k, e in evals[rm].items()}
         md = model_metadata(model, feats, evaluation=summary, features_sha256=sha256_file(fpath),
                             extra={"training_features": f"features_{rm / 1000:g}km.parquet", "seed": seed,
                                    "training_inputs": labels, "classifier": classifier,
-                                   "unknown_threshold": threshold})
+                                   "calibration": cal.to_dict()})
         save_model(model, model_path, md)
         meta["model"] = {"path": str(model_path), "sha256": sha256_file(model_path), "radius_m": rm}
     _write_text(out / "manifest.json", json.dumps(meta, indent=2, default=float))
     # timings change with the machine's load: kept out of the committed manifest (timings.json is not committed)
     _write_text(out / "timings.json", json.dumps({"timings_s": timings, "load_average": os.getloadavg()}, indent=2))
     _write_text(out / "README.md", _readme(t2, evals, meta))
-    return {"table2": t2, "evaluations": evals, "meta": meta}
+    return {"table2": t2, "evaluations": evals, "features": feats_by_r, "meta": meta}

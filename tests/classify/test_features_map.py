@@ -161,20 +161,15 @@ def test_region_with_one_disk_is_named_and_dropped(dems_and_model):
     assert any("dropping regions with fewer than 2" in str(w.message) and "lonely: 1" in str(w.message) for w in rec)
 
 
-def test_terrain_label_and_unknown_threshold():
-    from orokit.classify.predict import terrain_log_probabilities
-    from orokit.classify.train import Evaluation
+def test_terrain_label_sums_floored_log_probabilities():
+    from orokit.classify.calibration import log_proba
 
     proba = np.array([[0.9, 0.1], [0.9, 0.1], [0.0, 1.0]])
     # the mean probability prefers class 0 (0.6), the summed log-probability class 1: one disk that rules
     # class 0 out (floored at 1e-3) outweighs two disks that merely lean to it
-    logp = terrain_log_probabilities(proba)
-    np.testing.assert_allclose(logp, [2 * np.log(0.9) + np.log(1e-3), 2 * np.log(0.1)])
+    logp = log_proba(proba).sum(axis=0)
+    np.testing.assert_allclose(logp, [2 * np.log(0.9) + np.log(1e-3 / 1.001), 2 * np.log(0.1) + np.log(1 / 1.001)])
     assert np.argmax(proba.mean(0)) == 0 and np.argmax(logp) == 1
-    terrain = [("a", "a", c) for c in np.linspace(0.3, 0.9, 21)] + [("b", "a", 0.2)]
-    ev = Evaluation("spatial", ["a", "b"], np.array([0.5]), np.zeros((2, 2), int), {}, {}, 0, {}, {}, {}, terrain)
-    assert ev.terrain_accuracy == pytest.approx(21 / 22)
-    assert ev.unknown_threshold() == pytest.approx(np.quantile(np.linspace(0.3, 0.9, 21), 0.05))
 
 
 def test_disk_map_polygons_are_geodesic_circles_on_lonlat():

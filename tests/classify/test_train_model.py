@@ -138,6 +138,16 @@ def test_cli_features_train_classify(tmp_path):
     assert res.exit_code == 0, res.output
     js = json.loads(res.output[res.output.index("{"):])
     assert js["label"] == "alpine" and abs(sum(js["probabilities"].values()) - 1) < 1e-6
+    # the model carries the calibration fitted on the spatial hold-out; the plain output names the unknown disks
+    cal = load_model(tmp_path / "m.skops").calibration
+    assert cal.temperature != 1.0 and js["unknown_threshold"] == pytest.approx(cal.terrain_threshold)
+    assert js["unknown_disks"] == sum(d["answer"] == "unknown" for d in js["disks"])
+    res = r.invoke(cli, ["classify", str(tmp_path / "m.skops"), inputs[1], "--region", str(region)])
+    assert res.exit_code == 0 and "alpine" in res.output and f"{js['unknown_disks']} of them unknown" in res.output
+    res = r.invoke(cli, ["classify", str(tmp_path / "m.skops"), inputs[1], "--region", str(region), "--threshold", "2",
+                         "--disk-threshold", "2", "--json"])
+    js = json.loads(res.output[res.output.index("{"):])
+    assert js["label"] == "unknown" and js["best"] == "alpine" and js["unknown_disks"] == js["n_disks"]
 
 
 @settings(max_examples=40, deadline=None)
@@ -194,3 +204,76 @@ def test_cli_train_block_split(feats, tmp_path):
     assert js["split"] == "blocks" and js["mean_accuracy"] > 0.6
     md = json.loads(metadata_path(tmp_path / "m.skops").read_text())
     assert md["evaluation"]["blocks"]["params"]["block_m"] == 5_000.0
+
+
+def test_calibrated_predictions_and_unknown_answers(feats, tmp_path):
+    from orokit.classify.calibration import Calibration, softmax, temper
+    from orokit.classify.predict import UNKNOWN
+
+    sp = evaluate(feats, runs=3, split="spatial", feature_groups=False, rng=0)
+    # every tested disk's held-out probabilities are kept, rows sum to 1, true columns match the confusion rows
+    assert len(sp.heldout_true) == sp.confusion.sum() and sp.heldout_proba.shape == (sp.confusion.sum(), 3)
+    np.testing.assert_allclose(sp.heldout_proba.sum(axis=1), 1.0)
+    np.testing.assert_array_equal(np.bincount(sp.heldout_true, minlength=3), sp.confusion.sum(axis=1))
+    check = sp.calibration_check()
+    assert check["disks"]["raw"]["accuracy"] == pytest.approx(sp.mean_accuracy, abs=0.05)
+    model = train_classifier(feats, rng=0)
+    md = model_metadata(model, feats)
+    alpine = feats[feats["label"] == "alpine"]
+    plain = predict_regions(load_model(save_model(model, tmp_path / "a.skops", md)), alpine)
+    cal = Calibration(temperature=0.5, terrain_temperature=3.0, disk_threshold=0.9, terrain_threshold=0.99)
+    m = load_model(save_model(model, tmp_path / "b.skops", dict(md, calibration=cal.to_dict())))
+    assert m.calibration == cal
+    pred = predict_regions(m, alpine)
+    q = temper(model.predict_proba(alpine[m.feature_names].to_numpy(float)), 0.5)
+    np.testing.assert_allclose(pred.disks[[f"proba_{c}" for c in m.classes]].to_numpy(float), q)
+    # one temperature for all classes: the best class of the terrain and of each disk are unchanged
+    assert pred.best == plain.best == "alpine" and (pred.disks["predicted"] == plain.disks["predicted"]).all()
+    np.testing.assert_allclose(list(pred.probabilities.values()), softmax(np.log(q).sum(axis=0) / 3.0))
+    assert pred.label == (UNKNOWN if q[:, m.classes.index("alpine")].mean() < 0.99 else "alpine")
+    assert (pred.disks["answer"] == UNKNOWN).sum() == (q.max(axis=1) < 0.9).sum() == pred.unknown_disks
+    forced = predict_regions(m, alpine, threshold=0.0, disk_threshold=0.0)
+    assert forced.label == "alpine" and forced.unknown_disks == 0
+    # a model saved before calibration existed keeps its terrain threshold and its probabilities
+    old = load_model(save_model(model, tmp_path / "c.skops", dict(md, unknown_threshold=0.42)))
+    assert old.calibration == Calibration(terrain_threshold=0.42)
+
+
+def test_open_set_never_trains_on_the_left_out_region(feats):
+    from orokit.classify.train import evaluate_open_set
+    from helpers.classify_synth import make_peaks
+
+    # a fourth region drawn like "alpine": left out, it is taken for alpine (and alpine for it)
+    p = peak_geometry(make_peaks(1500, rng=99, **STYLES["alpine"]))
+    d = sample_disks_in_polygon(shapely.box(0, -60_000, 60_000, 0), radius_m=10_000, rng=9)
+    four = concat_features([feats, feature_table(p, d, label="alpine-twin", source="alpine-twin")])
+    res = evaluate_open_set(four, runs=1, n_estimators=30, rng=0)
+    rows = {r["region"]: r for r in res.rows}
+    assert set(rows) == {"alpine", "alpine-twin", "mid", "rolling"}
+    assert all(r["answered_as"] != name for name, r in rows.items())
+    assert rows["alpine-twin"]["answered_as"] == "alpine" and rows["alpine"]["answered_as"] == "alpine-twin"
+    for r in res.rows:
+        for k in ("unknown_disks", "unknown_terrain", "known_unknown_disks", "known_unknown_terrain"):
+            assert 0.0 <= r[k] <= 1.0
+        assert 0.0 <= r["auroc"] <= 1.0 and r["runs"] == 1
+    # the twin is a known kind of ground: its disks are no more often unknown than chance would make a
+    # known region's held-out disks (the threshold keeps 95 % of right answers)
+    assert rows["alpine-twin"]["unknown_disks"] < 0.5
+    with pytest.raises(InputError, match=">= 3 regions"):
+        evaluate_open_set(feats[feats["label"] != "mid"], runs=1)
+
+
+def test_calibration_page(feats, tmp_path):
+    from orokit.classify.train import evaluate_open_set
+    from orokit.reports.classification_calibration import calibration_files, write_calibration_page
+
+    sp = evaluate(feats, runs=3, split="spatial", feature_groups=False, rng=0)
+    op = evaluate_open_set(feats, runs=1, n_estimators=30, rng=0)
+    path = write_calibration_page(sp, op, tmp_path, radius_m=10_000.0, command="test")
+    files = calibration_files(10_000.0, tmp_path, open_set=True)
+    assert path == files[0] and all(f.exists() for f in files)
+    text = path.read_text()
+    cal = sp.calibration()
+    assert f"temperature **{cal.temperature:.3f}**" in text and "leave one region out" in text
+    assert len(pd.read_csv(files[-1])) == 3  # one row per left-out region
+    assert files[1].stat().st_size > 10_000  # the reliability figure
