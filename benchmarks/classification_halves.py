@@ -38,6 +38,14 @@ def _orokit() -> str:
     return str(exe) if exe.exists() else "orokit"
 
 
+def _child_cpu() -> float:
+    """CPU seconds (user + system) of the finished child processes so far."""
+    import resource
+
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
 def run_cli(*args: str) -> str:
     res = subprocess.run([_orokit(), *args], capture_output=True, text=True)
     if res.returncode != 0:
@@ -78,10 +86,11 @@ def protocol(folder: Path, names: list[str], *, feature_set: str, classifier: st
     run_cli("-q", "features", *[str(folder / "north" / f"{n}.tif") for n in names], "-o", str(feats),
             "--radius", radius, "--features", feature_set, "--no-progress", "--overwrite")
     t_features = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _child_cpu()
     run_cli("-q", "train", str(feats), "-o", str(model), "--drop-small-classes", "--classifier", classifier,
             "--no-progress", "--overwrite")
-    t_train = time.perf_counter() - t0
+    t_train, c_train = time.perf_counter() - t0, _child_cpu() - c0
+    load_train = list(os.getloadavg())
     md = json.loads(Path(str(model) + ".json").read_text())
     classes = md["classes"]
     rows = []
@@ -108,7 +117,8 @@ def protocol(folder: Path, names: list[str], *, feature_set: str, classifier: st
             "regions_counted": len(counted), "right": sum(r["right"] for r in counted),
             "best_right": sum(r["best_right"] for r in counted),
             "mean_disk_accuracy": (sum(r["disk_accuracy"] for r in counted) / len(counted)) if counted else None,
-            "timings_s": {"features": t_features, "train": t_train}, "load_after": list(os.getloadavg())}
+            "timings_s": {"features": t_features, "train": t_train, "train_cpu": c_train}, "load_after_train": load_train,
+            "load_after": list(os.getloadavg())}
 
 
 def markdown(results: list[dict]) -> str:
@@ -122,9 +132,10 @@ def markdown(results: list[dict]) -> str:
                   f"**{r['right']} of {r['regions_counted']}** regions right (best class right: {r['best_right']} of "
                   f"{r['regions_counted']}; 'unknown' threshold {r['unknown_threshold']:.2f}); mean share of south "
                   f"disks right {100 * (r['mean_disk_accuracy'] or 0):.1f} %; features {r['timings_s']['features']:.1f} "
-                  f"s, training {r['timings_s']['train']:.1f} s (load average after: "
-                  f"{', '.join(f'{v:.1f}' for v in r['load_after'])}).", "",
-                  "| region | training disks | south disks | answer | best class | mean prob. | south disks right |",
+                  f"s, training {r['timings_s']['train']:.1f} s wall / {r['timings_s']['train_cpu']:.1f} s CPU "
+                  f"(load average after training: {', '.join(f'{v:.1f}' for v in r['load_after_train'])}; at the "
+                  f"end: {', '.join(f'{v:.1f}' for v in r['load_after'])}).", "",
+                  "| region | training disks | south disks | answer | best class | mean calibrated prob. | south disks right |",
                   "|---|---:|---:|---|---|---:|---:|"]
         for row in r["rows"]:
             conf = f"{row['confidence']:.2f}" if row.get("confidence") is not None else "-"

@@ -16,6 +16,7 @@ Results go to ``--out`` (Markdown) and ``reports/benchmarks/classification_layou
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import os
 import sys
@@ -38,7 +39,30 @@ def rows():
         ("orometry + spatial pattern", dataclasses.replace(oro, name="v", pattern=True), {}),
         ("orometry, Random Forest", oro, {"classifier": "rf"}),
         ("orometry, gradient boosting (HistGradientBoosting)", oro, {"classifier": "hgb"}),
+        ("orometry, ExtraTrees with balanced class weights", oro, {"estimator_options": {"class_weight": "balanced"}}),
     ]
+
+
+@contextlib.contextmanager
+def estimator_options(options: dict | None):
+    """Every classifier made inside gets these scikit-learn parameters (experiment rows only)."""
+    import orokit.classify.train as train
+
+    if not options:
+        yield
+        return
+    original = train.make_classifier
+
+    def patched(*args, **kwargs):
+        pipe = original(*args, **kwargs)
+        pipe[-1].set_params(**options)
+        return pipe
+
+    train.make_classifier = patched
+    try:
+        yield
+    finally:
+        train.make_classifier = original
 
 
 def main() -> None:
@@ -73,8 +97,9 @@ def main() -> None:
             for split, runs in (("spatial", a.runs), ("blocks", a.block_runs)):
                 t0 = time.perf_counter()
                 kw = {"block_m": 5_000.0} if split == "blocks" else {}
-                ev = evaluate(f, split=split, runs=runs, feature_groups=False, small_classes="drop", rng=0,
-                              **kw, **ekw)
+                with estimator_options(ekw.get("estimator_options")):
+                    ev = evaluate(f, split=split, runs=runs, feature_groups=False, small_classes="drop", rng=0,
+                                  **kw, **{k: v for k, v in ekw.items() if k != "estimator_options"})
                 lay[split] = ev.mean_accuracy
                 lay[f"{split}_s"] = time.perf_counter() - t0
                 lay[f"{split}_per_class"] = ev.per_class
