@@ -15,6 +15,8 @@ class RenderParams:
     jitter : planar jitter of refined points, as a fraction of the piece length.
     river_slope : minimum downstream slope of river beds (m/m).
     river_margin : river beds lie at least this far below the ridges they face.
+    river_max_sink_m : river beds lie at most this far below the bound the ridges around them
+        set (None: no limit; :func:`orokit.raster.rivers.river_network`).
     valley_coef : valley width ``w = valley_coef * A^0.4`` (A in m^2).
     min_prominence_m : eps of the orometry to keep; noise amplitude is ``noise_ratio * eps``.
     noise_ratio : noise amplitude as a fraction of eps (< 0.5 so no new peak reaches eps).
@@ -69,6 +71,7 @@ class RenderParams:
     jitter: float = 0.25
     river_slope: float = 0.01
     river_margin: float = 5.0
+    river_max_sink_m: float | None = None
     valley_coef: float = 0.15
     min_prominence_m: float = 30.0
     noise_ratio: float = 0.3

@@ -101,6 +101,7 @@ def river_network(
     margin_m: float = 5.0,
     slope: float = 0.01,
     cap=None,
+    max_sink_m: float | None = None,
 ) -> RiverNetwork:
     """Rivers of a Divide Tree: dual Voronoi edges not crossing a ridge, oriented to outlets.
 
@@ -114,6 +115,11 @@ def river_network(
     slope : minimum downstream bed slope (m/m).
     cap : optional callable ``(k, 2) xy -> (k,)`` upper bound of the ground (e.g. the
         flank envelope of the ridges); river beds stay ``margin_m`` below it.
+    max_sink_m : a bed lies at most this far below its own bound (``min(ridge crossings, cap) -
+        margin_m``) after the downstream sweep (None: no limit). The sweep pulls every bed below
+        the lowest bed upstream minus ``slope`` x the distance; over long winding rivers that pins
+        them to ``base_elevation`` (gobi: 22 % of the river nodes); with a limit a bed may lie
+        above an upstream one (a closed depression, as in endorheic basins).
 
     Returns
     -------
@@ -235,5 +241,7 @@ def river_network(
     h0 = np.where(np.isfinite(h0), h0, base_elevation + slope * flowdist)
     h0[outlet] = np.minimum(h0[outlet], base_elevation)
     h = _kernels.river_elevations(order_arr, receiver, length, h0, float(slope), float(base_elevation))
+    if max_sink_m is not None:
+        h = np.maximum(h, h0 - float(max_sink_m))
     logger.info("rivers: %d nodes, %d outlets", h.size, int(outlet.sum()))
     return RiverNetwork(xy=xy, elevation=h, receiver=receiver, length=length, order=order_arr, outlet=outlet)

@@ -185,7 +185,8 @@ def build_skeleton(
         return flank_envelope(xy, rxy, rz, rs, ridge_floor=rfloor, tree=rtree, k_neighbours=params.flank_neighbours)
 
     rivers = river_network(fine_ridges, ridge_lines.xy, extent, base_elevation=base,
-                           margin_m=params.river_margin, slope=params.river_slope, cap=envelope)
+                           margin_m=params.river_margin, slope=params.river_slope, cap=envelope,
+                           max_sink_m=params.river_max_sink_m)
     t["rivers"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

@@ -30,7 +30,7 @@ if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
 
 __all__ = [
-    "FLOORS", "LandformStatistics", "compare_landforms", "landform_distances", "landform_statistics",
+    "FLOORS", "POWER_BANDS_M", "LandformStatistics", "band_power", "compare_landforms", "landform_distances", "landform_statistics",
     "slope_and_relief", "spectral_slope", "split_halves",
 ]
 
@@ -40,6 +40,10 @@ N_QUANTILES = 512
 FLAT_SLOPE_DEG = 2.0
 #: drainage area above which a cell counts as a channel (m^2)
 CHANNEL_AREA_M2 = 1.0e6
+#: wavelength bands (metres) of :func:`band_power`: below 0.5 km (texture, curvature), the
+#: spectral-slope range 0.5-10 km in four bands
+POWER_BANDS_M: tuple[tuple[float, float], ...] = ((0.0, 300.0), (300.0, 500.0), (500.0, 1000.0),
+                                                  (1000.0, 2000.0), (2000.0, 5000.0), (5000.0, 10_000.0))
 #: floors of the distances (issue 11); the target is max(2 x halves, floor)
 FLOORS: dict[str, float] = {
     "slope_deg": 4.0,
@@ -151,6 +155,25 @@ def _relief(z: NDArray[np.float64], window_cells: tuple[int, int]) -> NDArray[np
     return r
 
 
+def _power_spectrum(z: NDArray[np.floating], cell_size_m: tuple[float, float]
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """Wavenumber ``|k|`` (cycles per metre) and power ``|FFT|^2`` of ``z`` (NaN filled with the
+    mean, least-squares plane removed, 2-D Hann taper), on the ``rfft2`` grid; None if all NaN."""
+    z = np.asarray(z, dtype=np.float64)
+    ok = np.isfinite(z)
+    if not ok.any():
+        return None
+    z = np.where(ok, z, z[ok].mean())
+    z = remove_plane(z)
+    ny, nx = z.shape
+    z *= np.outer(np.hanning(ny), np.hanning(nx))
+    power = np.abs(np.fft.rfft2(z)) ** 2
+    dx, dy = cell_size_m
+    kx = np.fft.rfftfreq(nx, dx)
+    ky = np.fft.fftfreq(ny, dy)
+    return np.hypot(kx[None, :], ky[:, None]), power
+
+
 def spectral_slope(z: NDArray[np.floating], cell_size_m: tuple[float, float], *,
                    wavelengths_m: tuple[float, float] = (500.0, 10_000.0), n_bins: int = 16) -> float:
     """Spectral slope beta of the radially averaged power spectrum, ``P(k) ~ k^-beta``.
@@ -162,19 +185,10 @@ def spectral_slope(z: NDArray[np.floating], cell_size_m: tuple[float, float], *,
     the least-squares slope of log P against log k. ``cell_size_m`` is ``(dx, dy)``.
     NaN when fewer than 3 bins hold a wavenumber (grid too small for the band).
     """
-    z = np.asarray(z, dtype=np.float64)
-    ok = np.isfinite(z)
-    if not ok.any():
+    spec = _power_spectrum(z, cell_size_m)
+    if spec is None:
         return float("nan")
-    z = np.where(ok, z, z[ok].mean())
-    z = remove_plane(z)
-    ny, nx = z.shape
-    z *= np.outer(np.hanning(ny), np.hanning(nx))
-    power = np.abs(np.fft.rfft2(z)) ** 2
-    dx, dy = cell_size_m
-    kx = np.fft.rfftfreq(nx, dx)
-    ky = np.fft.fftfreq(ny, dy)
-    k = np.hypot(kx[None, :], ky[:, None])
+    k, power = spec
     kmin, kmax = 1.0 / wavelengths_m[1], 1.0 / wavelengths_m[0]
     edges = np.geomspace(kmin, kmax, n_bins + 1)
     sel = (k >= kmin) & (k <= kmax)
@@ -189,6 +203,35 @@ def spectral_slope(z: NDArray[np.floating], cell_size_m: tuple[float, float], *,
     lp = np.log10(psum[has] / cnt[has])
     slope = np.polyfit(lk, lp, 1)[0]
     return float(-slope)
+
+
+def band_power(z: NDArray[np.floating], cell_size_m: tuple[float, float], *,
+               bands_m: tuple[tuple[float, float], ...] = POWER_BANDS_M) -> NDArray[np.float64]:
+    """Mean spectral power of ``z`` in wavelength bands (m^2 per Fourier coefficient).
+
+    Same preprocessing as :func:`spectral_slope` (NaN filled with the mean, plane removed,
+    2-D Hann taper); band ``(lo, hi)`` holds the wavelengths ``lo <= 1/|k| < hi`` metres.
+    The ratio of two grids' band powers (same shape and cell size) says at which
+    wavelengths one has more relief than the other: where beta and curvature differences
+    come from. NaN for a band without a wavenumber (or an all-NaN grid).
+
+    >>> y, x = np.mgrid[0:128, 0:128] * 100.0
+    >>> p = band_power(np.sin(2 * np.pi * x / 1600.0), (100.0, 100.0))
+    >>> int(np.nanargmax(p)), bool(p[3] > 10 * np.nanmax(np.delete(p, 3)))
+    (3, True)
+    """
+    out = np.full(len(bands_m), np.nan)
+    spec = _power_spectrum(z, cell_size_m)
+    if spec is None:
+        return out
+    k, power = spec
+    with np.errstate(divide="ignore"):
+        wavelength = np.where(k > 0, 1.0 / k, np.inf)
+    for i, (lo, hi) in enumerate(bands_m):
+        sel = (wavelength >= lo) & (wavelength < hi)
+        if sel.any():
+            out[i] = float(power[sel].mean())
+    return out
 
 
 def _drainage(z: NDArray[np.float64], dx: float, dy: float) -> tuple[float, float]:

@@ -261,3 +261,28 @@ def test_flank_envelope_with_more_neighbours_approaches_the_full_envelope():
     e64 = flank_envelope(p, q, z, s, k_neighbours=64)
     assert (e16 <= e64 + 1e-9).all() and (e64 <= full + 1e-9).all() and (e16 < full - 1.0).any()
     np.testing.assert_allclose(flank_envelope(p, q, z, s, k_neighbours=200), full)
+
+
+def test_river_max_sink_keeps_beds_near_their_bound():
+    """Without a limit the downstream sweep pulls beds far below the bound the cap sets; with
+    ``max_sink_m`` every bed stays within it, never lower than without, on the same network."""
+    from orokit.raster.rivers import ridge_segments, river_network
+
+    rng = np.random.default_rng(3)
+    peaks = np.column_stack([rng.uniform(1000, 19000, (12, 2)), rng.uniform(800, 1200, 12)])
+    saddles = np.column_stack([(peaks[:-1, :2] + peaks[1:, :2]) / 2, np.full(11, 700.0)])
+    edges = np.column_stack([np.arange(11), np.arange(1, 12), np.arange(11)])
+    ridges = ridge_segments(peaks, saddles, edges)
+    nodes = np.concatenate([peaks[:, :2], saddles[:, :2]])
+
+    def cap(xy):
+        return np.full(xy.shape[0], 650.0)
+
+    kw = dict(base_elevation=0.0, margin_m=5.0, slope=0.05, cap=cap)
+    free = river_network(ridges, nodes, (0, 0, 20000, 20000), **kw)
+    held = river_network(ridges, nodes, (0, 0, 20000, 20000), max_sink_m=20.0, **kw)
+    assert np.array_equal(free.receiver, held.receiver)
+    inner = ~held.outlet
+    assert (held.elevation >= free.elevation - 1e-9).all()
+    assert (held.elevation[inner] >= 645.0 - 20.0 - 1e-9).all()  # the bound is at most cap - margin
+    assert (free.elevation[inner] < 600.0).any()  # the sweep pinned some beds far below it

@@ -189,3 +189,22 @@ def test_validate_prints_and_records_the_landform_table(tmp_path, make_dem):
     rows = {row["statistic"]: row for row in doc["landform"]["table"]}
     assert set(FLOORS) <= set(rows)
     assert all(np.isfinite(rows[s]["distance"]) for s in FLOORS if s != "spectral_slope")
+
+
+def test_band_power_puts_a_wave_in_its_band_and_scales_with_amplitude():
+    """A sinusoid's power lands in the band holding its wavelength; doubling the amplitude
+    quadruples every band; a band longer than the grid has no wavenumber (NaN)."""
+    from orokit.validate.landform import POWER_BANDS_M, band_power
+
+    res = 50.0
+    y, x = np.mgrid[0:256, 0:256] * res
+    for i, wave in ((0, 200.0), (2, 800.0), (4, 3200.0)):
+        lo, hi = POWER_BANDS_M[i]
+        assert lo <= wave < hi
+        z = 10.0 * np.sin(2 * np.pi * (x + 0.3 * y) / wave)
+        p = band_power(z, (res, res))
+        assert int(np.nanargmax(p)) == i
+        assert np.allclose(band_power(2.0 * z, (res, res)), 4.0 * p, rtol=1e-9, atol=1e-12)
+    p = band_power(np.random.default_rng(0).standard_normal((64, 80)), (res, res))  # 3.2 x 4 km
+    assert np.isfinite(p[:-1]).all() and np.isnan(p[-1])
+    assert np.isnan(band_power(np.full((8, 8), np.nan), (res, res))).all()
