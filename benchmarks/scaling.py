@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -87,13 +86,84 @@ def write_mosaic(n: int, workdir: Path, dem_name: str) -> Path:
     return vrt
 
 
-def run_one(vrt: str, chunks: int | None, eps: float, out: str | None) -> dict:
-    """One measurement (in a subprocess): analyse, report time, peak RSS and task costs."""
+class _PhaseRss:
+    """Peak resident memory of each named phase of this process (Linux ``/proc``).
+
+    At every phase change the kernel's high-water mark (``VmHWM``) is read as the peak of
+    the phase that ends, then reset (``/proc/self/clear_refs`` 5), so a phase's peak is
+    exact however short it is. A thread also samples ``VmRSS`` every ``interval``
+    seconds; with ``log`` every sample is appended there as ``seconds<TAB>phase<TAB>MB``.
+    """
+
+    def __init__(self, interval: float = 0.5, log: str | None = None):
+        import threading
+
+        self.phase = "start"
+        self.peak: dict[str, float] = {}
+        self.interval = interval
+        self.log = open(log, "w") if log else None  # noqa: SIM115 - closed in stop()
+        self.t0 = time.perf_counter()
+        self.lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    @staticmethod
+    def status_mb(field: str) -> float:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1]) / 1024.0
+        return float("nan")
+
+    def _note(self, phase: str, mb: float) -> None:
+        self.peak[phase] = max(self.peak.get(phase, 0.0), mb)
+        if self.log:
+            self.log.write(f"{time.perf_counter() - self.t0:.1f}\t{phase}\t{mb:.0f}\n")
+            self.log.flush()
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.interval):
+            with self.lock:
+                self._note(self.phase, self.status_mb("VmRSS"))
+
+    def enter(self, phase: str) -> None:
+        with self.lock:
+            self._note(self.phase, self.status_mb("VmHWM"))
+            with open("/proc/self/clear_refs", "w") as f:
+                f.write("5")  # reset VmHWM to the current RSS
+            self.phase = phase
+
+    def wrap(self, fn, phase: str):
+        def wrapper(*a, **k):
+            self.enter(phase)
+            try:
+                return fn(*a, **k)
+            finally:
+                self.enter("after " + phase)  # what follows it, e.g. freeing its inputs
+        return wrapper
+
+    def stop(self) -> dict[str, float]:
+        self._stop.set()
+        self._thread.join()
+        self.enter("end")
+        if self.log:
+            self.log.close()
+        return {k: round(v, 1) for k, v in self.peak.items() if k != "end"}
+
+
+def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: str | None = None) -> dict:
+    """One measurement (in a subprocess): analyse, report time, peak RSS (per phase) and task costs."""
     import threading
 
+    rss = _PhaseRss(log=rss_log)
+    rss.enter("imports")
     import orokit
     from orokit.io.dem import read_dem
     from orokit.tiling import engine as tiling_engine
+    from orokit.metrics import isolation as metrics_isolation
+    from orokit.tiling import isolation as tiling_isolation
+    from orokit.topology import engine as topo_engine
 
     cost = {"merge_s": 0.0, "merges": 0, "chunk_s": 0.0, "chunks": 0}
     lock = threading.Lock()
@@ -112,17 +182,27 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None) -> dict:
     # the engine builds its graph from these module attributes: time every task
     tiling_engine.merge_summaries = timed(tiling_engine.merge_summaries, "merge")
     tiling_engine._tile_task = timed(tiling_engine._tile_task, "chunk")
+    # phases: the chunk pass (chunk tasks + merges), isolation across chunks, tables, writing
+    tiling_engine.tiled_orometry = rss.wrap(tiling_engine.tiled_orometry, "chunk pass")
+    tiling_isolation.tiled_isolation = rss.wrap(tiling_isolation.tiled_isolation, "isolation")
+    topo_engine.orometry = rss.wrap(topo_engine.orometry, "engine (in memory)")
+    metrics_isolation.isolation = rss.wrap(metrics_isolation.isolation, "isolation")
+    topo_engine.build_result = rss.wrap(topo_engine.build_result, "tables")
+    rss.enter("read")
     t0 = time.perf_counter()
     dem = read_dem(vrt, chunks=chunks)
     # as `orokit analyze VRT -o OUT --chunks N`: tables without point geometries, every file written
     r = orokit.analyze(dem, min_prominence_m=eps, chunks=chunks, geometry=False)
     t_analyze = time.perf_counter() - t0
-    rss_analyze = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    rss.enter("before writing")
+    rss_analyze = max(rss.peak.values())
     cells = int(dem.shape[0] * dem.shape[1])
     del dem
     if out:
+        rss.enter("writing")
         orokit.write_analysis(r, out, overwrite=True)
     dt = time.perf_counter() - t0
+    by_phase = rss.stop()
     return {
         "cells": cells,
         "seconds": dt,
@@ -130,15 +210,19 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None) -> dict:
         "peaks": int(len(r.peaks)),
         "timings": r.attrs["timings_s"],
         "task_costs": cost,
-        "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        # the phases cover the whole run: their largest peak is the process's (ru_maxrss is reset with them)
+        "rss_mb": max(by_phase.values()),
         "rss_mb_before_writing": rss_analyze,
+        "rss_mb_by_phase": by_phase,
         "load_average_1min": os.getloadavg()[0],
     }
 
 
-def measure(vrt: Path, chunks: int | None, eps: float, out: Path | None = None) -> dict:
+def measure(vrt: Path, chunks: int | None, eps: float, out: Path | None = None, rss_log: Path | None = None) -> dict:
     """:func:`run_one` in a fresh subprocess."""
     cmd = [sys.executable, __file__, "--one", str(vrt), "--eps", str(eps)]
+    if rss_log:
+        cmd += ["--rss-log", str(rss_log)]
     if chunks:
         cmd += ["--chunks", str(chunks)]
     if out:
@@ -161,9 +245,11 @@ def main() -> None:
     ap.add_argument("--one")
     ap.add_argument("--eps", type=float)
     ap.add_argument("--out")
+    ap.add_argument("--rss-log", help="(with --one) append every resident-memory sample here: seconds phase MB")
     args = ap.parse_args()
     if args.one:
-        print(json.dumps(run_one(args.one, args.chunks if "--chunks" in sys.argv else None, args.eps, args.out)))
+        print(json.dumps(run_one(args.one, args.chunks if "--chunks" in sys.argv else None, args.eps, args.out,
+                                 args.rss_log)))
         return
 
     import pandas as pd
@@ -180,13 +266,14 @@ def main() -> None:
         modes = [("chunked", args.chunks)] + ([("in-memory", None)] if n <= args.in_memory_max else [])
         for mode, ch in modes:
             out = args.workdir / f"analysis_{n}_{mode}"
-            m = measure(vrt, ch, eps, out)
+            m = measure(vrt, ch, eps, out, rss_log=args.workdir / f"rss_{n}_{mode}.log")
             rows[n, mode] = m
             tc = m["task_costs"]
             merge = (f"{tc['chunks']:>6d} {tc['chunk_s']:>8.1f} {tc['merges']:>6d} {tc['merge_s']:>8.1f}"
                      if tc["chunks"] else f"{'':>6} {'':>8} {'':>6} {'':>8}")
             print(f"{n:>3}x{n:<4} {m['cells'] / 1e6:>8.1f} {mode:>10} {m['peaks']:>8d} {m['seconds']:>8.1f} "
                   f"{m['cells'] / m['seconds'] / 1e6:>6.1f} {m['rss_mb']:>11.0f} {merge} {m['load_average_1min']:>5.1f}")
+            print("         peak RSS MB by phase: " + ", ".join(f"{k} {v:.0f}" for k, v in m["rss_mb_by_phase"].items()))
     summary = {"chunks": args.chunks, "eps_ft": args.eps_ft, "dem": args.dem,
                "runs": [{"mosaic": n, "mode": mode, **m} for (n, mode), m in rows.items()]}
     both = [n for n in args.sizes if (n, "in-memory") in rows]
