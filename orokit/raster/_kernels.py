@@ -425,3 +425,40 @@ def flood_levels(z: np.ndarray, mask: np.ndarray, owner: np.ndarray) -> tuple[np
                 level[i, j] = -np.inf
                 source[i, j] = -1
     return level, source
+
+
+@njit(cache=True, nogil=True)
+def basin_owner(lab: np.ndarray, tid: np.ndarray) -> np.ndarray:
+    """``tid[lab]`` where ``lab >= 0``, else -2 (NaN cells): the tree peak owning each cell's
+    basin (one pass; same values as ``np.where(lab >= 0, tid[max(lab, 0)], -2)``)."""
+    out = np.empty(lab.size, np.int64)
+    for i in range(lab.size):
+        v = lab[i]
+        out[i] = tid[v] if v >= 0 else -2
+    return out
+
+
+@njit(cache=True, nogil=True)
+def border_pairs(owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Flat indices ``(a, b)`` of 8-adjacent cells whose ``owner`` differs (both >= 0): for the
+    offsets E, SW, S, SE in turn, the pairs in raster order of ``a``."""
+    ny, nx = owner.shape
+    cnt = 0
+    for step in range(2):
+        if step == 1:
+            ia = np.empty(cnt, np.int64)
+            ib = np.empty(cnt, np.int64)
+            cnt = 0
+        for d in range(4):
+            dr = 0 if d == 0 else 1
+            dc = 1 if d == 0 else d - 2  # E, then SW, S, SE
+            for i in range(ny - dr):
+                for j in range(max(0, -dc), nx - max(0, dc)):
+                    oa = owner[i, j]
+                    ob = owner[i + dr, j + dc]
+                    if oa != ob and oa >= 0 and ob >= 0:
+                        if step == 1:
+                            ia[cnt] = i * nx + j
+                            ib[cnt] = (i + dr) * nx + j + dc
+                        cnt += 1
+    return ia, ib

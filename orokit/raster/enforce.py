@@ -88,18 +88,9 @@ def enforce_orometry(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, label:
 
 
 def _border_pairs(owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Flat indices ``(a, b)`` of 8-adjacent cells whose ``owner`` differs (both >= 0)."""
-    ny, nx = owner.shape
-    ia, ib = [], []
-    idx = np.arange(ny * nx, dtype=np.int64).reshape(ny, nx)
-    for dr, dc in ((0, 1), (1, -1), (1, 0), (1, 1)):
-        a = (slice(0, ny - dr), slice(max(0, -dc), nx - max(0, dc)))
-        b = (slice(dr, ny), slice(max(0, dc), nx - max(0, -dc)))
-        oa, ob = owner[a], owner[b]
-        m = (oa != ob) & (oa >= 0) & (ob >= 0)
-        ia.append(idx[a][m])
-        ib.append(idx[b][m])
-    return np.concatenate(ia), np.concatenate(ib)
+    """Flat indices ``(a, b)`` of 8-adjacent cells whose ``owner`` differs (both >= 0)
+    (:func:`_kernels.border_pairs`: offsets E, SW, S, SE, each in raster order)."""
+    return _kernels.border_pairs(np.ascontiguousarray(owner, np.int64))
 
 
 def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.ndarray, drop_m: float = 0.5,
@@ -152,8 +143,8 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
         """Tree peak owning each cell's basin (-1: a spurious maximum, -2: NaN), basin labels, basin tops."""
         lab, peak_cell = steepest_ascent_basins(z)
         k = np.minimum(np.searchsorted(cells, peak_cell), cells.size - 1)
-        tid = np.where(cells[k] == peak_cell, pid[k], -1)
-        return np.where(lab >= 0, tid[np.maximum(lab, 0)], -2).reshape(z.shape), lab, peak_cell
+        tid = np.where(cells[k] == peak_cell, pid[k], -1).astype(np.int64)
+        return _kernels.basin_owner(lab.reshape(-1), tid).reshape(z.shape), lab, peak_cell
 
     def spurious_hills(own: np.ndarray, lab: np.ndarray, top: np.ndarray):
         """Mask of spurious basins, the tree peak each drains to and whether it is kept."""

@@ -62,8 +62,8 @@ def sample_elevation(
     Returns ``(h, d_ridge, d_river)``.
     """
     tree = cKDTree(ridge_xy)
-    dT, iq = tree.query(points)
-    dR, ir = cKDTree(river_xy).query(points)
+    dT, iq = tree.query(points, workers=-1)  # both cores; same answers
+    dR, ir = cKDTree(river_xy).query(points, workers=-1)
     w = river_w[ir]
     hq, hr = ridge_z[iq], river_z[ir]
     denom = np.maximum(dR + dT - w, 1e-9)
@@ -100,7 +100,7 @@ def flank_envelope(points: np.ndarray, ridge_xy: np.ndarray, ridge_z: np.ndarray
     """
     tree = tree if tree is not None else cKDTree(ridge_xy)
     k = min(k_neighbours, ridge_xy.shape[0])
-    dk, ik = tree.query(points, k=k)
+    dk, ik = tree.query(points, k=k, workers=-1)
     dk, ik = dk.reshape(points.shape[0], -1), ik.reshape(points.shape[0], -1)
     env = np.max(ridge_z[ik] - ridge_slope[ik] * dk, axis=1)
     if ridge_floor is not None:

@@ -48,11 +48,12 @@ def fractal_noise(
     out = np.zeros(shape, np.float32)
     n_oct = max(int(np.floor(np.log2(max(largest_m / (2.0 * res), 1.0)))) + 1, 1)
     amp = 1.0
+    base = None if roughness is None else 0.25 + 0.75 * np.clip(roughness, 0.0, 1.0)  # once, not per octave
     for k in range(n_oct):
         wave = largest_m / 2.0**k
         o = _octave(shape, max(wave / res, 1.0), rng) * amp
-        if roughness is not None:
-            o *= np.power(0.25 + 0.75 * np.clip(roughness, 0.0, 1.0), k / n_oct).astype(np.float32)
+        if base is not None:
+            o *= np.power(base, k / n_oct).astype(np.float32)
         out += o
         amp *= persistence
     peak = float(np.max(np.abs(out))) if out.size else 0.0

@@ -92,6 +92,39 @@ def _segment_params(p0, p1, q0, q1):
     return np.clip(np.nan_to_num(u, nan=0.5), 0.0, 1.0)
 
 
+def _flood_from_outlets(start: np.ndarray, src: np.ndarray, dst: np.ndarray, xy: np.ndarray, bnd: np.ndarray,
+                        outlet: np.ndarray, base_elevation: float) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Priority flood over the river graph (CSR ``start``/``dst``, entries sorted by ``src``) from
+    the outlets, lowest bound first: every reached node's receiver, flow distance to its outlet,
+    and the nodes in the order they were reached."""
+    n = xy.shape[0]
+    receiver = np.full(n, -1, np.int64)
+    seen = np.zeros(n, bool)
+    heap: list[tuple[float, float, int]] = []
+    for o in np.flatnonzero(outlet):
+        heapq.heappush(heap, (float(min(bnd[o], base_elevation)), 0.0, int(o)))
+        seen[o] = True
+    # plain lists and the edge lengths computed at once (the same np.hypot values as edge by
+    # edge) keep the Python loop fast
+    elen = np.hypot(xy[dst, 0] - xy[src, 0], xy[dst, 1] - xy[src, 1]).tolist()
+    start_l, dst_l, bnd_l, seen_l = start.tolist(), dst.tolist(), bnd.tolist(), seen.tolist()
+    rec_l, fd_l = receiver.tolist(), [0.0] * n
+    order: list[int] = []
+    while heap:
+        key, dist, v = heapq.heappop(heap)
+        order.append(v)
+        for k in range(start_l[v], start_l[v + 1]):
+            w = dst_l[k]
+            if seen_l[w]:
+                continue
+            seen_l[w] = True
+            rec_l[w] = v
+            d = elen[k]
+            fd_l[w] = dist + d
+            heapq.heappush(heap, (max(key, bnd_l[w]), dist + d, w))
+    return np.asarray(rec_l, dtype=np.int64), np.asarray(fd_l, dtype=np.float64), order
+
+
 def river_network(
     ridges: RidgeSegments,
     node_xy: np.ndarray,
@@ -196,26 +229,7 @@ def river_network(
     src, dst = src[order_e], dst[order_e]
     start = np.searchsorted(src, np.arange(n + 1))
 
-    receiver = np.full(n, -1, np.int64)
-    flowdist = np.zeros(n)
-    seen = np.zeros(n, bool)
-    heap: list[tuple[float, float, int]] = []
-    for o in np.flatnonzero(outlet):
-        heapq.heappush(heap, (float(min(bnd[o], base_elevation)), 0.0, int(o)))
-        seen[o] = True
-    order: list[int] = []
-    while heap:
-        key, dist, v = heapq.heappop(heap)
-        order.append(v)
-        for k in range(start[v], start[v + 1]):
-            w = int(dst[k])
-            if seen[w]:
-                continue
-            seen[w] = True
-            receiver[w] = v
-            d = float(np.hypot(*(xy[w] - xy[v])))
-            flowdist[w] = dist + d
-            heapq.heappush(heap, (max(key, float(bnd[w])), dist + d, w))
+    receiver, flowdist, order = _flood_from_outlets(start, src, dst, xy, bnd, outlet, base_elevation)
     reached = np.asarray(order, dtype=np.int64)
     if reached.size < n:
         logger.debug("%d river nodes cannot reach an outlet; dropped", n - reached.size)

@@ -176,7 +176,7 @@ def build_skeleton(
     if params.flank_max_slope is not None and n < nodes.shape[0]:
         # steep cones dig valley walls that follow them (> 60 deg tails); beside a saddle
         # (within 2 lambda) they stay steep so the saddle stays the highest pass
-        near, _ = cKDTree(nodes[n:, :2]).query(rxy)
+        near, _ = cKDTree(nodes[n:, :2]).query(rxy, workers=-1)
         rs = np.where(near > 2.0 * lam, np.minimum(rs, params.flank_max_slope), rs)
     rfloor = _cone_floor(ridge_lines, rorig, ridges, nodes[:, 2], params.flank_depth)
     rtree = cKDTree(rxy)
@@ -203,7 +203,7 @@ def build_skeleton(
     ])
     # drainage area: each sample's area goes to its nearest river node
     cell_area = (pext[2] - pext[0]) * (pext[3] - pext[1]) / max(samples.shape[0], 1)
-    _, near = cKDTree(rivers.xy).query(samples)
+    _, near = cKDTree(rivers.xy).query(samples, workers=-1)
     local = np.bincount(near, minlength=rivers.n_nodes) * cell_area
     area = rivers.drainage_area(local)
     river_seg = rivers.edges()
