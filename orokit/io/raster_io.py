@@ -39,7 +39,8 @@ def write_cog(dem: xr.DataArray, path: PathLike, *, tags: dict[str, Any] | None 
         raise InputError(f"write_cog writes one 2-D band; got an array of shape {z.shape}")
     profile = {"driver": "COG", "width": z.shape[1], "height": z.shape[0], "count": 1, "dtype": "float32",
                "crs": dem.rio.crs, "transform": dem.rio.transform(), "nodata": np.nan,
-               "compress": "DEFLATE", "predictor": 3}
+               "compress": "DEFLATE", "predictor": 3,
+               "num_threads": "ALL_CPUS"}  # compression on every core: the same file bytes, less wall time
     with atomic_path(path) as tmp:
         with rasterio.open(tmp, "w", **profile) as dst:
             dst.write(z, 1)

@@ -122,3 +122,28 @@ def test_river_flood_equals_the_per_edge_version(seed):
     want = _flood_reference(start, dst, xy, bnd, outlet, 50.0)
     got = _flood_from_outlets(start, src, dst, xy, bnd, outlet, 50.0)
     assert np.array_equal(got[0], want[0]) and got[1].tobytes() == want[1].tobytes() and got[2] == want[2]
+
+
+def test_write_cog_threads_give_the_same_file(tmp_path):
+    """write_cog compresses on every core (NUM_THREADS=ALL_CPUS): the file is byte for byte the
+    single-threaded one."""
+    import rasterio
+
+    from helpers.orometry_oracles import make_dem
+    from orokit.io.raster_io import write_cog
+
+    z = ndimage.gaussian_filter(np.random.default_rng(3).normal(0, 50, (700, 900)), 4).astype(np.float32)
+    dem = make_dem(z)
+    dem.attrs["units"] = "m"
+    write_cog(dem, tmp_path / "threads.tif")
+    with rasterio.open(tmp_path / "threads.tif") as src:
+        profile = {"driver": "COG", "width": src.width, "height": src.height, "count": 1, "dtype": "float32",
+                   "crs": src.crs, "transform": src.transform, "nodata": np.nan, "compress": "DEFLATE",
+                   "predictor": 3}
+        tags, units, desc = src.tags(), src.units, src.descriptions
+    with rasterio.open(tmp_path / "one.tif", "w", **profile) as dst:
+        dst.write(z, 1)
+        dst.units = units
+        dst.set_band_description(1, desc[0])
+        dst.update_tags(**tags)
+    assert (tmp_path / "threads.tif").read_bytes() == (tmp_path / "one.tif").read_bytes()
