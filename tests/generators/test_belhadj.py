@@ -172,6 +172,16 @@ def test_same_seed_same_raster_and_different_seed_differs():
     assert a.attrs["seed"] == 11 and a.attrs["generator"] == "belhadj"
 
 
+@pytest.mark.parametrize("cell", [50.0, 100.0])
+def test_relief_displacement_is_a_share_of_the_relief_per_km(cell):
+    """relief_displacement r: the same raster as displacement_m_per_cell = r x relief x cell (km)."""
+    tree = small_tree()  # relief: 1500 m peak - 900 m lowest saddle = 600 m
+    a = render_terrain(tree, generator="belhadj", cell_size_m=cell, seed=5, params={"relief_displacement": 0.05})
+    b = render_terrain(tree, generator="belhadj", cell_size_m=cell, seed=5,
+                       params={"displacement_m_per_cell": 0.05 * 600.0 * cell / 1000.0})
+    assert a.values.tobytes() == b.values.tobytes()
+
+
 def test_padding_keeps_the_grid_and_crops():
     tree = small_tree()
     dem = render_terrain(tree, generator="belhadj", cell_size_m=100.0, extent=(0.0, 0.0, 8000.0, 6000.0), seed=1)
@@ -181,6 +191,7 @@ def test_padding_keeps_the_grid_and_crops():
 
 
 @pytest.mark.parametrize("bad", [{"hurst": 0.0}, {"hurst": 3.0}, {"displacement_m_per_cell": -1.0},
+                                 {"relief_displacement": -0.1},
                                  {"subdivision": "square-square"}, {"skeleton": "voronoi"},
                                  {"ridge_pairs": 0}, {"ridge_hurst": 1.0}, {"friction": 1.0}, {"gravity": 0.0},
                                  {"river_particles": -1}])
