@@ -56,6 +56,9 @@ class RenderParams:
     flank_neighbours : the cone envelope is the highest cone of this many nearest ridge points; far from
         the ridges a small set makes the envelope jump where its highest cone drops out of the set
         (steep steps mid-slope: on the Everest render 16 gives 4.7 % of cells > 60 deg, 64 gives 3.5 %).
+    max_slope_deg : critical hillslope angle: the skeleton raster's cells are raised so none lies
+        more than ``tan(max_slope_deg)`` x distance below a neighbour
+        (:func:`orokit.raster.hillslope.limit_slope`, before texture, noise and erosion); None: off.
     surface : ``"tin"`` (the paper: Poisson samples capped by the flank cones, triangulated and
         rasterized) or ``"field"`` (every cell from its nearest ridge and river cell by exact
         distance transforms, :func:`orokit.raster.interpolate.field_elevation`: no facets, no
@@ -83,6 +86,7 @@ class RenderParams:
     flank_slope: float = 0.05
     flank_ratio: float = 1.5
     profiles: str = "linear"
+    max_slope_deg: float | None = None
     surface: str = "tin"
     field_smooth_m: float = 200.0
     field_weight: float = 1.0
@@ -107,6 +111,8 @@ class RenderParams:
 
         if self.profiles not in ("learned", "linear"):
             raise InputError(f"profiles must be 'learned' or 'linear', got {self.profiles!r}")
+        if self.max_slope_deg is not None and not 0.0 < float(self.max_slope_deg) < 90.0:
+            raise InputError(f"max_slope_deg must be in (0, 90) degrees or None, got {self.max_slope_deg!r}")
         if self.surface not in ("tin", "field"):
             raise InputError(f"surface must be 'tin' or 'field', got {self.surface!r}")
 

@@ -23,6 +23,7 @@ from orokit._typing import SeedLike
 from orokit.errors import CRSError, DivideTreeError, InputError, OrokitWarning
 from orokit.raster.enforce import enforce_orometry
 from orokit.raster.erosion import erode_multiscale
+from orokit.raster.hillslope import limit_slope
 from orokit.raster.interpolate import field_elevation, valley_width
 from orokit.raster.noise import falloff, fractal_noise, spectral_noise
 from orokit.raster.params import RenderParams
@@ -218,6 +219,8 @@ def render_elevation(
     set_cells(z, grid, nodes[:, :2], nodes[:, 2])
     if np.isnan(z).any():
         z = np.where(np.isnan(z), np.float32(np.nanmin(z)), z)
+    if params.max_slope_deg is not None:
+        z = limit_slope(z, grid.cell_size_m, params.max_slope_deg)
     timings["raster"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

@@ -286,3 +286,32 @@ def test_river_max_sink_keeps_beds_near_their_bound():
     assert (held.elevation >= free.elevation - 1e-9).all()
     assert (held.elevation[inner] >= 645.0 - 20.0 - 1e-9).all()  # the bound is at most cap - margin
     assert (free.elevation[inner] < 600.0).any()  # the sweep pinned some beds far below it
+
+
+def test_limit_slope_fills_cliff_feet_only():
+    """A cliff becomes a talus of the critical slope; cells are only raised, a gentler plane is
+    unchanged, and no new maximum appears (the tree's peaks stay the only ones)."""
+    from scipy import ndimage
+
+    from orokit.raster.hillslope import limit_slope
+
+    res = 30.0
+    yy, xx = np.mgrid[0:60, 0:80] * res
+    plane = 0.2 * xx + 0.1 * yy  # ~12.6 deg
+    assert np.array_equal(limit_slope(plane, res, 45.0), plane)
+    z = np.where(xx > 1200.0, 500.0, 0.0) + plane
+    z[30, 60] += 300.0  # a pinnacle: one maximum
+    out = limit_slope(z, res, 45.0)
+    assert (out >= z).all()
+    t = np.tan(np.radians(45.0)) * res
+    assert (np.abs(np.diff(out, axis=1)) <= t + 1e-9).all() and (np.abs(np.diff(out, axis=0)) <= t + 1e-9).all()
+    assert (np.abs(out[1:, 1:] - out[:-1, :-1]) <= t * np.sqrt(2) + 1e-9).all()
+    assert out[30, 60] == z[30, 60]  # the summit keeps its height
+    # local maxima (>= all 8 neighbours): only the pinnacle and the cliff top's far corner
+    fp = np.ones((3, 3), bool)
+    fp[1, 1] = False
+    neigh = ndimage.maximum_filter(out, footprint=fp, mode="constant", cval=-np.inf)
+    assert np.argwhere(out > neigh).tolist() == np.argwhere(z > ndimage.maximum_filter(
+        z, footprint=fp, mode="constant", cval=-np.inf)).tolist()
+    with pytest.raises(InputError):
+        RenderParams(max_slope_deg=95.0)
