@@ -105,6 +105,9 @@ def chunk_isolation(core: np.ndarray, row0: int, col0: int, shape: tuple[int, in
     ok = best * (1.0 + metric.slack) < exterior
     nan = _mk.nearest_nan_query(*_mk.nan_pyramid(core), rows[ok], cols[ok], best[ok], *args)
     c = cand[ok]
+    # candidates fill each row from the left: keep only the columns some peak uses (one or two
+    # on a projected grid instead of ncand), this travels with the summaries until the end
+    c = c[:, :int((c >= 0).sum(axis=1).max(initial=0))]
     gc = np.where(c >= 0, (row0 + c // w) * W + col0 + c % w, -1)
     return {"key": keys[ok], "best": best[ok], "cand": gc, "nan": nan}
 
@@ -200,16 +203,13 @@ def _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, pz, rows, col
                 *metric.args(r0), metric.slack, metric.ncand,
             )
             bw = block["shape"][1]
-            for t, q in enumerate(p):
-                found = cl[t][cl[t] >= 0]
-                if found.size:
-                    g = (r0 + found // bw) * W + c0 + found % bw
-                    room = cand.shape[1] - ncand[q]
-                    g = g[:room]
-                    cand[q, ncand[q]:ncand[q] + g.size] = g
-                    ncand[q] += g.size
-                if b[t] < best[q]:
-                    best[q] = b[t]
+            # append each peak's candidates (a prefix of its row of cl) while its row of cand has room
+            take = np.minimum((cl >= 0).sum(axis=1), cand.shape[1] - ncand[p])
+            t, j = np.nonzero(np.arange(cl.shape[1])[None, :] < take[:, None])
+            found = cl[t, j]
+            cand[p[t], ncand[p[t]] + j] = (r0 + found // bw) * W + c0 + found % bw
+            ncand[p] += take
+            best[p] = np.minimum(best[p], b)
             lb[sel, k] = np.inf
 
 

@@ -127,7 +127,7 @@ def label_basins(ptr):
     return label, peak_cell
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def ascent_labels(z, lab):
     """Basins of steepest ascent of a whole raster, in place and in parallel row blocks.
 
