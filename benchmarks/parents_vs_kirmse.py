@@ -12,7 +12,9 @@ For each DEM (manifest dataset names or raster paths; default: every shared DEM)
 4. peaks are matched by cell (a Kirmse peak on a flat summit moved to the summit's first
    cell, orokit's convention), and so are both parents of every matched peak.
 
-A disagreement is a *tie* when two of the peaks on either program's walk from the peak to the
+A prominence parent disagreement is also a *tie* when orokit's parent has P's prominence
+(in feet): orokit counts the higher of two equally prominent peaks as more prominent, Kirmse's
+``compute_parents`` needs a strictly larger prominence. A disagreement is a *tie* when two of the peaks on either program's walk from the peak to the
 farther of the two parents (the chain of its line parents) have the same elevation (Kirmse
 takes the first peak at least as high, orokit the first strictly higher one in its
 raster-order tie rule, and Kirmse's line tree and island tree may order equal peaks
@@ -192,6 +194,10 @@ def compare(kirmse: pd.DataFrame, ours: pd.DataFrame, z_ft: np.ndarray, tree=Non
             heights = [z_ft[c] for c in chain]
             kheights = [z_ft[c] for c in kchain]
             tie = len(set(heights)) < len(heights) or len(set(kheights)) < len(kheights)
+            if kind == "prominence_parent" and ours_cell in o.index:
+                # equal prominences: orokit counts the higher peak as more prominent, Kirmse's
+                # compute_parents needs a strictly larger prominence
+                tie = tie or bool(np.rint(o.at[ours_cell, "prominence"] / FT) == np.rint(mine["prominence"] / FT))
             flat = any(_is_flat_summit(z_ft, *c) for c in (theirs, ours_cell) if c[0] >= 0)
             h, w = z_ft.shape
             on_edge = [c for c in chain + kchain + [(int(mine["saddle_row"]), int(mine["saddle_col"]))]

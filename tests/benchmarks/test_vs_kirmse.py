@@ -289,3 +289,29 @@ def test_kirmse_takes_the_other_branch_of_a_saddle_fork(kirmse_bin, tmp_path):
     p = rerooted[(rerooted["row"] == 3) & (rerooted["col"] == 1)].iloc[0]
     assert (p["line_parent_row"], p["line_parent_col"]) == (1, 5)
     assert (p["prominence_parent_row"], p["prominence_parent_col"]) == (5, 6)
+
+
+def test_equal_prominence_is_a_tie():
+    """P and Q have the same prominence (50 ft): orokit's prominence parent of P is the higher Q,
+    Kirmse's compute_parents (strictly more prominent) goes on to R; the benchmark counts a tie."""
+    import parents_vs_kirmse as pk
+
+    z = -np.arange(21, dtype=np.float64).reshape(3, 7) - 100.0
+    z[1, 1], z[1, 3], z[1, 5] = 100.0, 120.0, 200.0
+    cells = [(1, 1), (1, 3), (1, 5)]
+    line = [(1, 3), (1, 5), (-1, -1)]
+
+    def table(prom_parent, scale):
+        return pd.DataFrame({
+            "row": [c[0] for c in cells], "col": [c[1] for c in cells],
+            "elevation": np.array([100.0, 120.0, 200.0]) * scale, "prominence": np.array([50.0, 50.0, 200.0]) * scale,
+            "saddle_row": [1, 1, -1], "saddle_col": [2, 4, -1],
+            "line_parent_row": [c[0] for c in line], "line_parent_col": [c[1] for c in line],
+            "prominence_parent_row": [c[0] for c in prom_parent], "prominence_parent_col": [c[1] for c in prom_parent]})
+
+    ours = table([(1, 3), (1, 5), (-1, -1)], FT)
+    kirmse = table([(1, 5), (1, 5), (-1, -1)], 1.0)
+    r = pk.compare(kirmse, ours, z)
+    assert r["matched"] == 3 and r["line_parent"]["agree"] == 3
+    assert r["prominence_parent"]["agree"] == 2 and r["prominence_parent"]["tie"] == 1
+    assert r["prominence_parent"]["unexplained"] == 0
