@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import dataclasses
 import os
 import sys
@@ -111,6 +112,16 @@ def main() -> None:
             res[k] = float(np.mean([lay[k] for lay in res["layouts"]]))
         results.append(res)
         print(f"{title}: strip {100 * res['spatial']:.1f} %, blocks {100 * res['blocks']:.1f} %", flush=True)
+    # rows not rerun keep their figures from the last record (same seeds and runs only)
+    kept = []
+    last = ROOT / "reports" / "benchmarks" / "classification_layouts.json"
+    if a.rows is not None and last.exists():
+        prev = json.loads(last.read_text())["results"]
+        if prev["seeds"] == a.seeds and prev["runs"] == a.runs and prev["block_runs"] == a.block_runs:
+            done = {r["variant"] for r in results}
+            kept = [dict(r, kept=True) for r in prev["variants"] if r["variant"] not in done]
+    order = {t[0]: i for i, t in enumerate(table)}
+    results = sorted(kept + results, key=lambda r: order.get(r["variant"], len(order)))
     seeds = ", ".join(str(s) for s in a.seeds)
     lines = ["# The classifier's main choices over several disk layouts (R = 10 km, shared DEMs)", "",
              f"`python benchmarks/classification_layouts.py --seeds {' '.join(str(s) for s in a.seeds)} --runs "
@@ -119,13 +130,16 @@ def main() -> None:
              f"Strip = held-out strip per region ({a.runs} runs), blocks = spatial k-fold with blocks of R/2 "
              f"({a.block_runs} run), training disks > 20 km from the held-out disks in both; terrain = share of "
              f"held-out strips whose disks together get the right region. Mean over the layouts, then the "
-             f"figure of each layout. Extremely randomized trees (200) unless the row says otherwise.", "",
+             f"figure of each layout. Extremely randomized trees (200) unless the row says otherwise. Rows marked "
+             f"'earlier run' were not rerun (`--rows`): their figures come from the previous record with the same "
+             f"seeds and runs.", "",
              "| variant | features | strip % (mean) | strip % per layout | blocks % (mean) | blocks % per layout "
              "| terrain % (mean) |", "|---|---:|---:|---|---:|---|---:|"]
     for r in results:
         s = " / ".join(f"{100 * lay['spatial']:.1f}" for lay in r["layouts"])
         b = " / ".join(f"{100 * lay['blocks']:.1f}" for lay in r["layouts"])
-        lines.append(f"| {r['variant']} | {r['n_features']} | {100 * r['spatial']:.1f} | {s} | "
+        lines.append(f"| {r['variant']}{' (earlier run)' if r.get('kept') else ''} | {r['n_features']} | "
+                     f"{100 * r['spatial']:.1f} | {s} | "
                      f"{100 * r['blocks']:.1f} | {b} | {100 * r['terrain']:.1f} |")
     lines += ["", f"Load average at the end: {', '.join(f'{v:.1f}' for v in os.getloadavg())} (2 cores)."]
     write_text_atomic(a.out, "\n".join(lines) + "\n")
