@@ -247,8 +247,8 @@ def figures(type_name: str, size_km: float, res: float, seed: int, out: Path) ->
     return written
 
 
-def psnr_table(regions: list[str], side: int, radii: list[int], n_atoms: int, sparsities: list[int], seed: int
-               ) -> dict:
+def psnr_table(regions: list[str], side: int, radii: list[int], n_atoms: int, sparsities: list[int], seed: int,
+               on_row=None) -> dict:
     """Guérin 2016 Table 1 setting: K-SVD dictionary of ``n_atoms`` learned on a ``side``^2 terrain,
     the same terrain coded at sparsity s and rebuilt; PSNR = 20 log10(elevation range / RMSE);
     storage ratio rho = (K N + n (2 s + 2) + 1) / side^2 (the paper's t(s, N) / t0, K = (2R)^2
@@ -279,6 +279,8 @@ def psnr_table(regions: list[str], side: int, radii: list[int], n_atoms: int, sp
                              "psnr_db": round(20.0 * np.log10(float(z.max() - z.min()) / rmse), 2),
                              "time_s": round(time.perf_counter() - t0, 2)})
                 print(rows[-1], flush=True)
+                if on_row is not None:  # record after every row: one K-SVD run takes minutes
+                    on_row(rows)
     return {"paper_alps_512_n128": {"1": 23.7, "2": 26.4, "8": 31.1},
             "paper_storage_ratio": {"1": 0.149, "2": 0.200, "8": 0.509}, "rows": rows,
             "load_average_after": list(os.getloadavg())}
@@ -416,7 +418,11 @@ def main() -> None:
         sys.path.insert(0, str(Path(__file__).parent))
         from _record import record
 
-        res = psnr_table(a.regions.split(","), 512, [int(r) for r in a.radius.split(",")], 128, [1, 2, 8], a.seed)
+        def partial(rows):
+            record("guerin_psnr", {"partial": True, "rows": rows, "load_average_after": list(os.getloadavg())})
+
+        res = psnr_table(a.regions.split(","), 512, [int(r) for r in a.radius.split(",")], 128, [1, 2, 8], a.seed,
+                         on_row=partial)
         print(f"recorded in {record('guerin_psnr', res)}")
         return
     if a.child:
