@@ -383,9 +383,16 @@ class Evaluation:
         }
 
 
+def _predict_in_order(clf: Any) -> None:
+    """One thread for predicting: a threaded forest sums its trees' probabilities in any order."""
+    est = clf[-1]
+    if "n_jobs" in est.get_params():
+        est.set_params(n_jobs=1)
+
+
 def _fit_score(X: NDArray, y: NDArray, tr: NDArray, va: NDArray, cols: NDArray | None, seed: int,
-               n_estimators: int, classes: list[str], kind: ClassifierKind = "rf", strict: bool = True
-               ) -> tuple[float, NDArray[np.int64], list[tuple[str, str, float]], NDArray[np.int64],
+               n_estimators: int, classes: list[str], kind: ClassifierKind = "rf", strict: bool = True,
+               n_jobs: int = 1) -> tuple[float, NDArray[np.int64], list[tuple[str, str, float]], NDArray[np.int64],
                           NDArray[np.float64]]:
     """One fit: accuracy, confusion, terrain answers, the validation rows it tested and their
     probabilities (columns: ``classes``; 0 for a class without training disks)."""
@@ -402,8 +409,9 @@ def _fit_score(X: NDArray, y: NDArray, tr: NDArray, va: NDArray, cols: NDArray |
     if len(va) == 0 or len(np.unique(y[tr])) < 2 or not np.isin(np.unique(y[va]), y[tr]).all():
         return float("nan"), empty, [], *none
     Xs = X if cols is None else X[:, cols]
-    clf = make_classifier(kind, n_estimators=n_estimators, n_jobs=1, random_state=seed)
-    clf.fit(Xs[tr], y[tr])
+    clf = make_classifier(kind, n_estimators=n_estimators, n_jobs=n_jobs, random_state=seed)
+    clf.fit(Xs[tr], y[tr])  # the same trees for any n_jobs (their seeds are drawn before the fit)
+    _predict_in_order(clf)
     proba = clf.predict_proba(Xs[va])
     known = [str(c) for c in clf.classes_]
     pred = np.asarray(known)[np.argmax(proba, axis=1)]
@@ -448,7 +456,8 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
     min_disks, small_classes
         See :func:`check_classes`: a region with fewer disks is an error, or dropped.
     n_jobs : int
-        Parallel fits (threads).
+        Threads of each forest's fit (the fits run one after the other; the results do not
+        depend on it).
     classifier : {"rf", "hgb"}
         See :func:`make_classifier`.
     rng : Generator, int or None
@@ -458,7 +467,6 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
     -------
     Evaluation
     """
-    from sklearn.utils.parallel import Parallel, delayed  # propagates the sklearn config (and warning filters) to the workers
 
     if runs < 1:
         raise InputError(f"runs must be >= 1, got {runs}")
@@ -505,14 +513,16 @@ def evaluate(features: pd.DataFrame, *, runs: int = 100, split: SplitKind = "ran
             tasks += [(name, groups_cols[name], i, k) for i in range(fr) for k in range(len(splits[i]))]
     else:
         fr = 0
-    it = (delayed(_fit_score)(X, y, splits[i][k][0], splits[i][k][1], gc, int(seeds[i]) + k, n_estimators, classes,
-                              classifier, strict)
-          for _, gc, i, k in tasks)
+    # The fits run one after the other, each forest on n_jobs threads. Fits in concurrent threads
+    # raced on the process-wide warning filters (sklearn's workers reset them while another
+    # thread's Parallel captured them) and raised spurious sklearn UserWarnings.
+    todo = tasks
     if progress:
         from tqdm.auto import tqdm
 
-        it = tqdm(it, total=len(tasks), desc=f"training ({split} split)", unit="fit")
-    results = Parallel(n_jobs=n_jobs, prefer="threads")(it)
+        todo = tqdm(tasks, desc=f"training ({split} split)", unit="fit")
+    results = [_fit_score(X, y, splits[i][k][0], splits[i][k][1], gc, int(seeds[i]) + k, n_estimators, classes,
+                          classifier, strict, n_jobs) for _, gc, i, k in todo]
     nc = len(classes)
 
     def pooled(name: str | None, n_runs: int) -> tuple[NDArray[np.float64], list[NDArray[np.int64]]]:
@@ -592,9 +602,10 @@ class OpenSetEvaluation:
 
 
 def _fit_predict(X: NDArray, y: NDArray, tr: NDArray, tests: list[NDArray], seed: int, n_estimators: int,
-                 kind: ClassifierKind) -> tuple[list[str], list[NDArray[np.float64]]]:
-    clf = make_classifier(kind, n_estimators=n_estimators, n_jobs=1, random_state=seed)
+                 kind: ClassifierKind, n_jobs: int = 1) -> tuple[list[str], list[NDArray[np.float64]]]:
+    clf = make_classifier(kind, n_estimators=n_estimators, n_jobs=n_jobs, random_state=seed)
     clf.fit(X[tr], y[tr])
+    _predict_in_order(clf)
     return [str(c) for c in clf.classes_], [clf.predict_proba(X[t]) if len(t) else np.zeros((0, len(clf.classes_)))
                                            for t in tests]
 
@@ -616,7 +627,6 @@ def evaluate_open_set(features: pd.DataFrame, *, runs: int = 3, n_estimators: in
     on the left-out region.
     """
     from sklearn.metrics import roc_auc_score
-    from sklearn.utils.parallel import Parallel, delayed
 
     if runs < 1:
         raise InputError(f"runs must be >= 1, got {runs}")
@@ -645,12 +655,13 @@ def evaluate_open_set(features: pd.DataFrame, *, runs: int = 3, n_estimators: in
             tr, va = spatial_split(y[known], mx[known], my[known], groups=groups[known], buffer_m=buffer_m,
                                    max_train=max_train, max_val=max_val, val_fraction=val_fraction, rng=s)
             tasks.append((r, known[tr], known[va], unknown, int(s)))
-    it = (delayed(_fit_predict)(X, y, tr, [va, u], s, n_estimators, classifier) for _, tr, va, u, s in tasks)
+    todo = tasks
     if progress:
         from tqdm.auto import tqdm
 
-        it = tqdm(it, total=len(tasks), desc="open-set test (one region left out)", unit="fit")
-    results = Parallel(n_jobs=n_jobs, prefer="threads")(it)
+        todo = tqdm(tasks, desc="open-set test (one region left out)", unit="fit")
+    # one fit after the other, each forest on n_jobs threads (see evaluate)
+    results = [_fit_predict(X, y, tr, [va, u], s, n_estimators, classifier, n_jobs) for _, tr, va, u, s in todo]
     rows = []
     for r in classes:
         kc = [c for c in classes if c != r]
