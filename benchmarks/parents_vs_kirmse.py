@@ -395,11 +395,11 @@ def _key_saddles_differ_at_one_level(z: np.ndarray, rec, mine) -> bool:
     return theirs[0] >= 0 and ours[0] >= 0 and theirs != ours and bool(z[theirs] == z[ours])
 
 
-def _walk_diverges(z: np.ndarray, tree, p: tuple[int, int], theirs: tuple[int, int], ours: tuple[int, int],
-                   key_saddle: tuple[int, int]) -> bool:
-    """True when Kirmse's uphill walk leaves the steepest ascent at a saddle where the two walks
-    (P to orokit's parent, P to Kirmse's, on orokit's unpruned tree) have not parted yet: P's key
-    saddle, the saddles of their common part and the first saddle of each branch."""
+def _walk_saddles(tree, p: tuple[int, int], theirs: tuple[int, int], ours: tuple[int, int],
+                  key_saddle: tuple[int, int]) -> set[tuple[int, int]]:
+    """The saddles where the two walks (P to orokit's parent, P to Kirmse's, on orokit's unpruned
+    tree) have not parted yet: P's key saddle, the saddles of their common part and the first
+    saddle of each branch."""
     a = tree_path_saddles(tree, p, ours) if ours[0] >= 0 else []
     b = tree_path_saddles(tree, p, theirs) if theirs[0] >= 0 else []
     common = 0
@@ -408,21 +408,19 @@ def _walk_diverges(z: np.ndarray, tree, p: tuple[int, int], theirs: tuple[int, i
     cand = {key_saddle} if key_saddle[0] >= 0 else set()
     cand.update(a[:common + 1])
     cand.update(b[:common + 1])
-    return any(saddle_exit_divergence(z, s) for s in cand)
+    return cand
+
+
+def _walk_diverges(z: np.ndarray, tree, p: tuple[int, int], theirs: tuple[int, int], ours: tuple[int, int],
+                   key_saddle: tuple[int, int]) -> bool:
+    """True when Kirmse's uphill walk leaves the steepest ascent at one of :func:`_walk_saddles`."""
+    return any(saddle_exit_divergence(z, s) for s in _walk_saddles(tree, p, theirs, ours, key_saddle))
 
 
 def _walk_forks(z: np.ndarray, tree, p: tuple[int, int], theirs: tuple[int, int], ours: tuple[int, int],
                 key_saddle: tuple[int, int]) -> bool:
-    """True when one of the saddles of :func:`_walk_diverges` is a :func:`saddle_fork`."""
-    a = tree_path_saddles(tree, p, ours) if ours[0] >= 0 else []
-    b = tree_path_saddles(tree, p, theirs) if theirs[0] >= 0 else []
-    common = 0
-    while common < min(len(a), len(b)) and a[common] == b[common]:
-        common += 1
-    cand = {key_saddle} if key_saddle[0] >= 0 else set()
-    cand.update(a[:common + 1])
-    cand.update(b[:common + 1])
-    return any(saddle_fork(z, s) for s in cand)
+    """True when one of :func:`_walk_saddles` is a :func:`saddle_fork`."""
+    return any(saddle_fork(z, s) for s in _walk_saddles(tree, p, theirs, ours, key_saddle))
 
 
 def tree_path_saddles(tree, a: tuple[int, int], b: tuple[int, int]) -> list[tuple[int, int]]:

@@ -151,29 +151,29 @@ def test_render_without_exemplar_needs_profile_none():
     assert z.max() == pytest.approx(1500.0, abs=1e-3) and z[row[0], col[0]] == z.max()
 
 
+def _bumps_exemplar(grid):
+    """An exemplar DEM: three Gaussian hills on a 300 m plain."""
+    from orokit.generators.base import as_dataarray
+
+    x, y = grid.centres()
+    bumps = sum(h * np.exp(-((x[None, :] - cx) ** 2 + (y[:, None] - cy) ** 2) / 6e5)
+                for cx, cy, h in ((2000, 2000, 600), (6000, 5000, 500), (3000, 6500, 400)))
+    return as_dataarray(300 + bumps, grid, None)
+
+
 def test_render_with_an_exemplar_profile():
     tree = small_tree()
     grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 100.0)
-    x, y = grid.centres()
-    from orokit.generators.base import as_dataarray
-
-    bumps = sum(h * np.exp(-((x[None, :] - cx) ** 2 + (y[:, None] - cy) ** 2) / 6e5)
-                for cx, cy, h in ((2000, 2000, 600), (6000, 5000, 500), (3000, 6500, 400)))
-    ex = as_dataarray(300 + bumps, grid, None)
+    ex = _bumps_exemplar(grid)
     dem = render_terrain(tree, generator="rusnell", cell_size_m=100.0, exemplar=ex, seed=1)
     assert np.isfinite(dem.values).all() and dem.values.max() <= 1500.0 + 1e-3
 
 
 def test_a_fitted_profile_passed_in_gives_the_same_raster():
     """`learn` + `inputs={"learned": ...}` (the benchmark's cached profile fit) renders the same bytes."""
-    from orokit.generators.base import as_dataarray
-
     tree = small_tree()
     grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 100.0)
-    x, y = grid.centres()
-    bumps = sum(h * np.exp(-((x[None, :] - cx) ** 2 + (y[:, None] - cy) ** 2) / 6e5)
-                for cx, cy, h in ((2000, 2000, 600), (6000, 5000, 500), (3000, 6500, 400)))
-    ex = as_dataarray(300 + bumps, grid, None)
+    ex = _bumps_exemplar(grid)
     direct = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=2)
     prof = R.learn(ex, grid, R.RusnellParams(), np.random.default_rng(2))
     cached = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=2, inputs={"learned": prof})
