@@ -8,17 +8,20 @@ and written with ``orokit.write_analysis`` (what ``orokit analyze VRT -o OUT --c
 isolation on, in a fresh subprocess so its peak resident memory (all threads) is its own.
 Prints M cells/s, peak RSS, the summed time of chunk tasks and of merge tasks, time per
 cell against the in-memory run of the largest mosaic both handle, and (``--chunk-sweep``)
-the merge cost against the number of chunks; chunked and in-memory peak tables are
-compared for equality.
+the merge cost against the number of chunks; chunked and in-memory peak and saddle
+tables are compared for equality, and so are the threaded and the ``--workers``
+(``dask.distributed`` LocalCluster) runs.
 
 Run:  .venv/bin/python benchmarks/scaling.py [--sizes 6 12 49 98] [--chunks 2048]
           [--chunk-sweep 12 512 1024 2048] [--workdir /tmp/orokit-scaling]
+          [--workers 2 --distributed-sizes 24]   # also on a 2-process LocalCluster: tables compared
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -152,8 +155,20 @@ class _PhaseRss:
         return {k: round(v, 1) for k, v in self.peak.items() if k != "end"}
 
 
-def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: str | None = None) -> dict:
-    """One measurement (in a subprocess): analyse, report time, peak RSS (per phase) and task costs."""
+def _worker_peak_mb() -> float:
+    """Peak resident memory of this (worker) process in MB."""
+    return _PhaseRss.status_mb("VmHWM")
+
+
+def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: str | None = None,
+            workers: int = 0) -> dict:
+    """One measurement (in a subprocess): analyse, report time, peak RSS (per phase) and task costs.
+
+    With ``workers`` > 0 the chunk tasks, merges and isolation reads run on a
+    ``dask.distributed`` LocalCluster of that many single-threaded worker processes
+    (started before the clock); their peak resident memory is reported per worker,
+    and task costs are not timed (the tasks run in other processes).
+    """
     import threading
 
     rss = _PhaseRss(log=rss_log)
@@ -179,9 +194,17 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
                     cost[what + "s"] += 1
         return wrapper
 
-    # the engine builds its graph from these module attributes: time every task
-    tiling_engine.merge_summaries = timed(tiling_engine.merge_summaries, "merge")
-    tiling_engine._tile_task = timed(tiling_engine._tile_task, "chunk")
+    cluster = client = None
+    if workers:
+        import distributed
+
+        cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                           dashboard_address=":0", memory_limit=0)
+        client = distributed.Client(cluster)
+    else:
+        # the engine builds its graph from these module attributes: time every task
+        tiling_engine.merge_summaries = timed(tiling_engine.merge_summaries, "merge")
+        tiling_engine._tile_task = timed(tiling_engine._tile_task, "chunk")
     # phases: the chunk pass (chunk tasks + merges), isolation across chunks, tables, writing
     tiling_engine.tiled_orometry = rss.wrap(tiling_engine.tiled_orometry, "chunk pass")
     tiling_isolation.tiled_isolation = rss.wrap(tiling_isolation.tiled_isolation, "isolation")
@@ -192,7 +215,7 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
     t0 = time.perf_counter()
     dem = read_dem(vrt, chunks=chunks)
     # as `orokit analyze VRT -o OUT --chunks N`: tables without point geometries, every file written
-    r = orokit.analyze(dem, min_prominence_m=eps, chunks=chunks, geometry=False)
+    r = orokit.analyze(dem, min_prominence_m=eps, chunks=chunks, geometry=False, scheduler=client)
     t_analyze = time.perf_counter() - t0
     rss.enter("before writing")
     rss_analyze = max(rss.peak.values())
@@ -202,11 +225,19 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
         rss.enter("writing")
         orokit.write_analysis(r, out, overwrite=True)
     dt = time.perf_counter() - t0
+    ru = resource.getrusage(resource.RUSAGE_SELF)
     by_phase = rss.stop()
+    worker_mb = None
+    if client is not None:
+        worker_mb = sorted(round(v, 1) for v in client.run(_worker_peak_mb).values())
+        client.close()
+        cluster.close()
     return {
         "cells": cells,
         "seconds": dt,
         "seconds_write": dt - t_analyze,
+        # CPU seconds of this process since it started (all threads; imports included)
+        "cpu_s": ru.ru_utime + ru.ru_stime,
         "peaks": int(len(r.peaks)),
         "timings": r.attrs["timings_s"],
         "task_costs": cost,
@@ -215,12 +246,15 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
         "rss_mb_before_writing": rss_analyze,
         "rss_mb_by_phase": by_phase,
         "load_average_1min": os.getloadavg()[0],
+        "workers": workers,
+        "worker_rss_mb": worker_mb,
     }
 
 
-def measure(vrt: Path, chunks: int | None, eps: float, out: Path | None = None, rss_log: Path | None = None) -> dict:
+def measure(vrt: Path, chunks: int | None, eps: float, out: Path | None = None, rss_log: Path | None = None,
+            workers: int = 0) -> dict:
     """:func:`run_one` in a fresh subprocess."""
-    cmd = [sys.executable, __file__, "--one", str(vrt), "--eps", str(eps)]
+    cmd = [sys.executable, __file__, "--one", str(vrt), "--eps", str(eps), "--workers", str(workers)]
     if rss_log:
         cmd += ["--rss-log", str(rss_log)]
     if chunks:
@@ -229,6 +263,13 @@ def measure(vrt: Path, chunks: int | None, eps: float, out: Path | None = None, 
         cmd += ["--out", str(out)]
     res = subprocess.run(cmd, capture_output=True, text=True, check=True)
     return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def _same_tables(a: Path, b: Path) -> bool:
+    """peaks.parquet and saddles.parquet of two analysis folders hold equal tables."""
+    import pandas as pd
+
+    return all(pd.read_parquet(a / f).equals(pd.read_parquet(b / f)) for f in ("peaks.parquet", "saddles.parquet"))
 
 
 def main() -> None:
@@ -245,11 +286,16 @@ def main() -> None:
     ap.add_argument("--one")
     ap.add_argument("--eps", type=float)
     ap.add_argument("--out")
+    ap.add_argument("--workers", type=int, default=0,
+                    help="also run each chunked mosaic on a dask.distributed LocalCluster of this many worker "
+                         "processes (one thread each) and compare its tables with the threaded run")
+    ap.add_argument("--distributed-sizes", type=int, nargs="+", metavar="N",
+                    help="with --workers: only these mosaics run on the cluster (default: all)")
     ap.add_argument("--rss-log", help="(with --one) append every resident-memory sample here: seconds phase MB")
     args = ap.parse_args()
     if args.one:
         print(json.dumps(run_one(args.one, args.chunks if "--chunks" in sys.argv else None, args.eps, args.out,
-                                 args.rss_log)))
+                                 args.rss_log, args.workers)))
         return
 
     import pandas as pd
@@ -264,39 +310,50 @@ def main() -> None:
     for n in args.sizes:
         vrt = write_mosaic(n, args.workdir, args.dem)
         modes = [("chunked", args.chunks)] + ([("in-memory", None)] if n <= args.in_memory_max else [])
+        modes += [("distributed", args.chunks)] if args.workers and n in (args.distributed_sizes or args.sizes) else []
         for mode, ch in modes:
             out = args.workdir / f"analysis_{n}_{mode}"
-            m = measure(vrt, ch, eps, out, rss_log=args.workdir / f"rss_{n}_{mode}.log")
+            m = measure(vrt, ch, eps, out, rss_log=args.workdir / f"rss_{n}_{mode}.log",
+                        workers=args.workers if mode == "distributed" else 0)
             rows[n, mode] = m
+            (args.workdir / f"run_{n}_{mode}.json").write_text(json.dumps(m))  # kept if a later size is stopped
             tc = m["task_costs"]
             merge = (f"{tc['chunks']:>6d} {tc['chunk_s']:>8.1f} {tc['merges']:>6d} {tc['merge_s']:>8.1f}"
                      if tc["chunks"] else f"{'':>6} {'':>8} {'':>6} {'':>8}")
             print(f"{n:>3}x{n:<4} {m['cells'] / 1e6:>8.1f} {mode:>10} {m['peaks']:>8d} {m['seconds']:>8.1f} "
-                  f"{m['cells'] / m['seconds'] / 1e6:>6.1f} {m['rss_mb']:>11.0f} {merge} {m['load_average_1min']:>5.1f}")
+                  f"{m['cells'] / m['seconds'] / 1e6:>6.1f} {m['rss_mb']:>11.0f} {merge} {m['load_average_1min']:>5.1f}"
+                  f"  ({m['cpu_s']:.0f} CPU s)")
             print("         peak RSS MB by phase: " + ", ".join(f"{k} {v:.0f}" for k, v in m["rss_mb_by_phase"].items()))
+            if mode == "distributed":
+                same = _same_tables(args.workdir / f"analysis_{n}_chunked", out)
+                m["tables_identical_to_threaded"] = same
+                print(f"         {args.workers} worker processes, peak RSS MB each: {m['worker_rss_mb']} "
+                      f"(the client process: {m['rss_mb']:.0f}); peaks and saddles identical to the threaded run: "
+                      f"{same}")
     summary = {"chunks": args.chunks, "eps_ft": args.eps_ft, "dem": args.dem,
                "runs": [{"mosaic": n, "mode": mode, **m} for (n, mode), m in rows.items()]}
     both = [n for n in args.sizes if (n, "in-memory") in rows]
     if both:
         n = max(both)
         c, i = rows[n, "chunked"], rows[n, "in-memory"]
-        a = pd.read_parquet(args.workdir / f"analysis_{n}_chunked" / "peaks.parquet")
-        b = pd.read_parquet(args.workdir / f"analysis_{n}_in-memory" / "peaks.parquet")
+        same = _same_tables(args.workdir / f"analysis_{n}_chunked", args.workdir / f"analysis_{n}_in-memory")
         print(f"largest raster both handle ({n}x{n}, {c['cells'] / 1e6:.1f} M cells): chunked/in-memory time "
               f"{c['seconds'] / i['seconds']:.2f}x, memory {c['rss_mb'] / i['rss_mb']:.2f}x; "
-              f"peak tables identical: {a.equals(b)}")
+              f"peak and saddle tables identical: {same}")
         summary.update({"time_ratio_chunked_vs_in_memory": c["seconds"] / i["seconds"],
                         "memory_ratio_chunked_vs_in_memory": c["rss_mb"] / i["rss_mb"],
-                        "tables_identical": bool(a.equals(b))})
+                        "tables_identical": same})
     if both:
         base = rows[max(both), "in-memory"]
         per_cell = base["seconds"] / base["cells"]
         for n in args.sizes:
             c = rows[n, "chunked"]
             ratio = (c["seconds"] / c["cells"]) / per_cell
+            cpu_ratio = (c["cpu_s"] / c["cells"]) / (base["cpu_s"] / base["cells"])
             print(f"{n}x{n} chunked: time per cell {ratio:.2f}x the in-memory {max(both)}x{max(both)} run "
-                  f"(target <= 1.3), peak RSS {c['rss_mb'] / 1024:.2f} GB (target < 2)")
+                  f"(target <= 1.3; CPU per cell {cpu_ratio:.2f}x), peak RSS {c['rss_mb'] / 1024:.2f} GB (target < 2)")
             c["time_per_cell_vs_in_memory"] = ratio
+            c["cpu_per_cell_vs_in_memory"] = cpu_ratio
     if args.chunk_sweep:
         n = args.chunk_sweep[0]
         vrt = write_mosaic(n, args.workdir, args.dem)

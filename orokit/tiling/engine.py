@@ -86,7 +86,11 @@ class _Window:
         self.array = data[max(r0 - 1, 0):min(r1 + 1, H), max(c0 - 1, 0):min(c1 + 1, W)]
 
     def read(self) -> np.ndarray:
-        block = np.asarray(self.array.compute(scheduler="sync"), dtype=np.float64)
+        """The window with NaN outside the raster: float32 when stored so (the kernels order
+        float32 values exactly as their float64 copies, at half the memory), else float64."""
+        block = np.asarray(self.array.compute(scheduler="sync"))
+        if block.dtype != np.float32:
+            block = block.astype(np.float64)
         return np.pad(block, self.pad, constant_values=np.nan) if any(sum(self.pad, ())) else block
 
 
@@ -123,10 +127,10 @@ def _corrupt_chunk(path: str) -> bool:
 def _tile_task(window: _Window, ij: tuple[int, int], row0: int, col0: int, shape, min_prominence_m: float,
                path: str | None, metric) -> _Part:
     block = window.read()
-    core = np.ascontiguousarray(block[1:-1, 1:-1])
-    stats = block_stats(core)
     summary = chunk_summary(block, row0, col0, shape, min_prominence_m)
+    core = np.ascontiguousarray(block[1:-1, 1:-1])  # made after the summary: one raster copy alive at a time
     del block
+    stats = block_stats(core)
     iso = None
     if metric is not None:
         iso = chunk_isolation(core, row0, col0, shape, summary.key[summary.ismax], metric)

@@ -114,6 +114,14 @@ def _reduce(s: ChunkSummary, min_prominence_m: float, needed: np.ndarray) -> Chu
     )
 
 
+def _frame(h: int, w: int) -> np.ndarray:
+    """Flat indices of the cells on the sides of an h x w block, increasing, each once."""
+    rows = np.arange(1, h - 1)
+    inner = np.stack([rows * w, rows * w + w - 1], axis=1).ravel() if w > 1 else rows * w
+    last = np.arange((h - 1) * w, h * w) if h > 1 else np.empty(0, np.int64)
+    return np.concatenate([np.arange(w), inner, last]).astype(np.int64)
+
+
 def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
                   min_prominence_m: float) -> ChunkSummary:
     """Summary of one chunk given with a one-cell halo (NaN outside the raster).
@@ -130,6 +138,9 @@ def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
     region = (row0, row0 + h, col0, col0 + w)
     ptr, exit_to, border = _k.steepest_ascent(zh)
     label, end_cell = _k.label_basins(ptr)
+    del ptr
+    out = exit_to[end_cell]  # chain ends: maxima of the raster, or exits whose ascent goes on next door
+    del exit_to
     npk = end_cell.size
     empty_i = np.empty(0, np.int64)
     if npk == 0:
@@ -143,14 +154,11 @@ def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
     def glob(i):
         return (row0 + i // w) * W + col0 + i % w
 
-    # chain ends: maxima of the raster, or exits whose ascent goes on in a neighbour chunk
-    out = exit_to[end_cell]
     is_exit = out >= 0
     nexit = np.where(is_exit, (row0 - 1 + out // (w + 2)) * W + col0 - 1 + out % (w + 2), -1)
     # side cells that are not chain ends become extra nodes, tied to their basin
-    rr, cc = np.divmod(np.arange(h * w), w)
-    side = (rr == 0) | (rr == h - 1) | (cc == 0) | (cc == w - 1)
-    side_cells = np.flatnonzero(side & (label >= 0))
+    side_cells = _frame(h, w)
+    side_cells = side_cells[label[side_cells] >= 0]
     side_cells = side_cells[_side_mask(glob(side_cells), region, shape)]
     is_end = np.zeros(h * w, bool)
     is_end[end_cell] = True
