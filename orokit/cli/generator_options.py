@@ -13,7 +13,7 @@ __all__ = ["generator_options", "check_generator_inputs", "render_generator", "f
 
 #: raster attrs written as COG tags besides those :func:`write_cog` always writes
 EXTRA_TAGS = ("generator_paper", "tree_sha256", "tree_file_sha256", "exemplar_sha256", "coarse_sha256",
-              "generators_sha256", "map_sha256", "cell_counts", "n_tree_peaks")
+              "generators_sha256", "map_sha256", "cell_counts", "derived", "n_tree_peaks")
 
 
 def _list_generators(ctx: click.Context, param: click.Parameter, value: bool) -> None:

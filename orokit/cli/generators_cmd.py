@@ -133,6 +133,8 @@ def _measure(dem_path: Path, tree, type_file: Path, real, model_path: Path | Non
     r["shape"] = f"{dem.shape[1]}x{dem.shape[0]}"
     r["real_shape"] = f"{real.shape[1]}x{real.shape[0]}"
     r["parameters"] = json.loads(tags.get("parameters", "{}"))
+    if "derived" in tags:  # parameter values the backend set from its inputs (e.g. the exemplar)
+        r["derived"] = json.loads(tags["derived"])
     return r
 
 

@@ -71,9 +71,9 @@ GENERATORS: dict[str, GeneratorSpec] = {
                             "amplification (§5.3) of the tree's interpolated ridges and rivers, or of a coarse DEM "
                             "(coarse=DEM), with a complete, constrained or K-SVD dictionary of exemplar patches"),
     "michel": GeneratorSpec("michel", "Michel et al. 2015, doi:10.2312/egsh.20151011",
-                            "orokit.generators.michel", "MichelParams", ("tree", "rivers"),
+                            "orokit.generators.michel", "MichelParams", ("tree", "rivers", "exemplar"),
                             "peak positions + rivers, or the paper's vector map (map=FILE); orokit's defaults for T1, "
-                            "T2, blur, k, slopes"),
+                            "T2, blur, k, slopes; valley sides at the exemplar's mean slope (optional exemplar)"),
 }
 
 
@@ -135,7 +135,8 @@ def render_terrain(
     Returns
     -------
     DataArray (float32 metres, NaN nodata, CRS/transform) with attrs ``generator``,
-    ``parameters`` (JSON), ``seed``, ``orokit_version``, ``tree_sha256``, ``timings`` (JSON).
+    ``parameters`` (JSON), ``seed``, ``orokit_version``, ``tree_sha256``, ``timings`` (JSON), and
+    ``derived`` (JSON) when the backend set parameter values from its inputs.
     """
     from orokit import __version__
     from orokit.generators.base import params_to_dict, tree_arrays, tree_rivers, tree_sha256
@@ -169,6 +170,7 @@ def render_terrain(
     if "rivers" in spec.inputs:
         timings["rivers"] = t_rivers
     counts = da.attrs.pop("cell_counts", None)
+    derived = da.attrs.pop("derived", None)
     da.attrs.update({
         "units": "m",
         "generator": spec.name,
@@ -182,4 +184,6 @@ def render_terrain(
     })
     if counts is not None:
         da.attrs["cell_counts"] = json.dumps(counts)
+    if derived is not None:  # parameters a backend set from its inputs (e.g. the exemplar)
+        da.attrs["derived"] = json.dumps(derived)
     return da

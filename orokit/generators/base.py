@@ -118,6 +118,30 @@ def as_dataarray(z: np.ndarray, grid: Grid, crs: Any, attrs: dict[str, Any] | No
     return da
 
 
+def exemplar_slope(exemplar: xr.DataArray) -> float:
+    """Mean slope of a real DEM as a gradient (m/m): ``tan`` of its mean slope angle.
+
+    Central differences with the grid's metric cell sizes (per row on lon/lat grids), NaN
+    cells left out; the same slope as :func:`orokit.validate.landform.landform_statistics`.
+
+    Raises
+    ------
+    InputError : the DEM has no two valid neighbouring cells.
+    """
+    from orokit.raster.shade import row_cell_sizes_m
+
+    z = np.asarray(exemplar.values, dtype=np.float64)
+    if z.ndim != 2 or min(z.shape) < 3:
+        raise InputError(f"the exemplar DEM must be a 2-D grid of at least 3 x 3 cells; got shape {z.shape}")
+    dxr, dy = row_cell_sizes_m(exemplar)
+    gy, gx = np.gradient(z)
+    g = np.hypot(gx / np.asarray(dxr, dtype=np.float64)[:, None], gy / float(dy))
+    g = g[np.isfinite(g)]
+    if g.size == 0:
+        raise InputError("the exemplar DEM has no valid slope (all nodata?); pass a DEM with valid cells")
+    return float(np.tan(np.mean(np.arctan(g))))
+
+
 # ----------------------------------------------------------------------------- parameters
 def params_to_dict(params: Any) -> dict[str, Any]:
     """A parameters dataclass as a JSON-ready dict (tuples become lists)."""

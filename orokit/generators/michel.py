@@ -23,7 +23,7 @@ import xarray as xr
 from scipy import ndimage
 
 from orokit.errors import InputError
-from orokit.generators.base import as_dataarray, check_crs, tree_arrays
+from orokit.generators.base import as_dataarray, check_crs, exemplar_slope, tree_arrays
 from orokit.raster.rasterize import Grid
 from orokit.raster.rivers import RiverNetwork
 
@@ -44,7 +44,16 @@ class MichelParams:
     k_min : fold attenuation far from the peaks, ``k = k_min + (1 - k_min) exp(-d^2 / 2 k_sigma_m^2)``.
     k_sigma_m : distance scale of that attenuation (metres).
     river_slope, hill_slope : slopes (m/m) of the watershed map along the rivers and away from them.
-    mask_m : distance to the rivers (metres) where the fold map fully takes over from the watershed.
+    mask_m : distance to the rivers (metres) where the fold map fully takes over from the watershed
+        (used when ``valley_slope`` is 0, or NaN without an exemplar).
+    valley_slope : the paper's mask m is "some normalized distance to rivers"; orokit
+        normalises it so that the valley sides, where ``h`` passes from the watershed to the
+        folds, rise at this slope (m/m): m reaches 1 at ``median(F - g) / valley_slope`` from the
+        rivers (F the fold map scaled to the relief, g the watershed). NaN (default): the
+        exemplar DEM's mean slope (:func:`orokit.generators.base.exemplar_slope`), or ``mask_m``
+        without an exemplar; 0: always ``mask_m``. Ranking trees (seed 0, appalachians /
+        karakoram / norway / sahara), landform targets met of 9: ``mask_m`` 1 km 3 / 2 / 2 / 4,
+        the exemplar's slope 7 / 4 / 3 / 4.
     erosion : run the fastscapelib stream-power erosion of :mod:`orokit.raster.erosion`.
     map : a vector map file (GeoPackage, GeoJSON, shapefile; read by
         :func:`orokit.io.vector_map_io.read_vector_map`) used instead of the tree's peaks and rivers.
@@ -61,6 +70,7 @@ class MichelParams:
     river_slope: float = 0.005
     hill_slope: float = 0.05
     mask_m: float = 1000.0
+    valley_slope: float = float("nan")
     erosion: bool = True
     map: str = field(default="", metadata={"file": "vector"})
     top_m: float = 2000.0
@@ -70,6 +80,8 @@ class MichelParams:
             raise InputError(f"t1 must be in [-1, 1] (a dot product of unit vectors), got {self.t1!r}")
         if not (0.0 <= self.t2 < 1.0):
             raise InputError(f"t2 must be in [0, 1) (an area ratio), got {self.t2!r}")
+        if not (math.isnan(self.valley_slope) or (self.valley_slope >= 0 and math.isfinite(self.valley_slope))):
+            raise InputError(f"valley_slope must be NaN (the exemplar's), 0 (mask_m) or a slope > 0, got {self.valley_slope!r}")
         for name in ("blur_m", "k_sigma_m", "mask_m"):
             v = getattr(self, name)
             if not (v > 0 and math.isfinite(v)):
@@ -401,7 +413,8 @@ def map_watershed(vmap: VectorMap, grid: Grid, *, river_slope: float, hill_slope
 
 
 def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generator,
-           params: MichelParams | None = None, *, map: VectorMap | None = None) -> xr.DataArray:  # noqa: A002
+           params: MichelParams | None = None, *, map: VectorMap | None = None,  # noqa: A002
+           exemplar: xr.DataArray | None = None) -> xr.DataArray:
     """Elevation raster after Michel et al. 2015 from a Divide Tree's peak positions and rivers,
     or from a vector map (``map``, read by the caller from ``params.map``).
 
@@ -413,10 +426,11 @@ def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generat
     4. Folds: ``f(p) = fBm(p + V(p)) x k(p)``, k falling with the distance to the nearest peak.
     5. Watershed g (:func:`watershed_map`) from the rivers, the sea at their outlets; with a
        map, :func:`map_watershed` (sea outside the land polygons, at 0 m).
-    6. ``h = g (1 - m) + F m`` with m = distance to the rivers (and the sea) / ``mask_m``
+    6. ``h = g (1 - m) + F m`` with m = distance to the rivers (and the sea) / D
        (clipped to 1) and F the fold map scaled to the relief (from the sea, the rivers'
        outlet level, to the highest peak; with a map from 0 to its top elevation or
-       ``top_m``); g starts at the sea.
+       ``top_m``); g starts at the sea. ``D = median(F - g) / valley_slope`` off the rivers
+       (``valley_slope`` NaN: the exemplar's mean slope), or ``mask_m``.
     7. Optional fastscapelib erosion (:func:`orokit.raster.erosion.erode_multiscale`, no uplift).
 
     From a tree, its peak heights, saddles and ridges are not used (the paper's input is a
@@ -469,9 +483,15 @@ def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generat
         wet = river | ~land
         sea, top = 0.0, float(map.top_m if map.top_m is not None else params.top_m)
     dist = ndimage.distance_transform_edt(~wet, sampling=grid.cell_size_m)
-    m = np.clip(dist / params.mask_m, 0.0, 1.0)
     fmax = float(f.max())
     F = sea + (top - sea) * (f / fmax if fmax > 0 else f)
+    slope = params.valley_slope
+    if math.isnan(slope):
+        slope = exemplar_slope(exemplar) if exemplar is not None else 0.0
+    mask_m = params.mask_m
+    if slope > 0 and (~wet).any():
+        mask_m = max(float(np.median((F - sea - g)[~wet])) / slope, grid.cell_size_m)
+    m = np.clip(dist / mask_m, 0.0, 1.0)
     h = sea + g * (1.0 - m) + (F - sea) * m
     t["watershed"] = time.perf_counter() - t0
     if params.erosion:
@@ -482,4 +502,6 @@ def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generat
                              scales_m=(max(100.0, grid.cell_size_m),), steps=(3,), k_dt=0.02, max_nodes=4_000_000)
         t["erosion"] = time.perf_counter() - t0
     logger.info("michel: %d sub-plates -> %d plates", int(ok.sum()), plates.n)
-    return as_dataarray(np.asarray(h, np.float32), grid, crs, {"timings": t, "cell_counts": {"plates": plates.n}})
+    return as_dataarray(np.asarray(h, np.float32), grid, crs, {"timings": t, "cell_counts": {"plates": plates.n},
+                                                               "derived": {"mask_m": round(mask_m, 3),
+                                                                           "valley_slope": round(slope, 6)}})

@@ -100,7 +100,8 @@ def test_watershed_drains_every_cell():
 
 
 @pytest.mark.parametrize("bad", [{"t1": 1.5}, {"t2": 1.0}, {"blur_m": 0.0}, {"k_min": 1.0}, {"fbm_beta": 6.0},
-                                 {"river_slope": 0.2, "hill_slope": 0.1}])
+                                 {"river_slope": 0.2, "hill_slope": 0.1}, {"valley_slope": -0.1},
+                                 {"valley_slope": float("inf")}])
 def test_out_of_range_parameters_are_refused(bad):
     with pytest.raises(InputError):
         M.MichelParams(**bad)
@@ -112,6 +113,44 @@ def test_render_scales_to_the_tree_relief():
     z = dem.values
     assert np.isfinite(z).all() and z.max() <= 1500.0 + 1e-3
     assert z.max() - z.min() > 300.0
+
+
+def _plane(slope, grid):
+    from orokit.generators.base import as_dataarray
+
+    x, _ = grid.centres()
+    return as_dataarray(np.broadcast_to(slope * (x - x[0]), (grid.ny, grid.nx)), grid, "EPSG:32633")
+
+
+def test_exemplar_slope_of_a_plane_is_its_gradient():
+    from orokit.generators.base import exemplar_slope
+
+    grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 100.0)
+    assert exemplar_slope(_plane(0.3, grid)) == pytest.approx(0.3, rel=1e-9)
+    with pytest.raises(InputError, match="exemplar"):
+        exemplar_slope(_plane(0.3, grid).where(False))
+
+
+def test_valley_sides_follow_the_valley_slope_and_the_exemplar():
+    tree = small_tree("EPSG:32633")
+    grid = make_grid((0.0, 0.0, 8000.0, 8000.0), 50.0)
+
+    def mean_slope(dem):
+        gy, gx = np.gradient(dem.values.astype(float), 50.0)
+        return float(np.hypot(gx, gy).mean())
+
+    base = {"erosion": False}
+    gentle = render_terrain(tree, generator="michel", grid=grid, params={**base, "valley_slope": 0.05}, seed=3)
+    steep = render_terrain(tree, generator="michel", grid=grid, params={**base, "valley_slope": 0.5}, seed=3)
+    assert mean_slope(steep) > mean_slope(gentle)
+    assert json.loads(steep.attrs["derived"])["valley_slope"] == 0.5
+    # NaN (the default) takes the exemplar's mean slope; without an exemplar, mask_m (= valley_slope 0)
+    ex = render_terrain(tree, generator="michel", grid=grid, params=base, seed=3, exemplar=_plane(0.5, grid))
+    np.testing.assert_array_equal(ex.values, steep.values)
+    plain = render_terrain(tree, generator="michel", grid=grid, params=base, seed=3)
+    fixed = render_terrain(tree, generator="michel", grid=grid, params={**base, "valley_slope": 0.0}, seed=3)
+    np.testing.assert_array_equal(plain.values, fixed.values)
+    assert json.loads(plain.attrs["derived"])["mask_m"] == M.MichelParams().mask_m
 
 
 # ----------------------------------------------------------------------------- plain mode: a vector map
