@@ -4,7 +4,7 @@ Usage:
     python benchmarks/generators.py bench [--generator all|belhadj,...] [--type norway] [--size-km 60] [--res 30]
     python benchmarks/generators.py figures [--type norway] [--size-km 30] [--res 30]
     python benchmarks/generators.py michel [--type norway] [--seeds 0,1,2]
-    python benchmarks/generators.py psnr [--regions pyrenees,himalaya-everest,norway] [--radius 16]
+    python benchmarks/generators.py psnr [--regions pyrenees,himalaya-everest,norway] [--radius 16] [--step radius]
 
 ``bench``: one Divide Tree of SIZE x SIZE km is synthesized from the committed terrain type
 ``reports/synthesis/types/TYPE.json`` (seed 0) and rendered at RES metres by each generator, each
@@ -248,15 +248,15 @@ def figures(type_name: str, size_km: float, res: float, seed: int, out: Path) ->
 
 
 def psnr_table(regions: list[str], side: int, radii: list[int], n_atoms: int, sparsities: list[int], seed: int,
-               on_row=None) -> dict:
+               on_row=None, step: str = "half-radius") -> dict:
     """Guérin 2016 Table 1 setting: K-SVD dictionary of ``n_atoms`` learned on a ``side``^2 terrain,
     the same terrain coded at sparsity s and rebuilt; PSNR = 20 log10(elevation range / RMSE);
     storage ratio rho = (K N + n (2 s + 2) + 1) / side^2 (the paper's t(s, N) / t0, K = (2R)^2
-    samples an atom, n primitives)."""
+    samples an atom, n primitives on the grid of ``step``: R/2 or R)."""
     import numpy as np
 
     from orokit.data import open_dataset_dem
-    from orokit.generators.guerin import GuerinParams, build_dictionary, synthesize
+    from orokit.generators.guerin import GuerinParams, build_dictionary, primitive_step, synthesize
 
     rows = []
     for region in regions:
@@ -264,15 +264,15 @@ def psnr_table(regions: list[str], side: int, radii: list[int], n_atoms: int, sp
         i0, j0 = (z.shape[0] - side) // 2, (z.shape[1] - side) // 2
         z = z[i0:i0 + side, j0:j0 + side]
         for radius in radii:
-            n_prim = (side // (radius // 2) + 1) ** 2
+            n_prim = (-(-side // primitive_step(radius, step)) + 1) ** 2
             for s in sparsities:
                 t0 = time.perf_counter()
-                p = GuerinParams(radius=radius, factor=1, sparsity=s, dictionary="ksvd", n_atoms=n_atoms)
+                p = GuerinParams(radius=radius, factor=1, sparsity=s, dictionary="ksvd", n_atoms=n_atoms, step=step)
                 d = build_dictionary(z, p, np.random.default_rng(seed))
                 rec = synthesize(z, d, s, z.shape)
                 rmse = float(np.sqrt(np.mean((rec - z) ** 2)))
                 k = (2 * radius) ** 2
-                rows.append({"region": region, "side": side, "radius": radius, "patch_k": k,
+                rows.append({"region": region, "side": side, "radius": radius, "step": step, "patch_k": k,
                              "n_atoms": int(d.n_atoms), "sparsity": s, "primitives": n_prim,
                              "storage_ratio": round((k * d.n_atoms + n_prim * (2 * s + 2) + 1) / side**2, 3),
                              "rmse_m": round(rmse, 2), "range_m": round(float(z.max() - z.min()), 1),
@@ -388,6 +388,8 @@ def main() -> None:
     ap.add_argument("what", choices=["bench", "figures", "psnr", "michel"])
     ap.add_argument("--regions", default="pyrenees,himalaya-everest,norway")
     ap.add_argument("--radius", default="16", help="psnr: comma-separated radii (cells)")
+    ap.add_argument("--step", default="half-radius", choices=["half-radius", "radius"],
+                    help="psnr: grid step of the primitives (R/2 or R; recorded in guerin_psnr[_step_radius].json)")
     ap.add_argument("--generator", default="all", help="bench: all, or comma-separated backends")
     ap.add_argument("--type", dest="type_name", default="norway")
     ap.add_argument("--size-km", type=float, default=None)
@@ -418,12 +420,14 @@ def main() -> None:
         sys.path.insert(0, str(Path(__file__).parent))
         from _record import record
 
+        name = "guerin_psnr" + ("_step_radius" if a.step == "radius" else "")
+
         def partial(rows):
-            record("guerin_psnr", {"partial": True, "rows": rows, "load_average_after": list(os.getloadavg())})
+            record(name, {"partial": True, "rows": rows, "load_average_after": list(os.getloadavg())})
 
         res = psnr_table(a.regions.split(","), 512, [int(r) for r in a.radius.split(",")], 128, [1, 2, 8], a.seed,
-                         on_row=partial)
-        print(f"recorded in {record('guerin_psnr', res)}")
+                         on_row=partial, step=a.step)
+        print(f"recorded in {record(name, res)}")
         return
     if a.child:
         print(json.dumps(bench(a.generator, Path(a.tree_file), a.type_name, a.res, a.seed, a.param)))

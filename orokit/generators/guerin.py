@@ -3,7 +3,7 @@
 E. Guérin, J. Digne, E. Galin, A. Peytavie, *Sparse representation of terrains for
 procedural modeling*, Computer Graphics Forum 35(2), 2016 (doi:10.1111/cgf.12821).
 
-A terrain is a blend of disk primitives of radius R centred on a grid of step R/2:
+A terrain is a blend of disk primitives of radius R centred on a grid of step R/2 (or R, ``step``):
 ``f = sum f_i a_i / sum a_i`` with ``a_i = (1 - r^2)^3`` (r = distance / R) and
 ``f_i = z_i + sum_j x_ij d_j``, where ``z_i`` is the patch mean and the ``x_i`` are sparse
 codes (orthogonal matching pursuit, sparsity s) over a dictionary of zero-mean atoms.
@@ -32,10 +32,22 @@ from orokit.raster.rasterize import Grid
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["GuerinParams", "Dictionary", "build_dictionary", "sparse_codes", "synthesize", "amplify",
+__all__ = ["GuerinParams", "Dictionary", "primitive_step", "build_dictionary", "sparse_codes", "synthesize", "amplify",
            "coarse_from_tree", "weight_kernel", "learn", "render"]
 
 _DICTIONARIES = ("complete", "constrained", "ksvd")
+_STEPS = ("half-radius", "radius")
+
+
+def primitive_step(radius: int, step: str = "half-radius") -> int:
+    """Grid step (cells) of the primitives' centres: ``R/2`` (``half-radius``) or ``R`` (``radius``).
+
+    >>> primitive_step(8), primitive_step(8, "radius")
+    (4, 8)
+    """
+    if step not in _STEPS:
+        raise InputError(f"step={step!r} is not one of {', '.join(_STEPS)}")
+    return radius // 2 if step == "half-radius" else radius
 
 
 @dataclass(frozen=True)
@@ -55,6 +67,10 @@ class GuerinParams:
         ``ksvd`` (K-SVD on the joined (L, H) vectors, so the pairs stay in correspondence).
     n_atoms : N for the learned dictionaries (the paper: up to 10^4).
     iterations : learning iterations (constrained, ksvd).
+    step : grid step of the primitives' centres: ``half-radius`` (R/2: the issue's and the
+        paper's text, "the grid step is half the patch radius") or ``radius`` (R: what the
+        paper's own count ``t0 = w h = n K / 4`` and its Table 1 storage ratios imply, n
+        primitives of K = 4 R^2 samples); R/2 places 4 x as many primitives.
     coarse : a coarse DEM (file or manifest dataset) to amplify instead of the tree's
         interpolated ridges and rivers; read by the caller (CLI ``--param coarse=DEM.tif``,
         Python ``render_terrain(..., inputs={"coarse": dem})``).
@@ -66,6 +82,7 @@ class GuerinParams:
     dictionary: str = field(default="complete", metadata={"choices": _DICTIONARIES})
     n_atoms: int = 1024
     iterations: int = 4
+    step: str = field(default="half-radius", metadata={"choices": _STEPS})
     coarse: str = field(default="", metadata={"file": "dem"})
 
     def __post_init__(self) -> None:
@@ -90,6 +107,7 @@ class GuerinParams:
             raise InputError(f"n_atoms must be an integer in [1, 100000], got {self.n_atoms!r}")
         if not (isinstance(self.iterations, int) and 0 <= self.iterations <= 100):
             raise InputError(f"iterations must be an integer in [0, 100], got {self.iterations!r}")
+        primitive_step(self.radius, self.step)  # refuses an unknown step
 
 
 @dataclass(frozen=True)
@@ -97,13 +115,19 @@ class Dictionary:
     """A multi-resolution dictionary: ``low`` (N, k_L) atoms, zero-mean and L2-normalised,
     and ``high`` (N, 2R, 2R) their exemplar counterparts (zero-mean, same scale: the block
     average of ``high[j]`` by ``factor`` is ``low[j]``). ``source`` (N,) is the index of the
-    exemplar primitive an atom was taken from (-1 for a K-SVD atom)."""
+    exemplar primitive an atom was taken from (-1 for a K-SVD atom); ``step`` the grid step
+    (cells) of the primitives it was learned from and that :func:`synthesize` uses."""
 
     low: np.ndarray
     high: np.ndarray
     source: np.ndarray
     radius: int
     factor: int
+    step: int = 0
+
+    def __post_init__(self) -> None:
+        if self.step == 0:
+            object.__setattr__(self, "step", self.radius // 2)
 
     @property
     def n_atoms(self) -> int:
@@ -145,11 +169,12 @@ def _pad(z: np.ndarray, pad: int) -> np.ndarray:
     return np.pad(z, pad, mode="symmetric")
 
 
-def primitives(z: np.ndarray, radius: int, factor: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def primitives(z: np.ndarray, radius: int, factor: int, step: int | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The primitives of a terrain ``z``: high ``(n, 2R, 2R)``, low ``(n, k_L)`` (block means),
-    and their means ``(n,)``. Centres every R/2 cells; the terrain is mirrored at its borders.
-    Patches holding nodata are NaN (callers drop them)."""
-    step = radius // 2
+    and their means ``(n,)``. Centres every ``step`` cells (default R/2); the terrain is
+    mirrored at its borders. Patches holding nodata are NaN (callers drop them)."""
+    step = radius // 2 if step is None else int(step)
     pad = 2 * radius
     zp = _pad(np.asarray(z, float), pad)
     rows, cols = _centres(z.shape[0], step), _centres(z.shape[1], step)
@@ -222,7 +247,7 @@ LEARN_SIGNALS = 8192
 def build_dictionary(exemplar: np.ndarray, params: GuerinParams, rng: np.random.Generator) -> Dictionary:
     """The multi-resolution dictionary of an exemplar (array in metres, NaN nodata).
 
-    ``complete``: every primitive of the exemplar (grid of step R/2, mirrored borders)
+    ``complete``: every primitive of the exemplar (grid of ``step``, mirrored borders)
     that holds no nodata and is not flat. ``constrained``: ``n_atoms`` of them, drawn at
     random then improved ``iterations`` times by the paper's problem 2 (code every
     primitive, then replace each atom by the primitive that best fits the restricted
@@ -234,17 +259,18 @@ def build_dictionary(exemplar: np.ndarray, params: GuerinParams, rng: np.random.
     InputError : the exemplar has no usable primitive (too small, all nodata or flat).
     """
     R, f = params.radius, params.factor
+    step = primitive_step(R, params.step)
     ex = np.asarray(exemplar, float)
     if ex.ndim != 2 or min(ex.shape) < 2 * R:
         raise InputError(f"the exemplar ({' x '.join(map(str, ex.shape))} cells) is smaller than one patch "
                          f"({2 * R} x {2 * R} cells at radius={R}); pass a larger exemplar DEM or a smaller radius")
-    high, low, mean = primitives(ex, R, f)
+    high, low, mean = primitives(ex, R, f, step)
     lo, hi, idx = _normalised_pairs(high, low, mean)
     if idx.size == 0:
         raise InputError("the exemplar has no usable patch (every patch holds nodata or is flat); "
                          "pass an exemplar DEM with relief")
     if params.dictionary == "complete":
-        return Dictionary(lo, hi, idx, R, f)
+        return Dictionary(lo, hi, idx, R, f, step)
     n = min(params.n_atoms, idx.size)
     pick = np.sort(rng.choice(idx.size, size=n, replace=False))
     train = np.sort(rng.choice(idx.size, size=min(idx.size, LEARN_SIGNALS), replace=False))
@@ -267,7 +293,7 @@ def build_dictionary(exemplar: np.ndarray, params: GuerinParams, rng: np.random.
                 approx[users] += np.outer(x[users, j], new)
                 atoms[j] = best
         atoms = np.unique(atoms)
-        return Dictionary(lo[atoms], hi[atoms], idx[atoms], R, f)
+        return Dictionary(lo[atoms], hi[atoms], idx[atoms], R, f, step)
     # ksvd on joined vectors: the low part is the coding space, the high part follows
     from scipy.linalg import svd
 
@@ -292,7 +318,7 @@ def build_dictionary(exemplar: np.ndarray, params: GuerinParams, rng: np.random.
     d = d[keep]
     low_atoms = d[:, :kl] / lnorm[keep, None]
     high_atoms = (d[:, kl:] * f / lnorm[keep, None]).reshape(-1, 2 * R, 2 * R)
-    return Dictionary(low_atoms, high_atoms, np.full(low_atoms.shape[0], -1), R, f)
+    return Dictionary(low_atoms, high_atoms, np.full(low_atoms.shape[0], -1), R, f, step)
 
 
 def synthesize(coarse: np.ndarray, dictionary: Dictionary, sparsity: int, shape: tuple[int, int]) -> np.ndarray:
@@ -307,7 +333,7 @@ def synthesize(coarse: np.ndarray, dictionary: Dictionary, sparsity: int, shape:
     """
     R, f = dictionary.radius, dictionary.factor
     ny, nx = shape
-    step = R // 2
+    step = dictionary.step
     rows, cols = _centres(ny, step), _centres(nx, step)
     z = np.asarray(coarse, float)
     lw = 2 * R // f
@@ -457,9 +483,11 @@ def render(tree, rivers, grid: Grid, rng: np.random.Generator, params: GuerinPar
     if learned is None:
         learned = learn(exemplar, grid, params, rng)
         timings["dictionary"] = time.perf_counter() - t0
-    elif (learned.radius, learned.factor) != (params.radius, params.factor):
-        raise InputError(f"the learned dictionary has radius {learned.radius}, factor {learned.factor}; the "
-                         f"parameters ask for radius {params.radius}, factor {params.factor}: learn it again")
+    elif (learned.radius, learned.factor, learned.step) != (params.radius, params.factor,
+                                                            primitive_step(params.radius, params.step)):
+        raise InputError(f"the learned dictionary has radius {learned.radius}, factor {learned.factor}, step "
+                         f"{learned.step}; the parameters ask for radius {params.radius}, factor {params.factor}, "
+                         f"step {params.step}: learn it again")
     d = learned
     h = max(_exemplar_cell(exemplar), grid.cell_size_m)
     t0 = time.perf_counter()

@@ -34,14 +34,18 @@ def test_weights_are_the_papers_falloff():
     assert np.allclose(w, np.where(r < 1, (1 - r**2) ** 3, 0.0))
 
 
+@pytest.mark.parametrize("step", ["half-radius", "radius"])
 @pytest.mark.parametrize("radius", [4, 8])
-def test_complete_dictionary_at_s1_reconstructs_exactly(radius):
+def test_complete_dictionary_at_s1_reconstructs_exactly(radius, step):
     z = fractal(96, 0)[:90, :77]  # not a multiple of the step: mirrored borders
-    p = GuerinParams(radius=radius, factor=1, sparsity=1, dictionary="complete")
+    p = GuerinParams(radius=radius, factor=1, sparsity=1, dictionary="complete", step=step)
     d = build_dictionary(z, p, np.random.default_rng(0))
     rec = synthesize(z, d, 1, z.shape)
     assert rec.shape == z.shape
     assert np.abs(rec - z).max() < 1e-9 * np.abs(z).max()
+    # centres every R/2 or R cells (0, step, ... up to the first one >= the side)
+    g = radius // 2 if step == "half-radius" else radius
+    assert d.step == g and d.n_atoms == (-(-90 // g) + 1) * (-(-77 // g) + 1)
 
 
 def test_error_falls_with_sparsity_and_atoms():
@@ -183,16 +187,17 @@ def test_a_learned_dictionary_passed_in_gives_the_same_raster(kind):
                             inputs={"learned": d})
     assert cached.values.tobytes() == direct.values.tobytes()
     assert "dictionary" in direct.attrs["timings"] and "dictionary" not in cached.attrs["timings"]
-    with pytest.raises(InputError, match="learn it again"):
-        render_terrain(tree, generator="guerin", grid=grid, exemplar=exemplar, seed=3,
-                       params=GuerinParams(radius=16, factor=4), inputs={"learned": d})
+    for other in (GuerinParams(radius=16, factor=4), GuerinParams(radius=8, factor=4, step="radius")):
+        with pytest.raises(InputError, match="learn it again"):
+            render_terrain(tree, generator="guerin", grid=grid, exemplar=exemplar, seed=3, params=other,
+                           inputs={"learned": d})
 
 
 @pytest.mark.parametrize("kv, msg", [
     ({"radius": 7}, "radius must be an even"), ({"radius": 16, "factor": 3}, "must divide"),
     ({"sparsity": 0}, "sparsity must be"), ({"radius": 4, "factor": 8}, "at least 2 cells"),
     ({"sparsity": 5, "radius": 8, "factor": 8}, "exceeds the coarse patch"), ({"n_atoms": 0}, "n_atoms"),
-    ({"dictionary": "pca"}, "not one of"), ({"iterations": -1}, "iterations"),
+    ({"dictionary": "pca"}, "not one of"), ({"iterations": -1}, "iterations"), ({"step": "quarter"}, "not one of"),
 ])
 def test_out_of_range_parameters_are_refused(kv, msg):
     with pytest.raises(InputError, match=msg):
