@@ -144,6 +144,37 @@ def landform_target_counts(runs: list[dict]) -> Any:
     return table.sort_index()
 
 
+def landform_target_counts_by_region(runs: list[dict]) -> tuple[Any, dict[str, str]]:
+    """Per generator (rows) and landform statistic (columns): runs within target per region,
+    as ``"A3 K0 ..."`` (region initial and count; the legend maps initials to regions and
+    their run counts). A statistic a backend meets in every run of every region reads all
+    full counts."""
+    import pandas as pd
+
+    regions = sorted({r["region"] for r in runs})
+    tags: dict[str, str] = {}
+    for reg in regions:  # shortest unique prefix, upper case
+        n = 1
+        while any(o != reg and o[:n].lower() == reg[:n].lower() for o in regions) and n < len(reg):
+            n += 1
+        tags[reg] = reg[:n].capitalize() if n > 1 else reg[:1].upper()
+    counts: dict[str, dict[str, dict[str, list[int]]]] = {}
+    for r in runs:
+        if r.get("failed") or not r.get("landform") or not r.get("landform_target"):
+            continue
+        row = counts.setdefault(r["generator"], {})
+        for k, d in r["landform"].items():
+            t = r["landform_target"].get(k)
+            if t is None:
+                continue
+            c = row.setdefault(k, {}).setdefault(r["region"], [0, 0])
+            c[0] += int(float(d) <= float(t))
+            c[1] += 1
+    table = pd.DataFrame({g: {k: " ".join(f"{tags[reg]}{a}" for reg, (a, _) in sorted(per.items()))
+                              for k, per in row.items()} for g, row in counts.items()}).T
+    return table.sort_index(), tags
+
+
 def _fmt(v: float, pct: bool) -> str:
     if v != v:  # NaN
         return "–"
@@ -199,6 +230,13 @@ def ranking_markdown(runs: list[dict], note: str | None = None) -> str:
                   "six of them.", "",
                   "| generator | " + " | ".join(met.columns) + " |", "|" + "---|" * (len(met.columns) + 1)]
         for g, row in met.iterrows():
+            lines.append(f"| {g} | " + " | ".join(str(v) if v == v else "–" for v in row) + " |")
+        by_region, tags = landform_target_counts_by_region(runs)
+        n_runs = {reg: len({r["seed"] for r in runs if r["region"] == reg}) for reg in tags}
+        legend = ", ".join(f"{t} = {reg} ({n_runs[reg]} seeds)" for reg, t in tags.items())
+        lines += ["", "Per region (runs within target per region; " + legend + "):", "",
+                  "| generator | " + " | ".join(by_region.columns) + " |", "|" + "---|" * (len(by_region.columns) + 1)]
+        for g, row in by_region.iterrows():
             lines.append(f"| {g} | " + " | ".join(str(v) if v == v else "–" for v in row) + " |")
     failed = per_run[per_run["failed"]]
     lines += ["", "## Failed runs", ""]

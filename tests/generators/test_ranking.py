@@ -65,6 +65,25 @@ def test_landform_targets_met_are_counted_per_generator_and_statistic():
     assert "| a | 2/3 | 1/3 |" in ranking_markdown(runs)
 
 
+def test_landform_targets_met_are_counted_per_region():
+    def run(gen, region, seed, slope):
+        r = _run(gen, seed, region=region)
+        r["landform"] = {"slope_deg": slope}
+        r["landform_target"] = {"slope_deg": 4.0}
+        return r
+
+    runs = [run("a", "norway", 0, 3.0), run("a", "norway", 1, 5.0), run("a", "nepal", 0, 1.0),
+            run("a", "sahara", 0, 9.0), run("b", "sahara", 0, 2.0)]
+    from orokit.reports.generators import landform_target_counts_by_region
+
+    table, tags = landform_target_counts_by_region(runs)
+    assert tags == {"nepal": "Ne", "norway": "No", "sahara": "S"}
+    assert table.loc["a", "slope_deg"] == "Ne1 No1 S0" and table.loc["b", "slope_deg"] == "S1"
+    md = ranking_markdown(runs)
+    assert "Ne = nepal (1 seeds), No = norway (2 seeds), S = sahara (1 seeds)" in md
+    assert "| a | Ne1 No1 S0 |" in md
+
+
 @pytest.fixture()
 def setup(tmp_path):
     """A tree file and a 'real' DEM of its domain (a smooth bump) at 100 m."""
