@@ -33,6 +33,7 @@ def rows():
     from orokit.sampling.feature_sets import FeatureSet
 
     oro = FeatureSet.orometry()
+    ter = FeatureSet.named("terrain")
     plain = dataclasses.replace(oro, name="v", saddles=False, pattern=False)
     return [
         ("session-4 default: orometry without the key-saddle features", plain, {}),
@@ -41,6 +42,12 @@ def rows():
         ("orometry, Random Forest", oro, {"classifier": "rf"}),
         ("orometry, gradient boosting (HistGradientBoosting)", oro, {"classifier": "hgb"}),
         ("orometry, ExtraTrees with balanced class weights", oro, {"estimator_options": {"class_weight": "balanced"}}),
+        ("terrain: orometry + the DEM's terrain in each disk (slope, relief, curvature, hypsometry, spectrum, "
+         "drainage)", ter, {}),
+        ("terrain features of the DEM only (no orometry)", dataclasses.replace(ter, name="v", histograms=(),
+                                                                             summaries=False, elevation=False,
+                                                                             saddles=False), {}),
+        ("terrain, ExtraTrees with max_features 1/3", ter, {"estimator_options": {"max_features": 1 / 3}}),
     ]
 
 

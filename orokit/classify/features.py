@@ -104,7 +104,7 @@ def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, feature_set: Feat
                   min_prominence_m: float = 30.0, min_peaks: int = 20, label: str | None = None,
                   source: str | None = None, crs: Any = None,
                   relative_elevation: RelativeElevation = RELATIVE_ELEVATION_DEFAULT,
-                  exact_only: bool = False) -> pd.DataFrame:
+                  exact_only: bool = False, dem: Any = None) -> pd.DataFrame:
     """Features of the peaks of each disk.
 
     Parameters
@@ -130,6 +130,9 @@ def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, feature_set: Feat
         See :mod:`orokit.metrics.disk`.
     exact_only : bool
         Drop peaks whose prominence is flagged not exact.
+    dem : xarray.DataArray, optional
+        The DEM the peaks come from (same CRS): needed by a feature set with ``terrain``
+        (:mod:`orokit.classify.terrain`).
 
     Returns
     -------
@@ -145,6 +148,15 @@ def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, feature_set: Feat
         raise SchemaError(f"disks need columns x, y, radius_m; got {list(disks.columns)}")
     if min_peaks < 1:
         raise InputError(f"min_peaks must be >= 1, got {min_peaks}")
+    if fs.terrain and dem is None:
+        raise InputError(f"feature set {fs.name!r} has terrain (raster) features and needs the DEM; peak lists and "
+                         f"Divide Trees have none: give the DEM (or its analysis folder) as input, or use "
+                         f"--features orometry")
+    terrain = None
+    if fs.terrain:
+        from orokit.classify.terrain import terrain_fields
+
+        terrain = terrain_fields(dem)
     geo = is_geographic(crs)
     keep = peaks["prominence"].to_numpy(dtype=float) >= min_prominence_m
     if exact_only:
@@ -170,8 +182,12 @@ def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, feature_set: Feat
                 parts.append(disk_feature_vector(*(a[idx] for a in arrays), radius_m=f * float(r), feature_set=fs,
                                                  relative_elevation_convention=relative_elevation,
                                                  spacing_m=None if spacing is None else spacing[idx]))
-            vectors.append(np.concatenate(parts))
             d = disks.iloc[i]
+            if terrain is not None:
+                from orokit.classify.terrain import terrain_matrix
+
+                parts.append(terrain_matrix(dem, disks.iloc[[i]], fields=terrain)[0])
+            vectors.append(np.concatenate(parts))
             rows.append({"label": label, "source": source,
                          "disk_id": int(d["disk_id"]) if "disk_id" in disks else int(i),
                          "x": float(d["x"]), "y": float(d["y"]), "radius_m": float(r),
@@ -269,7 +285,7 @@ def features_from_dem(dem: Any, *, radius_m: float, label: str | None = None, an
     peaks = peak_geometry(analysis.peaks, crs=analysis.crs if analysis.crs is not None else crs)
     return feature_table(peaks, disks, feature_set=feature_set, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
                          label=label, source=str(dem.attrs.get("source", label)), crs=peaks.crs,
-                         relative_elevation=relative_elevation, exact_only=exact_only)
+                         relative_elevation=relative_elevation, exact_only=exact_only, dem=dem)
 
 
 def features_from_region(peaks: pd.DataFrame, region: Any, *, radius_m: float, label: str | None = None,

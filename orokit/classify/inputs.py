@@ -47,12 +47,13 @@ def default_label(source: PathLike) -> str:
     return p.name.split(".")[0]
 
 
-def _analysis_domain(peaks: pd.DataFrame, meta: dict[str, Any]) -> tuple[np.ndarray, Any] | None:
-    """Valid mask and transform of the DEM behind an analysis folder, when known.
+def _analysis_domain(peaks: pd.DataFrame, meta: dict[str, Any]) -> tuple[np.ndarray, Any, Any] | None:
+    """Valid mask, transform and DEM (or None) behind an analysis folder, when known.
 
     The grid is the one recorded in ``analysis.json`` (``shape``, ``transform``; see
     :func:`orokit.sampling.grid.analysis_grid`); the valid mask comes from the source DEM
-    named there when it can be read on that grid (its nodata), else every cell is valid.
+    named there when it can be read on that grid (its nodata), else every cell is valid
+    and the DEM is None.
     """
     from orokit.sampling.grid import analysis_grid
 
@@ -62,6 +63,7 @@ def _analysis_domain(peaks: pd.DataFrame, meta: dict[str, Any]) -> tuple[np.ndar
         logger.warning("%s", exc)
         return None
     valid = np.ones(shape, dtype=bool)
+    found = None
     src = meta.get("source")
     if src and Path(str(src)).exists():
         try:
@@ -74,12 +76,13 @@ def _analysis_domain(peaks: pd.DataFrame, meta: dict[str, Any]) -> tuple[np.ndar
                                                             rtol=1e-9, atol=1e-9)
             if same:
                 valid = np.isfinite(np.asarray(dem.values, dtype=float))
+                found = dem
             else:
                 logger.warning("%s no longer matches the analysed grid (shape %s, transform %s); using the full "
                                "extent", src, dem.shape, tuple(transform)[:6])
         except Exception as exc:  # noqa: BLE001 - the extent alone is a usable domain
             logger.warning("cannot read %s for its nodata mask (%s); using the full extent", src, exc)
-    return valid, transform
+    return valid, transform, found
 
 
 def open_input_dem(source: PathLike, *, z_units: str | None = None, cell_size_m: float | None = None) -> Any:
@@ -130,12 +133,16 @@ def features_for_input(source: PathLike, *, radius_m: float, label: str | None =
         raw = read_peak_cells(p) if p.is_dir() else peaks
         dom = _analysis_domain(raw, meta)
         if dom is not None:
-            valid, transform = dom
+            valid, transform, dem = dom
+            if feature_set is not None and feature_set.terrain and dem is None:
+                raise InputError(f"{p}: feature set {feature_set.name!r} needs the analysed DEM for its terrain "
+                                 f"features, but {meta.get('source')!r} (analysis.json 'source') cannot be read on "
+                                 f"the analysed grid; give the DEM itself as input, or use --features orometry")
             disks = sample_disks_in_mask(valid, transform=transform, radius_m=radius_m, crs=peaks.crs,
                                          separation=separation, max_disks=max_disks, rng=rng)
             return feature_table(peaks, disks, feature_set=feature_set, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
                                  label=label, source=p.name, crs=peaks.crs, relative_elevation=relative_elevation,
-                                 exact_only=exact_only)
+                                 exact_only=exact_only, dem=dem)
     warnings.warn(f"{p}: no region polygon and no DEM extent known; placing disks inside the convex hull of the "
                   f"peaks (pass --region to use a polygon)", OrokitWarning, stacklevel=2)
     import shapely

@@ -30,10 +30,12 @@ from orokit.cli.options import (
               help="Minimum disk-centre distance as a fraction of R.")
 @click.option("--label", "labels", multiple=True,
               help="Region label: once for all inputs, or once per input (default: dataset / file name).")
-@click.option("--features", "feature_set_name", type=click.Choice(["orometry", "paper"]), default="orometry",
+@click.option("--features", "feature_set_name", type=click.Choice(["orometry", "terrain", "paper"]), default="orometry",
               show_default=True,
-              help="Feature set: orometry (default: histograms plus disk summaries at R/2 and R, chosen on the "
-                   "spatial hold-out) or paper (Argudo et al. 2019, Table 1, the reference mode).")
+              help="Feature set: orometry (default: histograms plus disk summaries at R, chosen on the "
+                   "spatial hold-out; works on peak lists), terrain (orometry plus slope, relief, curvature, "
+                   "hypsometry, spectral slope and drainage of the DEM in each disk; DEM inputs only) or paper "
+                   "(Argudo et al. 2019, Table 1, the reference mode).")
 @click.option("--relative-elevation", type=click.Choice(["minmax", "max"]), default="minmax", show_default=True,
               help="Relative elevation (h-min)/(max-min) over the disk, or h/max.")
 @click.option("--exact-only", is_flag=True, help="Drop peaks whose prominence is flagged not exact (edge effects).")

@@ -32,7 +32,7 @@ from orokit.cli.options import (
               help="Also save a model trained on all disks at the first radius (e.g. models/regions-10km.skops).")
 @z_units_option(help="Elevation units of DEM inputs that do not declare them (PNG).")
 @cell_size_option(help="Cell size of DEM inputs without georeference (PNG)")
-@click.option("--features", "feature_set", type=click.Choice(["orometry", "paper"]), default="orometry",
+@click.option("--features", "feature_set", type=click.Choice(["orometry", "terrain", "paper"]), default="orometry",
               show_default=True, help="Feature set (paper: Argudo et al. 2019 Table 1, the reference mode).")
 @click.option("--classifier", type=click.Choice(["rf", "et", "hgb"]), default="et", show_default=True,
               help="et: extremely randomized trees, 2x --trees (default, chosen on the spatial hold-out); rf: the paper's Random Forest; hgb: HistGradientBoostingClassifier.")

@@ -47,9 +47,9 @@ from orokit.metrics.disk import (
 )
 from orokit.sampling.histograms import HistogramSpec
 
-__all__ = ["FeatureSet", "FEATURE_SET_NAMES", "SUMMARY_QUANTILES", "disk_feature_vector", "saddle_features"]
+__all__ = ["FeatureSet", "FEATURE_SET_NAMES", "TERRAIN_COLUMNS", "TERRAIN_GROUPS", "SUMMARY_QUANTILES", "disk_feature_vector", "saddle_features"]
 
-FEATURE_SET_NAMES = ("orometry", "paper")
+FEATURE_SET_NAMES = ("orometry", "terrain", "paper")
 #: histograms the default set leaves out: direction ones rotate with the DEM and drift between parts of a
 #: region; disk-relative ones drift between the halves of a region and between a DEM and its synthetic twin
 UNSTABLE_HISTOGRAMS = ("isolation_direction", "saddle_direction", "relative_elevation", "relative_prominence",
@@ -93,6 +93,20 @@ SADDLE_GROUPS: dict[str, list[str]] = {
     "saddle_height": [f"{q}_saddle_height" for q in _Q],
 }
 
+#: terrain (raster) features at R, computed from the DEM cells within the disk by
+#: :mod:`orokit.classify.terrain` (inputs with a DEM only): slope quantiles and flat share, local relief in
+#: ~1 and ~5 km windows, Laplacian curvature, hypsometry in the disk, spectral slope, drainage share
+_TQ = (10, 25, 50, 75, 90)
+TERRAIN_GROUPS: dict[str, list[str]] = {
+    "slope": [f"q{q}_slope_deg" for q in _TQ] + ["flat_share"],
+    "terrain_relief": [f"q{q}_relief_1km_km" for q in _TQ[1:]] + ["q50_relief_5km_km", "q90_relief_5km_km"],
+    "curvature": ["q10_curvature_per_km", "q90_curvature_per_km", "iqr_curvature_per_km"],
+    "hypsometry": ["hypsometric_integral"] + [f"q{q}_hypsometry" for q in _TQ[1:4]],
+    "spectral_slope": ["spectral_slope"],
+    "drainage": ["drainage_share"],
+}
+TERRAIN_COLUMNS = [c for cols in TERRAIN_GROUPS.values() for c in cols]
+
 #: human-readable names of the summary groups (Table 2 rows)
 SUMMARY_TITLES: dict[str, str] = {
     "density": "Peak density", "prominence_summary": "Prominence quantiles",
@@ -104,6 +118,9 @@ SUMMARY_TITLES: dict[str, str] = {
     "elevation_prominence_correlation": "Elevation-prominence correlation",
     "relief": "Relief peaks to key saddles", "col_ratio": "Key col height ratio",
     "saddle_height": "Key saddle height in the disk",
+    "slope": "Slope quantiles (DEM)", "terrain_relief": "Local relief 1 / 5 km (DEM)",
+    "curvature": "Curvature (DEM)", "hypsometry": "Hypsometry in the disk (DEM)",
+    "spectral_slope": "Spectral slope (DEM)", "drainage": "Drainage share (DEM)",
 }
 
 
@@ -144,6 +161,10 @@ class FeatureSet:
         ``prominence / key-saddle distance``; Spearman correlation of elevation and
         prominence. All are unchanged by rotating or flipping the DEM. (Isolation directions
         are left out: on a grid, equidistant higher cells make them depend on the scan order.)
+    terrain : bool
+        Add terrain (raster) features at R (:data:`TERRAIN_GROUPS`, :mod:`orokit.classify.terrain`),
+        computed from the DEM cells within each disk: only inputs with a DEM have them (not peak
+        lists nor Divide Trees). Appended after the columns of every radius.
     """
 
     name: str
@@ -155,6 +176,7 @@ class FeatureSet:
     cumulative: bool = False
     pattern: bool = False
     saddles: bool = False
+    terrain: bool = False
 
     def __post_init__(self) -> None:
         if not self.radii or any(not (0 < f <= 1.0) for f in self.radii) or len(set(self.radii)) != len(self.radii):
@@ -179,12 +201,19 @@ class FeatureSet:
                    histograms=tuple(n for n in spec.names if n not in UNSTABLE_HISTOGRAMS))
 
     @classmethod
+    def terrain_set(cls) -> FeatureSet:
+        """``orometry`` plus the terrain (raster) features of each disk: for inputs with a DEM."""
+        return dataclasses.replace(cls.orometry(), name="terrain", terrain=True)
+
+    @classmethod
     def named(cls, name: str) -> FeatureSet:
-        """The feature set called ``name`` (``"orometry"`` or ``"paper"``)."""
+        """The feature set called ``name`` (``"orometry"``, ``"terrain"`` or ``"paper"``)."""
         if name == "paper":
             return cls.paper()
         if name == "orometry":
             return cls.orometry()
+        if name == "terrain":
+            return cls.terrain_set()
         raise SchemaError(f"unknown feature set {name!r}; choose one of {', '.join(FEATURE_SET_NAMES)}")
 
     @property
@@ -212,19 +241,22 @@ class FeatureSet:
     def columns(self) -> list[str]:
         """Feature columns in vector order (radius by radius, as listed in :attr:`radii`)."""
         base = [c for cols in self._groups_at().values() for c in cols]
-        return [self._prefix(f) + c for f in self.radii for c in base]
+        return [self._prefix(f) + c for f in self.radii for c in base] + (TERRAIN_COLUMNS if self.terrain else [])
 
     def groups(self) -> dict[str, list[str]]:
         """Feature group -> its columns at every radius (one Table 2 row each)."""
-        return {name: [self._prefix(f) + c for f in self.radii for c in cols]
-                for name, cols in self._groups_at().items()}
+        g = {name: [self._prefix(f) + c for f in self.radii for c in cols] for name, cols in self._groups_at().items()}
+        if self.terrain:
+            g.update(TERRAIN_GROUPS)
+        return g
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "spec": self.spec.to_dict(), "radii": list(self.radii),
                 "histograms": None if self.histograms is None else list(self.histograms),
                 "summaries": self.summaries, "elevation": self.elevation, "cumulative": self.cumulative,
                 **({"saddles": True} if self.saddles else {}),  # absent when False: older files compare equal
-                **({"pattern": True} if self.pattern else {})}
+                **({"pattern": True} if self.pattern else {}),
+                **({"terrain": True} if self.terrain else {})}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> FeatureSet:
@@ -235,7 +267,7 @@ class FeatureSet:
                        histograms=None if h is None else tuple(str(x) for x in h),
                        summaries=bool(d.get("summaries", False)), elevation=bool(d.get("elevation", False)),
                        cumulative=bool(d.get("cumulative", False)), pattern=bool(d.get("pattern", False)),
-                       saddles=bool(d.get("saddles", False)))
+                       saddles=bool(d.get("saddles", False)), terrain=bool(d.get("terrain", False)))
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise SchemaError(f"not a feature set dictionary ({exc!r}): {str(d)[:200]}") from exc
 

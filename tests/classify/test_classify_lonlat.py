@@ -172,9 +172,10 @@ def test_analysis_folder_of_a_lonlat_dem_keeps_its_voids(make_dem, tmp_path):
     dem, out = _geographic_analysis(make_dem, tmp_path)
     meta = json.loads((out / "analysis.json").read_text())
     raw = pd.read_parquet(out / "peaks.parquet", columns=["row", "col", "x", "y"])
-    valid, transform = _analysis_domain(raw, meta)
+    valid, transform, found = _analysis_domain(raw, meta)
     assert tuple(transform)[:6] == pytest.approx(tuple(dem.rio.transform())[:6])
     assert (valid == np.isfinite(dem.values)).all() and (~valid).sum() == 160 * 60
+    assert found is not None and found.shape == dem.shape  # the DEM itself, for terrain features
 
     from orokit.classify.inputs import features_for_input
 

@@ -51,12 +51,13 @@ def _centre_features(make_dem, z: np.ndarray, fs: FeatureSet) -> pd.Series:
     t = dem.rio.transform()
     cx, cy = t * (N // 2 + 0.5, N // 2 + 0.5)  # centre of the middle cell, the fixed point of rot90 / flips
     disks = pd.DataFrame({"disk_id": [0], "x": [cx], "y": [cy], "radius_m": [RADIUS]})
-    f = feature_table(peaks, disks, feature_set=fs, min_prominence_m=30.0, min_peaks=5, crs=dem.rio.crs)
+    f = feature_table(peaks, disks, feature_set=fs, min_prominence_m=30.0, min_peaks=5, crs=dem.rio.crs,
+                      dem=dem if fs.terrain else None)
     assert len(f) == 1
     return f[fs.columns].iloc[0]
 
 
-@pytest.mark.parametrize("name", ["paper", "orometry", "pattern"])
+@pytest.mark.parametrize("name", ["paper", "orometry", "pattern", "terrain"])
 def test_features_invariant_to_rotation_and_flips_except_directions(make_dem, name):
     import dataclasses
 
