@@ -23,6 +23,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["tiled_isolation", "chunk_isolation", "block_stats"]
 
 _BATCH = 4096
+_CACHE_BYTES = 256 * 2**20  # chunks and pyramids kept by the cross-chunk search
 
 
 def _chunk_bounds(rows, cols, rb, cb, metric: KernelMetric) -> np.ndarray:
@@ -48,11 +49,13 @@ class _BlockCache:
     processed chunk by chunk in raster order, so neighbouring chunks are usually still
     here). The NaN pyramid of a chunk is built only when a search asks for it."""
 
-    def __init__(self, blocks, nbx: int, compute, has_nan: np.ndarray, budget_bytes: int = 256 * 2**20):
-        self.blocks, self.nbx, self.compute, self.budget = blocks, nbx, compute, budget_bytes
+    def __init__(self, blocks, nbx: int, compute, has_nan: np.ndarray, budget_bytes: int | None = None):
+        self.blocks, self.nbx, self.compute = blocks, nbx, compute
+        self.budget = _CACHE_BYTES if budget_bytes is None else budget_bytes
         self.has_nan = has_nan
         self.entries: dict[int, dict] = {}
         self.loads = 0
+        self.largest = 0  # bytes of the largest entry so far, with its raw chunk while it is built
 
     @staticmethod
     def _size(e: dict) -> int:
@@ -63,6 +66,8 @@ class _BlockCache:
         """Per chunk: {"shape", "pyr": block pyramid, and with ``nan`` "nan": NaN pyramid}."""
         missing = [k for k in ks if k not in self.entries]
         if missing:
+            # make room first: the budget holds while the new chunks are read and their pyramids built
+            self._evict(keep=set(ks), extra=len(missing) * self.largest)
             arrays = self.compute([self.blocks[k // self.nbx, k % self.nbx] for k in missing])
             self.loads += len(missing)
             for k, a in zip(missing, arrays):
@@ -70,6 +75,7 @@ class _BlockCache:
                 # the raw chunk is kept only for a NaN pyramid, which only chunks with NaN need
                 self.entries[k] = {"shape": a.shape, "pyr": _mk.block_pyramid(a),
                                    "raw": a if self.has_nan[k] else None}
+                self.largest = max(self.largest, self._size(self.entries[k]) + a.nbytes)
         out = []
         for k in ks:
             e = self.entries.pop(k)
@@ -78,9 +84,16 @@ class _BlockCache:
                 e["nan"] = _mk.nan_pyramid(e["raw"])
                 e["raw"] = None
             out.append(e)
-        while len(self.entries) > len(ks) and sum(self._size(e) for e in self.entries.values()) > self.budget:
-            self.entries.pop(next(iter(self.entries)))
+        self._evict(keep=set(ks))
         return out
+
+    def _evict(self, keep: set, extra: int = 0) -> None:
+        """Drop the least recently used chunks not in ``keep`` until ``extra`` more bytes fit."""
+        total = sum(self._size(e) for e in self.entries.values())
+        for k in [k for k in self.entries if k not in keep]:
+            if total + extra <= self.budget:
+                break
+            total -= self._size(self.entries.pop(k))
 
 
 def chunk_isolation(core: np.ndarray, row0: int, col0: int, shape: tuple[int, int], keys: np.ndarray,
@@ -149,11 +162,10 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
     cnan = chunk_stats[:, 1] > 0.5
     n = rows.size
     best = np.full(n, np.inf)
-    cand = np.full((n, metric.ncand), -1, np.int64)
-    ncand = np.zeros(n, np.int64)
     edge = _mk.outside_distance(rows, cols, H, W, *metric.args())
     cache = _BlockCache(blocks, nbx, compute, cnan)
     todo = np.ones(n, bool)
+    hit = src = None
     if known is not None and known["key"].size:
         order_k = np.argsort(known["key"])
         kk = known["key"][order_k]
@@ -161,15 +173,19 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
         hit = kk[pos] == rows * W + cols
         src = order_k[pos[hit]]
         best[hit] = known["best"][src]
-        m = min(cand.shape[1], known["cand"].shape[1])
-        cand[hit, :m] = known["cand"][src, :m]
         edge[hit] = np.minimum(edge[hit], known["nan"][src])
         todo &= ~hit
+    # candidate cells (ncand per peak: 64 on geographic grids) only for the peaks searched here;
+    # those settled in their chunk keep their own short rows
+    slot = np.cumsum(todo) - 1
+    cand = np.full((int(todo.sum()), metric.ncand), -1, np.int64)
+    ncand = np.zeros(cand.shape[0], np.int64)
     # peaks grouped by their own chunk, chunks in raster order
     home = (np.searchsorted(rb, rows, side="right") - 1) * nbx + np.searchsorted(cb, cols, side="right") - 1
     order = np.lexsort((cols, rows, home))
     order = order[todo[order]]
     bounds = np.flatnonzero(np.diff(home[order])) + 1
+    del home
     slack = 1.0 + metric.slack
     for group in np.split(order, bounds):
         for start in range(0, group.size, _BATCH):
@@ -177,15 +193,27 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
             lb = _chunk_bounds(rows[idx], cols[idx], rb, cb, metric)
             lb_nan = np.where(cnan[None, :], lb, np.inf)
             lb = np.where(cmax[None, :] > pz[idx, None], lb, np.inf)
-            _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, pz, rows, cols, W, slack)
+            _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, slot, pz, rows, cols, W, slack)
             # nearest NaN cell, only where it could be closer than the edge and the target
             _visit_nan(lb_nan, idx, cache, rb, cb, nbx, metric, best, edge, rows, cols)
     logger.info("isolation of %d peaks (%d settled in their chunk): %d chunk loads for %d chunks",
                 n, int((~todo).sum()), cache.loads, nby * nbx)
-    return finish_isolation(metric, rows, cols, best, cand, W, edge)
+    del cache, order, bounds
+    # all candidates in one array as wide as the longest row (one or two columns on projected grids)
+    width = int(ncand.max(initial=0))
+    if hit is not None:
+        width = max(width, int((known["cand"] >= 0).sum(axis=1).max(initial=0)))
+    cand_all = np.full((n, width), -1, np.int64)
+    cand_all[todo] = cand[:, :width]
+    del cand, ncand
+    if hit is not None:
+        m = min(width, known["cand"].shape[1])
+        cand_all[np.flatnonzero(hit)] = known["cand"][src, :width] if m == width else np.pad(
+            known["cand"][src, :m], ((0, 0), (0, width - m)), constant_values=-1)
+    return finish_isolation(metric, rows, cols, best, cand_all, W, edge)
 
 
-def _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, pz, rows, cols, W, slack):
+def _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, slot, pz, rows, cols, W, slack):
     while True:
         nxt = np.argmin(lb, axis=1)
         val = lb[np.arange(idx.size), nxt]
@@ -204,11 +232,12 @@ def _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, pz, rows, col
             )
             bw = block["shape"][1]
             # append each peak's candidates (a prefix of its row of cl) while its row of cand has room
-            take = np.minimum((cl >= 0).sum(axis=1), cand.shape[1] - ncand[p])
+            q = slot[p]
+            take = np.minimum((cl >= 0).sum(axis=1), cand.shape[1] - ncand[q])
             t, j = np.nonzero(np.arange(cl.shape[1])[None, :] < take[:, None])
             found = cl[t, j]
-            cand[p[t], ncand[p[t]] + j] = (r0 + found // bw) * W + c0 + found % bw
-            ncand[p] += take
+            cand[q[t], ncand[q[t]] + j] = (r0 + found // bw) * W + c0 + found % bw
+            ncand[q] += take
             best[p] = np.minimum(best[p], b)
             lb[sel, k] = np.inf
 
@@ -218,7 +247,8 @@ def _visit_nan(lb, idx, cache, rb, cb, nbx, metric, best, edge, rows, cols):
         nxt = np.argmin(lb, axis=1)
         val = lb[np.arange(idx.size), nxt]
         cut = np.minimum(edge[idx], best[idx])
-        active = np.isfinite(val) & (val < cut)
+        # a NaN cell as far as the target makes the isolation inexact (dist < edge): ties are visited
+        active = np.isfinite(val) & (val <= cut)
         if not active.any():
             return
         chunks = np.unique(nxt[active])

@@ -40,3 +40,40 @@ def test_chunk_isolation_agrees_with_in_memory_and_keeps_only_used_candidates(gr
     assert (cand == target[:, None]).any(axis=1).all()  # the in-memory answer is among the candidates
     if grid == "projected":
         np.testing.assert_allclose(got["best"], want["isolation"].to_numpy(), rtol=1e-12)
+
+
+@pytest.mark.parametrize("grid", GRIDS)
+def test_tiled_isolation_with_a_tiny_chunk_cache_equals_in_memory(grid, monkeypatch):
+    """Every chunk leaves the search's cache as soon as it is not in use (budget 1 byte):
+    same table as the in-memory search; chunks are read again instead of kept. Cells next
+    to the void whose higher ground is as far as the void are not exact (a NaN chunk at a
+    distance equal to the target was skipped before)."""
+    import dask.array as da
+
+    from orokit.tiling import isolation as tiso
+
+    transform, crs = GRIDS[grid]
+    rng = np.random.default_rng(5)
+    z = np.round(rng.normal(size=(90, 100)).cumsum(axis=0) + 3 * rng.normal(size=(90, 100)), 1)
+    z[40:44, 10:30] = np.nan  # a void: the NaN pyramids are read back too
+    H, W = z.shape
+    peaks = np.flatnonzero(np.isfinite(z.ravel()))[::7]
+    rows, cols = peaks // W, peaks % W
+    want = isolation(z, rows, cols, transform=transform, crs=crs)
+    data = da.from_array(z, chunks=(20, 25))
+    loads = {}
+    for budget in (tiso._CACHE_BYTES, 1):
+        monkeypatch.setattr(tiso, "_CACHE_BYTES", budget)
+        real_init = tiso._BlockCache.__init__
+
+        def init(self, *a, **k):
+            real_init(self, *a, **k)
+            loads[budget] = self
+
+        monkeypatch.setattr(tiso._BlockCache, "__init__", init)
+        got = tiso.tiled_isolation(data, rows, cols, z.ravel()[peaks], transform=transform, crs=crs,
+                                   compute=lambda objs: [np.asarray(o.compute(scheduler="sync")) for o in objs])
+        monkeypatch.setattr(tiso._BlockCache, "__init__", real_init)
+        assert got.equals(want)
+    assert loads[1].loads > loads[256 * 2**20].loads  # chunks were dropped and read again
+    assert len(loads[1].entries) <= 9  # at most the chunks of one step stay
