@@ -201,12 +201,12 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
     del cache, order, bounds
     # all candidates in one array as wide as the longest row (one or two columns on projected grids)
     width = int(ncand.max(initial=0))
-    if hit is not None:
+    if known is not None and hit is not None:
         width = max(width, int((known["cand"] >= 0).sum(axis=1).max(initial=0)))
     cand_all = np.full((n, width), -1, np.int64)
     cand_all[todo] = cand[:, :width]
     del cand, ncand
-    if hit is not None:
+    if known is not None and hit is not None:
         m = min(width, known["cand"].shape[1])
         cand_all[np.flatnonzero(hit)] = known["cand"][src, :width] if m == width else np.pad(
             known["cand"][src, :m], ((0, 0), (0, width - m)), constant_values=-1)
