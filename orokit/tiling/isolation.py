@@ -23,6 +23,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["tiled_isolation", "chunk_isolation", "block_stats"]
 
 _BATCH = 4096
+_BOUNDS_CELLS = 2**20  # peaks x chunks of one batch's distance bounds (8 MB each array): flat in the chunk count
 _CACHE_BYTES = 256 * 2**20  # chunks and pyramids kept by the cross-chunk search
 
 
@@ -187,9 +188,10 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
     bounds = np.flatnonzero(np.diff(home[order])) + 1
     del home
     slack = 1.0 + metric.slack
+    batch = max(64, min(_BATCH, _BOUNDS_CELLS // (nby * nbx)))
     for group in np.split(order, bounds):
-        for start in range(0, group.size, _BATCH):
-            idx = group[start:start + _BATCH]
+        for start in range(0, group.size, batch):
+            idx = group[start:start + batch]
             lb = _chunk_bounds(rows[idx], cols[idx], rb, cb, metric)
             lb_nan = np.where(cnan[None, :], lb, np.inf)
             lb = np.where(cmax[None, :] > pz[idx, None], lb, np.inf)

@@ -43,7 +43,7 @@ def test_chunk_isolation_agrees_with_in_memory_and_keeps_only_used_candidates(gr
 
 
 @pytest.mark.parametrize("grid", GRIDS)
-def test_tiled_isolation_with_a_tiny_chunk_cache_equals_in_memory(grid, monkeypatch):
+def test_tiled_isolation_with_a_tiny_chunk_cache_and_small_batches_equals_in_memory(grid, monkeypatch):
     """Every chunk leaves the search's cache as soon as it is not in use (budget 1 byte):
     same table as the in-memory search; chunks are read again instead of kept. Cells next
     to the void whose higher ground is as far as the void are not exact (a NaN chunk at a
@@ -64,6 +64,8 @@ def test_tiled_isolation_with_a_tiny_chunk_cache_equals_in_memory(grid, monkeypa
     loads = {}
     for budget in (tiso._CACHE_BYTES, 1):
         monkeypatch.setattr(tiso, "_CACHE_BYTES", budget)
+        # with the tiny budget, batches of 64 peaks too (the bounds of a batch: 64 x 20 chunks)
+        monkeypatch.setattr(tiso, "_BOUNDS_CELLS", 2**20 if budget > 1 else 1)
         real_init = tiso._BlockCache.__init__
 
         def init(self, *a, **k):
