@@ -6,7 +6,8 @@ from scipy import ndimage
 
 from orokit._typing import SeedLike
 
-__all__ = ["fractal_noise", "falloff", "remove_plane", "spectral_noise", "texture_spectrum"]
+__all__ = ["fractal_noise", "falloff", "power_law_fit", "power_law_noise", "remove_plane", "spectral_noise",
+           "texture_spectrum"]
 
 
 def _octave(shape: tuple[int, int], cells_per_node: float, rng: np.random.Generator) -> np.ndarray:
@@ -166,3 +167,100 @@ def spectral_noise(shape: tuple[int, int], res: float, *, rms: float, beta: floa
     out -= out.mean(dtype=np.float64)
     sd = float(out.std(dtype=np.float64))
     return (out * np.float32(rms / sd)).astype(np.float32, copy=False) if sd > 0 else np.zeros(shape, np.float32)
+
+
+def power_law_fit(z: np.ndarray, res: float, *, fit_m: tuple[float, float] = (1000.0, 10_000.0),
+                  n_bins: int = 8) -> tuple[float, float]:
+    """``(c, beta)`` of the power spectral density ``S(k) = c k^-beta`` of ``z`` over wavelengths ``fit_m``.
+
+    ``S(k) = |FFT|^2 res^2 / N`` (m^2 m^2; the variance of ``z`` is the sum of ``S`` over the
+    wavenumber grid times ``dk^2``), on ``z`` block-averaged to cells of at most
+    ``fit_m[0] / 8`` (plane removed, 2-D Hann taper, power divided by the taper's mean
+    square), radially averaged in ``n_bins`` log-spaced bins. ``(0, 3)`` when fewer than 3
+    bins hold a wavenumber (grid smaller than the band).
+
+    >>> c, b = power_law_fit(spectral_noise((512, 512), 100.0, rms=50.0, beta=3.0, largest_m=1e6, rng=0), 100.0)
+    >>> bool(abs(b - 3.0) < 0.2)
+    True
+    """
+    z = np.asarray(z, dtype=np.float64)
+    f = max(int(fit_m[0] / (8.0 * res)), 1)
+    ny, nx = (z.shape[0] // f) * f, (z.shape[1] // f) * f
+    if ny < 8 * f or nx < 8 * f:
+        return 0.0, 3.0
+    zc = z[:ny, :nx].reshape(ny // f, f, nx // f, f).mean(axis=(1, 3))
+    zc = remove_plane(np.where(np.isfinite(zc), zc, np.nanmean(zc)))
+    d = res * f
+    w = np.outer(np.hanning(zc.shape[0]), np.hanning(zc.shape[1]))
+    power = np.abs(np.fft.rfft2(zc * w)) ** 2 * d * d / zc.size / float(np.mean(w * w))
+    k = np.hypot(np.fft.fftfreq(zc.shape[0], d)[:, None], np.fft.rfftfreq(zc.shape[1], d)[None, :])
+    kmin, kmax = 1.0 / fit_m[1], 1.0 / fit_m[0]
+    sel = (k >= kmin) & (k <= kmax)
+    edges = np.geomspace(kmin, kmax, n_bins + 1)
+    idx = np.clip(np.searchsorted(edges, k[sel], side="right") - 1, 0, n_bins - 1)
+    cnt = np.bincount(idx, minlength=n_bins)
+    ps = np.bincount(idx, weights=power[sel], minlength=n_bins)
+    ks = np.bincount(idx, weights=k[sel], minlength=n_bins)
+    has = (cnt > 0) & (ps > 0)
+    if has.sum() < 3:
+        return 0.0, 3.0
+    slope, icpt = np.polyfit(np.log(ks[has] / cnt[has]), np.log(ps[has] / cnt[has]), 1)
+    return float(np.exp(icpt)), float(-slope)
+
+
+def _radial_density(z: np.ndarray, res: float, k: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Radially averaged power spectral density ``|FFT|^2 res^2 / N`` of ``z`` (plane removed,
+    periodic: no taper) in the wavenumber bins ``edges``; NaN for an empty bin."""
+    zz = remove_plane(z).astype(np.float32)
+    p = np.abs(np.fft.rfft2(zz)) ** 2 * np.float32(res * res / zz.size)
+    idx = np.searchsorted(edges, k.ravel(), side="right") - 1
+    ok = (idx >= 0) & (idx < edges.size - 1)
+    cnt = np.bincount(idx[ok], minlength=edges.size - 1)
+    ps = np.bincount(idx[ok], weights=p.ravel()[ok], minlength=edges.size - 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return ps / cnt
+
+
+def power_law_noise(shape: tuple[int, int], res: float, *, c: float, beta: float, largest_m: float = 1000.0,
+                    minus: np.ndarray | None = None, rng: SeedLike = None) -> np.ndarray:
+    """Gaussian noise whose power spectral density is ``c k^-beta`` (see :func:`power_law_fit`)
+    at wavelengths below ``largest_m`` (smooth high-pass ``1 - exp(-(k largest_m)^4)``), 0 above.
+
+    The continuation of a surface's own spectrum to shorter wavelengths: its amplitude is set
+    by ``c`` (not renormalised), so it is the same in metres at any cell size. With ``minus``
+    (a grid of ``shape``), only the deficit ``max(0, c k^-beta - S_minus(k))`` is made, ``S_minus``
+    being the radially averaged density of ``minus`` in 16 log-spaced bins per decade: the
+    noise adds what that surface lacks of the power law, nothing where it has enough.
+    """
+    rng = np.random.default_rng(rng)
+    ny, nx = shape
+    if c <= 0 or ny < 2 or nx < 2:
+        return np.zeros(shape, np.float32)
+    white = rng.standard_normal(shape, dtype=np.float32)
+    ky = np.fft.fftfreq(ny, res).astype(np.float32)
+    kx = np.fft.rfftfreq(nx, res).astype(np.float32)
+    k = np.hypot(ky[:, None], kx[None, :])
+    k[0, 0] = np.inf
+    target = np.float32(c) * k ** np.float32(-float(beta)) * _highpass(k, largest_m).astype(np.float32)
+    if minus is not None:
+        k[0, 0] = 0.0
+        kmax = float(k.max())
+        kmin = min(0.1 / float(largest_m), kmax / 2.0)
+        edges = np.geomspace(kmin, kmax * 1.0001, max(int(16 * np.log10(kmax * 1.0001 / kmin)), 2) + 1)
+        dens = _radial_density(np.asarray(minus, np.float64), res, k, edges)
+        mid = np.sqrt(edges[1:] * edges[:-1])
+        has = np.isfinite(dens)
+        if has.sum() >= 2:
+            sm = np.interp(np.log(np.maximum(k, kmin)), np.log(mid[has]), dens[has]).astype(np.float32)
+            target = np.maximum(target - sm, np.float32(0.0))
+        k[0, 0] = np.inf
+    # E|FFT(white)|^2 = N; S = |F|^2 res^2 / N  ->  F = FFT(white) sqrt(S) / res
+    filt = np.sqrt(target) / np.float32(res)
+    del target
+    filt[0, 0] = 0.0
+    del k
+    f = np.fft.rfft2(white)
+    del white
+    f *= filt
+    del filt
+    return np.fft.irfft2(f, s=shape).astype(np.float32, copy=False)

@@ -68,6 +68,16 @@ class RenderParams:
     field_weight : the ``"field"`` surface is ``field_weight`` x the field + the rest x the TIN.
     flank_depth : the cones of a ridge piece reach at most ``flank_depth * (peak - saddle)``
         below its saddle (None: no limit; far from ridges steep cones dug canyons).
+    smooth_m : Gaussian sigma (metres) that rounds the skeleton raster's planar facets and creases
+        (the TIN carries no information below its meshing distance ``lam``), faded to 0 within
+        ``texture_clearance_m`` of peaks and saddles; 0 = off.
+    detail_gain, detail_fit_m, detail_largest_m, detail_slope_power : sub-lambda relief. The
+        skeleton raster's power spectral density is fitted by ``c k^-beta`` over the wavelengths
+        ``detail_fit_m`` (:func:`orokit.raster.noise.power_law_fit`, before ``smooth_m``); Gaussian
+        noise continues ``detail_gain^2 c k^-beta`` below ``detail_largest_m``, minus the density the
+        (smoothed) skeleton has there already (:func:`orokit.raster.noise.power_law_noise`), weighted by
+        the skeleton's slope to ``detail_slope_power`` (RMS 1) and faded near peaks and saddles as the
+        texture is; 0 = off. Spurious hills it makes are cut by the orometry enforcement.
     """
 
     lam: float = 200.0
@@ -105,6 +115,11 @@ class RenderParams:
     texture_clearance_m: float = 300.0
     texture_slope_power: float = 1.0
     texture_relief_ratio: float = 0.0
+    smooth_m: float = 0.0
+    detail_gain: float = 0.0
+    detail_fit_m: tuple[float, float] = (1000.0, 10_000.0)
+    detail_largest_m: float = 1000.0
+    detail_slope_power: float = 1.0
 
     def __post_init__(self) -> None:
         from orokit.errors import InputError

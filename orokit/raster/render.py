@@ -25,7 +25,7 @@ from orokit.raster.enforce import enforce_orometry
 from orokit.raster.erosion import erode_multiscale
 from orokit.raster.hillslope import limit_slope
 from orokit.raster.interpolate import field_elevation, valley_width
-from orokit.raster.noise import falloff, fractal_noise, spectral_noise
+from orokit.raster.noise import falloff, fractal_noise, power_law_fit, power_law_noise, spectral_noise
 from orokit.raster.params import RenderParams
 from orokit.raster.profiles import hillslope_profile
 from orokit.raster.rasterize import MAX_CELLS, as_extent, burn_max, make_grid, rasterize_tin, set_cells
@@ -229,6 +229,27 @@ def render_elevation(
     mask[row[ok], col[ok]] = False
     dist = ndimage.distance_transform_edt(mask, sampling=grid.cell_size_m).astype(np.float32)
     uplift = falloff(dist / np.float32(params.uplift_radius))
+    detail = {}
+    if params.detail_gain > 0:
+        # the skeleton's own power law, fitted where the TIN resolves the tree's relief
+        c, beta = power_law_fit(z, grid.cell_size_m, fit_m=params.detail_fit_m)
+        detail = {"detail_beta": round(beta, 3), "detail_log10_c": round(float(np.log10(c)), 3) if c > 0 else None}
+    if params.smooth_m > 0:
+        # round the TIN's planar facets and creases below the meshing scale; peaks and saddles kept
+        keep = falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
+        zs = ndimage.gaussian_filter(z, params.smooth_m / grid.cell_size_m, mode="nearest")
+        z += (zs - z) * (1.0 - keep)
+        del zs, keep
+    if params.detail_gain > 0 and c > 0:
+        # sub-lambda relief: the power law continued below detail_largest_m, minus what the
+        # (smoothed) skeleton has there already, where the skeleton is steep, away from peaks and saddles
+        fade = 1.0 - falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
+        weight = _slope_weight(z, grid.cell_size_m, params.detail_largest_m, params.detail_slope_power) * fade
+        d = power_law_noise(z.shape, grid.cell_size_m, c=c * params.detail_gain ** 2, beta=beta,
+                            largest_m=params.detail_largest_m, minus=z, rng=rng) * weight
+        detail["detail_rms_m"] = round(float(d.std()), 3)
+        z += d
+        del fade, weight, d
     texture_rms = params.texture_rms_m
     if texture_rms == 0 and params.texture_relief_ratio > 0:
         # no measured texture (a real tree): real DEMs have texture RMS ~ 0.07-0.12 x their median 1 km relief
@@ -276,7 +297,7 @@ def render_elevation(
         "generator": "orokit.raster.render_elevation (Argudo et al. 2019, section 6)",
         "orokit_version": __version__,
         "parameters": json.dumps({**params.to_dict(), "cell_size_m": grid.cell_size_m, "extent": list(ext),
-                                  "erosion": bool(erosion), "texture_rms_used_m": round(float(texture_rms), 3)}),
+                                  "erosion": bool(erosion), "texture_rms_used_m": round(float(texture_rms), 3), **detail}),
         "seed": seed,
         "local_grid": crs is None,
         "cell_size_m": (grid.cell_size_m, grid.cell_size_m),

@@ -1,0 +1,77 @@
+"""Sub-lambda detail of the renderer: power-law fit and continuation (orokit.raster.noise), facet smoothing."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import orokit
+from orokit.raster.noise import power_law_fit, power_law_noise, spectral_noise
+from orokit.raster.params import RenderParams
+from orokit.raster.render import render_elevation
+from orokit.validate.landform import band_power
+from orokit.validate.roundtrip import compare_peaks
+
+from helpers.trees import small_tree
+
+
+@pytest.mark.parametrize("beta", [2.0, 3.0, 4.0])
+def test_power_law_fit_recovers_the_spectral_slope_of_power_law_noise(beta):
+    z = spectral_noise((512, 512), 100.0, rms=50.0, beta=beta, largest_m=1e6, rng=3)
+    c, b = power_law_fit(z, 100.0, fit_m=(1000.0, 10_000.0))
+    assert abs(b - beta) < 0.25  # the taper leaks a little low-wavenumber power upwards
+    assert c > 0
+
+
+def test_power_law_noise_has_the_fitted_density_at_any_cell_size():
+    """Noise made from (c, beta) and fitted again gives the same density at 50 and 100 m cells
+    (the amplitude is in metres, not relative to the grid)."""
+    c0, b0 = 1.0e-3, 3.0
+    for res, n in ((100.0, 512), (50.0, 1024)):
+        z = power_law_noise((n, n), res, c=c0, beta=b0, largest_m=1e6, rng=1)
+        c, b = power_law_fit(z, res, fit_m=(1000.0, 10_000.0))
+        assert abs(b - b0) < 0.2
+        # density at 2 km wavelength within a factor 1.5
+        k = 1.0 / 2000.0
+        assert 1 / 1.5 < (c * k ** -b) / (c0 * k ** -b0) < 1.5
+
+
+def test_power_law_noise_is_zero_above_its_largest_wavelength():
+    bands = ((100.0, 400.0), (5000.0, 20_000.0))
+    hp, full = (band_power(power_law_noise((512, 512), 50.0, c=1.0e-3, beta=3.0, largest_m=m, rng=2), (50.0, 50.0),
+                           bands_m=bands) for m in (500.0, 1e6))
+    assert hp[0] > 0.5 * full[0]  # short wavelengths kept
+    assert hp[1] < 1e-3 * full[1]  # long ones removed
+    assert power_law_noise((8, 8), 50.0, c=0.0, beta=3.0).any() == False  # noqa: E712
+
+
+def test_power_law_fit_needs_a_grid_larger_than_the_band():
+    assert power_law_fit(np.zeros((16, 16)), 100.0, fit_m=(1000.0, 10_000.0)) == (0.0, 3.0)
+
+
+def test_deficit_noise_adds_nothing_where_the_surface_has_the_power_law_already():
+    """``minus`` = a surface with (at least) the target density: the deficit is ~0; a flat surface: the full law."""
+    c0, b0 = 1.0e-3, 3.0
+    kw = {"c": c0, "beta": b0, "largest_m": 2000.0}
+    full = power_law_noise((256, 256), 50.0, **kw, rng=4)
+    rich = power_law_noise((256, 256), 50.0, c=4 * c0, beta=b0, largest_m=1e6, rng=5)
+    none = power_law_noise((256, 256), 50.0, **kw, minus=np.zeros((256, 256)), rng=4)
+    np.testing.assert_allclose(none, full, rtol=1e-4, atol=1e-4)
+    left = power_law_noise((256, 256), 50.0, **kw, minus=rich, rng=4)
+    assert float(left.std()) < 0.05 * float(full.std())
+
+
+def _render(params, seed=7):
+    return render_elevation(small_tree(), cell_size_m=50.0, erosion=False, params=params, rng=seed)
+
+
+def test_render_with_detail_keeps_the_tree_orometry_and_is_deterministic():
+    params = RenderParams(smooth_m=100.0, detail_gain=1.0, detail_fit_m=(400.0, 2000.0), detail_largest_m=1000.0)
+    a, b = _render(params), _render(params)
+    np.testing.assert_array_equal(a.values, b.values)
+    plain = _render(RenderParams())
+    assert not np.array_equal(a.values, plain.values)
+    res = orokit.analyze(a, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(small_tree(), res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+    np.testing.assert_allclose(comp.peaks["raster_prominence"].to_numpy(), [1500.0, 200.0, 200.0, 150.0, 100.0],
+                               atol=6.0)
