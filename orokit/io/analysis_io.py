@@ -85,40 +85,57 @@ def _write(result: AnalysisResult, out: Path) -> Path:
 
 
 def _write_parquet(frame, path: Path, crs: Any = None, batch_rows: int | None = None) -> None:
-    """A table as GeoParquet (point geometry from ``x``/``y``), written in batches of rows.
+    """A table as GeoParquet (point geometry from ``x``/``y``), in row groups of ``batch_rows``.
 
     ``frame``: a GeoDataFrame, or a DataFrame without geometry (points are made from
-    ``x``/``y`` in ``crs``, one batch at a time). The file is that of
-    ``GeoDataFrame.to_parquet`` (the same bytes while the table fits in one batch; beyond,
-    the same table in row groups of ``batch_rows``).
+    ``x``/``y`` in ``crs``). The file is that of ``GeoDataFrame.to_parquet`` (the same
+    bytes while the table fits in one row group; beyond, the same table in row groups of
+    ``batch_rows``). Only the schema goes through geopandas (from the first row); the
+    columns go to Arrow without copies and the points straight to WKB.
     """
     import geopandas as gpd
+    import pyarrow as pa
     import pyarrow.parquet as pq
     from geopandas.io.arrow import _geopandas_to_arrow
 
     from orokit.io.divide_tree_gpkg import WRITE_BATCH_ROWS
+    from orokit.io.wkb import point_wkb
 
     step = batch_rows or WRITE_BATCH_ROWS
     n = len(frame)
     has_geometry = isinstance(frame, gpd.GeoDataFrame)
+    head = frame.iloc[:1]
     if has_geometry:
         crs = frame.crs
-    with atomic_path(path) as tmp:
-        writer = None
-        try:
-            for start in range(0, max(n, 1), step):
-                part = frame.iloc[start:start + step]
-                if not has_geometry:
-                    part = gpd.GeoDataFrame(part, geometry=gpd.points_from_xy(part["x"], part["y"]), crs=crs)
-                table = _geopandas_to_arrow(part)
-                if writer is None:
-                    schema = table.schema.with_metadata(_whole_table_metadata(table.schema.metadata, frame, n))
-                    writer = pq.ParquetWriter(str(tmp), schema, compression="snappy")
-                writer.write_table(table.replace_schema_metadata(writer.schema.metadata))
-                del part, table
-        finally:
-            if writer is not None:
-                writer.close()
+        wkb = _geometry_wkb(frame.geometry.values)
+        geometry_name = frame.geometry.name
+    else:
+        head = gpd.GeoDataFrame(head, geometry=gpd.points_from_xy(head["x"], head["y"]), crs=crs)
+        wkb = point_wkb(frame["x"].to_numpy(np.float64), frame["y"].to_numpy(np.float64))
+        geometry_name = "geometry"
+    schema = _geopandas_to_arrow(head).schema
+    schema = schema.with_metadata(_whole_table_metadata(schema.metadata, frame, n))
+    arrays = []
+    for field in schema:
+        if field.name == geometry_name:
+            arrays.append(wkb)
+        elif field.name in frame.columns:
+            arrays.append(pa.Array.from_pandas(frame[field.name], type=field.type))
+        else:  # an index stored as a column (not a RangeIndex)
+            arrays.append(pa.Array.from_pandas(frame.index.get_level_values(field.name), type=field.type))
+    table = pa.Table.from_arrays(arrays, schema=schema)
+    del arrays, wkb
+    with atomic_path(path) as tmp, pq.ParquetWriter(str(tmp), schema, compression="snappy") as writer:
+        for start in range(0, max(n, 1), step):
+            writer.write_table(table.slice(start, step))
+
+
+def _geometry_wkb(geometry):
+    """Geometries as an Arrow binary array of WKB (as geopandas writes them to GeoParquet)."""
+    import pyarrow as pa
+    import shapely
+
+    return pa.array(shapely.to_wkb(geometry, flavor="iso"), type=pa.binary())
 
 
 def _whole_table_metadata(meta: dict, frame, n: int) -> dict:
@@ -141,31 +158,19 @@ def _whole_table_metadata(meta: dict, frame, n: int) -> dict:
     return meta
 
 
-def _write_csv(frame, path: Path, batch_rows: int | None = None) -> None:
+def _write_csv(frame, path: Path) -> None:
     """A (Geo)DataFrame without its geometry as CSV, index first, floats in full precision.
 
-    Written in batches of rows, so only one batch is ever copied (to pandas, then Arrow).
+    The columns go to Arrow without copies (one Arrow table, written by Arrow's CSV writer).
     """
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    from orokit.io.divide_tree_gpkg import WRITE_BATCH_ROWS
-
-    step = batch_rows or WRITE_BATCH_ROWS
     columns = [c for c in frame.columns if c != "geometry"]
+    names = [frame.index.name or "index", *columns]
+    arrays = [pa.Array.from_pandas(frame.index), *(pa.Array.from_pandas(frame[c]) for c in columns)]
     with atomic_path(path) as tmp:
-        writer = schema = None
-        try:
-            for start in range(0, max(len(frame), 1), step):
-                part = pd.DataFrame(frame.iloc[start:start + step][columns]).reset_index()
-                table = pa.Table.from_pandas(part, preserve_index=False, schema=schema)
-                if writer is None:
-                    schema = table.schema
-                    writer = pacsv.CSVWriter(str(tmp), schema)
-                writer.write_table(table)
-        finally:
-            if writer is not None:
-                writer.close()
+        pacsv.write_csv(pa.Table.from_arrays(arrays, names=names), str(tmp))
 
 
 def read_analysis(outdir: PathLike) -> AnalysisResult:

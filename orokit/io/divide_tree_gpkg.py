@@ -38,11 +38,19 @@ def _json_attrs(attrs: dict) -> dict:
     return out
 
 
+#: rows per row group of the GeoParquet tables
+WRITE_BATCH_ROWS = 65_536
 #: how every layer is written: through GDAL's Arrow interface, without spatial index (GIS tools
 #: build one on demand; it would double the writing time)
-#: rows per batch when writing large tables (peaks, saddles, CSV): bounds the copies made for a write
-WRITE_BATCH_ROWS = 65_536
-_GPKG = {"driver": "GPKG", "engine": "pyogrio", "use_arrow": True, "layer_options": {"SPATIAL_INDEX": "NO"}}
+_GPKG = {"driver": "GPKG", "layer_options": {"SPATIAL_INDEX": "NO"}}
+
+
+def _gdal_crs(crs) -> str | None:
+    """A pyproj CRS as GDAL takes it (what geopandas passes): ``EPSG:n`` when it has a code, else WKT1."""
+    if crs is None:
+        return None
+    epsg = crs.to_epsg()
+    return f"EPSG:{epsg}" if epsg else crs.to_wkt("WKT1_GDAL")
 
 
 def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFrame | None = None,
@@ -63,8 +71,10 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
 
     ``layers``: further point GeoDataFrames by layer name (e.g. ``depressions``).
     """
-    import geopandas as gpd
+    import pyarrow as pa
+    import pyogrio
 
+    from orokit.io.wkb import point_wkb, polyline_wkb
     from orokit.topology.tables import OROMETRY_COLUMNS, validate_peak_table
 
     path = Path(path)
@@ -78,35 +88,42 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
         added = [c for c in OROMETRY_COLUMNS if c not in tree.peaks.columns]
     meta = {"orokit_attrs": json.dumps(_json_attrs(tree.attrs)), "orometry_columns": json.dumps(added)}
 
-    def points(frame: pd.DataFrame, id_name: str, layer: str, extra: pd.DataFrame | None = None, **kw) -> None:
-        """One point layer, appended in batches of rows (points and copies only of a batch in memory)."""
-        for start in range(0, max(len(frame), 1), WRITE_BATCH_ROWS):
-            f = frame.iloc[start:start + WRITE_BATCH_ROWS].reset_index(drop=True)
-            if extra is not None:
-                more = pd.DataFrame(extra.iloc[start:start + WRITE_BATCH_ROWS][added]).reset_index(drop=True)
-                f = pd.concat([f, more], axis=1)
-            f.insert(0, id_name, np.arange(start, start + len(f), dtype=np.int64))
-            g = gpd.GeoDataFrame(f, geometry=gpd.points_from_xy(f["x"], f["y"]), crs=tree.crs)
-            g.to_file(tmp, layer=layer, append=start > 0, **kw, **_GPKG)
+    crs = _gdal_crs(tree.crs)
+
+    def write(columns: dict[str, Any], wkb, layer: str, geometry_type: str) -> None:
+        """One layer from whole columns (no copies) and its WKB geometries, in one write."""
+        names = [*columns, "geometry"]
+        arrays = [pa.Array.from_pandas(v) for v in columns.values()] + [wkb]
+        pyogrio.write_arrow(pa.Table.from_arrays(arrays, names=names), tmp, layer=layer, geometry_name="geometry",
+                            geometry_type=geometry_type, crs=crs, **_GPKG)
+
+    def points(frame: pd.DataFrame, id_name: str, layer: str, extra: pd.DataFrame | None = None) -> None:
+        columns: dict[str, Any] = {id_name: np.arange(len(frame), dtype=np.int64)}
+        columns.update((c, frame[c]) for c in frame.columns)
+        if extra is not None:
+            columns.update((c, extra[c]) for c in added)
+        write(columns, point_wkb(frame["x"].to_numpy(np.float64), frame["y"].to_numpy(np.float64)), layer, "Point")
 
     with atomic_path(path) as tmp, warnings.catch_warnings():
         # a tree on a local grid has no CRS: that is recorded in attrs, not a problem
         warnings.filterwarnings("ignore", message="'crs' was not provided", category=UserWarning)
         points(tree.peaks, "peak_id", "peaks", peaks)
         points(tree.saddles, "saddle_id", "saddles")
-        for start in range(0, max(len(tree.edges), 1), WRITE_BATCH_ROWS):
-            ridges = tree.ridges(start, start + WRITE_BATCH_ROWS).reset_index(drop=True)
-            if ridges.crs is None and tree.crs is not None:
-                ridges = ridges.set_crs(tree.crs)
-            ridges.to_file(tmp, layer="ridges", geometry_type="LineString", append=start > 0, **_GPKG)
+        a, b, s = tree._edge_arrays()
+        px, py = tree.peaks["x"].to_numpy(np.float64), tree.peaks["y"].to_numpy(np.float64)
+        sx, sy = tree.saddles["x"].to_numpy(np.float64), tree.saddles["y"].to_numpy(np.float64)
+        ridges: dict[str, Any] = {c: tree.edges[c] for c in tree.edges.columns}
+        ridges["saddle_elevation"] = tree.saddles["elevation"].to_numpy(np.float64)[s]
+        line = polyline_wkb(np.stack([px[a], sx[s], px[b]], axis=1), np.stack([py[a], sy[s], py[b]], axis=1))
+        write(ridges, line, "ridges", "LineString")
+        del a, b, s, ridges, line
         for key in ("runoffs", "basin_saddles"):
             extra = tree.attrs.get(key)
             if isinstance(extra, pd.DataFrame):
-                points(extra, "point_id", key, geometry_type="Point")
+                points(extra, "point_id", key)
         for name, frame in (layers or {}).items():
-            frame.reset_index().to_file(tmp, layer=name, geometry_type="Point", **_GPKG)
-        import pyogrio
-
+            frame.reset_index().to_file(tmp, layer=name, geometry_type="Point", engine="pyogrio", use_arrow=True,
+                                          **_GPKG)
         # attrs go to a small non-spatial table (portable across GDAL versions)
         frame = pd.DataFrame({"key": list(meta), "value": list(meta.values())})
         pyogrio.write_dataframe(frame, tmp, layer="orokit_metadata", driver="GPKG")

@@ -265,12 +265,18 @@ class DivideTree:
             raise DivideTreeError(f"ridge {int(np.flatnonzero(a == b)[0])} joins a peak to itself")
         if a.size >= max(n, 1):
             raise DivideTreeError(f"{a.size} ridges for {n} peaks: a tree has at most n - 1")
-        parent = np.arange(n)
-        for i in range(a.size):
-            ra, rb = _find_py(parent, a[i]), _find_py(parent, b[i])
-            if ra == rb:
-                raise DivideTreeError(f"ridge {i} (peaks {a[i]}-{b[i]}) closes a cycle")
-            parent[rb] = ra
+        if a.size:
+            from orokit.topology._kernels import forest_components
+
+            # n nodes and m edges without a cycle make exactly n - m components
+            roots = np.count_nonzero(forest_components(n, a, b) == np.arange(n))
+            if roots != n - a.size:  # find the first ridge that closes a cycle
+                parent = np.arange(n)
+                for i in range(a.size):
+                    ra, rb = _find_py(parent, a[i]), _find_py(parent, b[i])
+                    if ra == rb:
+                        raise DivideTreeError(f"ridge {i} (peaks {a[i]}-{b[i]}) closes a cycle")
+                    parent[rb] = ra
         if check_elevations and a.size:
             pz = self.peaks["elevation"].to_numpy(float)
             sz = self.saddles["elevation"].to_numpy(float)[s]
