@@ -58,6 +58,9 @@ _HGT_SHAPES = ((1201, 1201), (3601, 3601), (1801, 3601))
 #: GDAL block cache (bytes) while orokit reads: by default GDAL caches up to 5 % of the RAM,
 #: so a whole-raster read kept a second copy of the raster in the cache (twice the peak memory)
 READ_CACHE_BYTES = 32 * 2**20
+#: threads reading a whole raster (row stripes, one GDAL handle each) and rows a stripe has at least
+READ_THREADS = min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+READ_MIN_ROWS = 512
 
 
 @contextlib.contextmanager
@@ -120,11 +123,22 @@ class _BandReader:
     dtype: np.dtype = np.dtype(np.float32)
     ndim: int = 2
 
+    def _in_place(self, dtype: np.dtype) -> bool:
+        """float32 metres are converted in place (a copy would double the peak memory)."""
+        return np.dtype(dtype) == np.float32 and self.factor == 1.0 and self.offset_m == 0.0
+
     def _convert(self, raw: NDArray[Any], where: str = "") -> NDArray[np.float32]:
-        # float32 metres are converted in place (a copy would double the peak memory);
-        # other inputs by row blocks, so the float64 intermediate stays small
-        inplace = raw.dtype == np.float32 and self.factor == 1.0 and self.offset_m == 0.0
-        out = raw if inplace else np.empty(raw.shape, np.float32)
+        out = None if self._in_place(raw.dtype) else np.empty(raw.shape, np.float32)
+        self._warn_implausible(*self._fill(raw, out), where)
+        return raw if out is None else out
+
+    def _fill(self, raw: NDArray[Any], out: NDArray[np.float32] | None) -> tuple[int, list[NDArray[Any]]]:
+        """``raw`` as float32 metres with NaN nodata into ``out`` (None: in place, float32 metres only).
+
+        By row blocks, so the float64 intermediate of integer inputs stays small. Returns
+        the number of implausible cells made nodata and their distinct raw values.
+        """
+        inplace = out is None
         n_bad = 0
         bad_values = []
         step = max(1, (1 << 22) // max(1, raw.shape[-1]))
@@ -170,8 +184,11 @@ class _BandReader:
                 bad_values.append(np.unique(blk[implausible]))
                 valid &= ~implausible
             z[~valid] = np.nan
-            if not inplace:
+            if out is not None:
                 out[r0:r0 + step] = z
+        return n_bad, bad_values
+
+    def _warn_implausible(self, n_bad: int, bad_values: list[NDArray[Any]], where: str) -> None:
         if n_bad:
             values = np.unique(np.concatenate(bad_values))
             shown = ", ".join(f"{v:g}" for v in values[:3]) + (", ..." if len(values) > 3 else "")
@@ -181,27 +198,62 @@ class _BandReader:
                 f"{PLAUSIBLE_MAX_M:g} m) and the file declares no such nodata; they are read as nodata. Declare the "
                 "nodata value in the file (gdal_edit.py -a_nodata) or check the elevation units (--z-units).",
                 OrokitWarning,
-                stacklevel=3,
+                stacklevel=4,
             )
-        return out
 
     def read(self, window: Window | None = None, out_shape: tuple[int, int] | None = None) -> NDArray[np.float32]:
+        if window is None and out_shape is None:
+            return self._read_all()
         where = "" if window is None else f" (rows {window.row_off}:{window.row_off + window.height}, cols {window.col_off}:{window.col_off + window.width})"
         with _open(self.path, what=where) as src:
             try:
                 if out_shape is not None:
                     raw = src.read(self.band, out_shape=out_shape, resampling=Resampling.nearest)
-                elif window is None:  # the whole raster, from the caller's thread: no cached second copy
-                    with bounded_gdal_cache():
-                        raw = src.read(self.band)
                 else:
                     raw = src.read(self.band, window=window)
             except rasterio.errors.RasterioError as exc:
-                raise InputError(
-                    f"cannot read the pixels of {self.path}{where}: {str(exc).rstrip('.')}. The file is probably truncated or "
-                    "corrupt; download it again (orokit data fetch) or re-export it."
-                ) from exc
+                raise self._read_error(exc, where) from exc
         return self._convert(raw, where)
+
+    def _read_error(self, exc: Exception, where: str) -> InputError:
+        return InputError(
+            f"cannot read the pixels of {self.path}{where}: {str(exc).rstrip('.')}. The file is probably truncated or "
+            "corrupt; download it again (orokit data fetch) or re-export it."
+        )
+
+    def _read_all(self) -> NDArray[np.float32]:
+        """The whole band, in row stripes read and converted by parallel threads (one GDAL handle each).
+
+        From the caller's thread under :func:`bounded_gdal_cache` (no cached second copy);
+        stripes start on block rows, so no block is read twice.
+        """
+        h, w = self.shape
+        raw = np.empty(self.shape, np.dtype(self.native_dtype))
+        out = raw if self._in_place(raw.dtype) else np.empty(self.shape, np.float32)
+        with _open(self.path) as src:
+            block_rows = max(1, int(src.block_shapes[self.band - 1][0]))
+        k = max(1, min(READ_THREADS, h // max(block_rows, READ_MIN_ROWS)))
+        cuts = sorted({min(h, -(-(i * h // k) // block_rows) * block_rows) for i in range(k)} | {h})
+
+        def stripe(r0: int, r1: int) -> tuple[int, list[NDArray[Any]]]:
+            with _open(self.path) as src:
+                try:
+                    src.read(self.band, window=Window(0, r0, w, r1 - r0), out=raw[r0:r1])
+                except rasterio.errors.RasterioError as exc:
+                    raise self._read_error(exc, "") from exc
+            return self._fill(raw[r0:r1], None if out is raw else out[r0:r1])
+
+        with bounded_gdal_cache():
+            if len(cuts) == 2:
+                parts = [stripe(0, h)]
+            else:
+                from concurrent.futures import ThreadPoolExecutor
+
+                with ThreadPoolExecutor(len(cuts) - 1) as pool:
+                    parts = list(pool.map(stripe, cuts[:-1], cuts[1:]))
+        del raw
+        self._warn_implausible(sum(p[0] for p in parts), [v for p in parts for v in p[1]], "")
+        return out
 
     def __getitem__(self, key: Any) -> NDArray[np.float32]:
         if not isinstance(key, tuple):

@@ -89,3 +89,43 @@ def test_cli_in_memory_analysis_imports_neither_xarray_nor_dask(tmp_path):
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert json.loads(res.stdout.strip().splitlines()[-1]) == []
     assert (tmp_path / "out" / "analysis.json").exists()
+
+
+@pytest.mark.parametrize("dtype", ["int16", "float32"])
+def test_whole_raster_read_in_parallel_stripes_is_the_plain_read(tmp_path, monkeypatch, dtype):
+    """The whole-raster read (row stripes in threads, one GDAL handle each, starting on block rows) gives
+    rasterio's pixels, converted as one read would, and one warning with the count of all stripes."""
+    import warnings
+
+    import orokit.io.dem as dem_mod
+    from orokit.errors import OrokitWarning
+
+    rng = np.random.default_rng(11)
+    z = rng.integers(-50, 3000, (203, 45)).astype(dtype)
+    z[5, 6] = -9999  # an undeclared void marker: nodata, reported
+    z[150, 3] = 20000  # beyond any elevation on Earth: nodata, reported
+    nodata = -32768 if dtype == "int16" else None
+    if nodata is not None:
+        z[100:103, 10] = nodata
+    path = tmp_path / "t.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=45, height=203, count=1, dtype=dtype, crs="EPSG:32633",
+                       transform=Affine(30, 0, 500000, 0, -30, 4000000), nodata=nodata, tiled=True,
+                       blockxsize=16, blockysize=16) as ds:
+        ds.write(z, 1)
+    with rasterio.open(path) as ds:
+        want = ds.read(1).astype(np.float32)
+    want[(want == -9999) | (want == 20000) | (want == -32768)] = np.nan
+
+    def read(threads: int):
+        monkeypatch.setattr(dem_mod, "READ_THREADS", threads)
+        monkeypatch.setattr(dem_mod, "READ_MIN_ROWS", 16)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            values = read_dem_array(path).values
+        return values, [str(w.message) for w in caught if issubclass(w.category, OrokitWarning)]
+
+    one, warned_one = read(1)
+    many, warned_many = read(3)
+    np.testing.assert_array_equal(one, want)
+    np.testing.assert_array_equal(many, want)
+    assert len(warned_one) == 1 and warned_many == warned_one and " 2 cells hold void markers" in warned_one[0]
