@@ -211,6 +211,20 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
     topo_engine.orometry = rss.wrap(topo_engine.orometry, "engine (in memory)")
     metrics_isolation.isolation = rss.wrap(metrics_isolation.isolation, "isolation")
     topo_engine.build_result = rss.wrap(topo_engine.build_result, "tables")
+    import logging
+
+    class _Keep(logging.Handler):  # the engine's own counts (chunk loads of the isolation search)
+        def __init__(self):
+            super().__init__(logging.INFO)
+            self.lines: list[str] = []
+
+        def emit(self, record):
+            self.lines.append(record.getMessage())
+
+    keep = _Keep()
+    for name in ("orokit.tiling.engine", "orokit.tiling.isolation"):
+        logging.getLogger(name).addHandler(keep)
+        logging.getLogger(name).setLevel(logging.INFO)
     rss.enter("read")
     t0 = time.perf_counter()
     dem = read_dem(vrt, chunks=chunks)
@@ -246,6 +260,7 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
         "rss_mb_before_writing": rss_analyze,
         "rss_mb_by_phase": by_phase,
         "load_average_1min": os.getloadavg()[0],
+        "engine_log": keep.lines,
         "workers": workers,
         "worker_rss_mb": worker_mb,
     }

@@ -22,6 +22,7 @@ import numpy as np
 from orokit.errors import TilingError
 from orokit.io.checkpoint_io import chunk_path, discard_chunk, open_checkpoint, read_chunk, write_chunk
 from orokit.tiling.isolation import block_stats, chunk_isolation
+from orokit.tiling.memory import release_free_heap
 from orokit.tiling.summary import ChunkSummary, chunk_summary, finalize_summary, merge_summaries
 from orokit.topology.engine import Orometry
 
@@ -247,6 +248,7 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
             ((result, iso, st),) = compute([final])
     else:
         ((result, iso, st),) = compute([final])
+    release_free_heap()  # the chunks' and merges' arrays, freed inside the heap
     return TiledOrometry(orometry=result, chunk_stats=st, chunk_isolation=iso)
 
 

@@ -17,6 +17,7 @@ import pandas as pd
 from orokit.metrics import _kernels as _mk
 from orokit.metrics._kernels import EARTH_RADIUS_M
 from orokit.metrics.isolation import KernelMetric, finish_isolation
+from orokit.tiling.memory import release_free_heap
 
 logger = logging.getLogger(__name__)
 
@@ -201,6 +202,7 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
     logger.info("isolation of %d peaks (%d settled in their chunk): %d chunk loads for %d chunks",
                 n, int((~todo).sum()), cache.loads, nby * nbx)
     del cache, order, bounds
+    release_free_heap()  # the chunks and pyramids the search read
     # all candidates in one array as wide as the longest row (one or two columns on projected grids)
     width = int(ncand.max(initial=0))
     if known is not None and hit is not None:
