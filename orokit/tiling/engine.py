@@ -138,6 +138,8 @@ def _tile_task(window: _Window, ij: tuple[int, int], row0: int, col0: int, shape
     if path is not None:
         extra = {} if iso is None else {f"iso_{f}": v for f, v in iso.items()}
         write_chunk(path, {**summary.to_npz(), **extra, "stats": np.array(stats, np.float64)})
+    del core
+    release_free_heap()  # the chunk's arrays: the heap keeps them otherwise (glibc: up to 32 MB each)
     return summary, iso, {ij: stats}
 
 
@@ -160,10 +162,15 @@ def _merge_task(a: _Part, b: _Part, min_prominence_m: float) -> _Part:
     """Merged summary of two parts; settled isolation kept only for peaks still in it."""
     s = merge_summaries(a[0], b[0], min_prominence_m)
     iso = _merge_iso([a[1], b[1]], keep=s.key[s.ismax])
+    release_free_heap()
     return s, iso, {**a[2], **b[2]}
 
 
 def _finalize_task(root: _Part, min_prominence_m: float, outside: str, nby: int, nbx: int) -> tuple:
+    s, iso = root[0], root[1]
+    logger.info("root summary: %d nodes (%d candidate peaks), %d edges, %.1f MB; settled isolation: %d peaks, %.1f MB",
+                s.n_nodes, int(s.ismax.sum()), s.ea.size, s.nbytes() / 2**20,
+                0 if iso is None else iso["key"].size, 0 if iso is None else sum(v.nbytes for v in iso.values()) / 2**20)
     stats = np.array([[root[2][i, j] for j in range(nbx)] for i in range(nby)], dtype=float)
     return finalize_summary(root[0], min_prominence_m=min_prominence_m, outside=outside), root[1], stats
 
