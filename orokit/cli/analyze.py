@@ -74,6 +74,7 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
     Row/col are 0-based on the input grid with row 0 at the top; all elevations,
     prominences and distances are in metres.
     """
+    _numba_without_blas_probe()
     from orokit.analysis import analyze as run
 
     from orokit.cli.outputs import claim_outputs
@@ -121,3 +122,25 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         f"{shape[0]}x{shape[1]} cells in {time.perf_counter() - t0:.2f} s -> {outdir}"
         + ("" if result.depressions is None else f" ({len(result.depressions)} depressions)")
     )
+
+
+def _numba_without_blas_probe() -> None:
+    """Load numba's array implementations without importing scipy.linalg for its BLAS probe.
+
+    numba imports ``scipy.linalg.cython_blas`` when its CPU target starts, only to offer
+    ``np.dot``/``np.linalg`` in compiled code; no orokit kernel uses them, and the probe
+    costs ~0.12 s of CPU and ~15 MB in every ``orokit analyze`` process (measured). While
+    the implementations load, ``scipy.linalg`` is marked unimportable; it is importable
+    again right after (numba then simply has no BLAS in this process). A process that
+    already imported either is left as it is.
+    """
+    import sys
+
+    if "scipy.linalg" in sys.modules or "numba.np.arraymath" in sys.modules:
+        return
+    sys.modules["scipy.linalg"] = None  # type: ignore[assignment]  # import raises ImportError
+    try:
+        import numba.np.arraymath  # noqa: F401
+    finally:
+        if sys.modules.get("scipy.linalg", 0) is None:
+            del sys.modules["scipy.linalg"]

@@ -93,15 +93,10 @@ def basin_graph(z: np.ndarray, label: np.ndarray, n_max: int) -> tuple[np.ndarra
     bmax = np.maximum.reduce([p[0] for p in parts])
     nmin = np.minimum.reduce([p[1] for p in parts])
     ea, eb, ec = (np.concatenate([p[i] for p in parts]) for i in (2, 3, 4))
+    del parts
     # a pair seen in several stripes: keep its highest pass (elevation, then raster order)
-    key = ea * np.int64(n_max) + eb
-    zf = z.ravel()
-    order = np.lexsort((ec, -zf[ec], key))
-    key = key[order]
-    first = np.ones(key.size, bool)
-    first[1:] = key[1:] != key[:-1]
-    sel = order[first]
-    return bmax, nmin, ea[sel], eb[sel], ec[sel]
+    ea, eb, ec = _kernels.dedupe_passes(ea, eb, ec, z.ravel(), n_max)
+    return bmax, nmin, ea, eb, ec
 
 
 def orometry(z: np.ndarray, *, min_prominence_m: float, outside: str = "unknown") -> Orometry:
