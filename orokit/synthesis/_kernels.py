@@ -121,7 +121,7 @@ def _disk_gain(qx, qy, cx0, cy0, cstep, cnx, cny, covered, radius, mark):
 
 @njit(cache=True)
 def throw_darts(
-    px, py, n_start, n_end,
+    px, py, z, n_start, n_end,
     fixed, fx, fy,
     cand_x, cand_y, cand_w,
     ptype, u,
@@ -130,6 +130,7 @@ def throw_darts(
     head, nxt, gx0, gy0, gcell, gnx, gny,
     floor_w,
     cx0, cy0, cstep, cnx, cny, covered, n_covered, cover_target, radius, disk_w,
+    grad_edges, grad_ne, grad_open, grad_target, grad_have, grad_on,
 ):
     """Place peaks ``n_start..n_end-1`` (sorted by decreasing elevation) by dart throwing.
 
@@ -147,6 +148,10 @@ def throw_darts(
     ``exp(-disk_w |gain - demand| / A)``, gain = centres it would cover, demand = target
     minus covered (at least 0), A = centres per disk. ``covered`` and ``n_covered[0]`` are
     updated in place.
+
+    Gradient target (``grad_on[t]``): the candidate's weight is also multiplied by the
+    remaining demand of its bin of ``(z_nearest - z) / d``, the elevation gradient to its
+    nearest (higher) placed peak, as for the isolation bins (``grad_have`` updated in place).
     Returns per placed peak the isolation distance (NaN for the first).
     """
     m = cand_x.shape[1]
@@ -191,6 +196,13 @@ def throw_darts(
                     if b2 >= 0:
                         f2 = max(dir_target[t, b2] - dir_have[t, b2], 0.0) + floor_w * dir_target[t, b2]
                     wc = wc * f1 * f2
+                    if grad_on[t]:
+                        b3 = _bin((z[nb] - z[k]) / max(d, 1e-9), grad_edges[t, : grad_ne[t]], grad_open[t])
+                        if b3 >= 0:
+                            wc = wc * (max(grad_target[t, b3] - grad_have[t, b3], 0.0)
+                                       + floor_w * grad_target[t, b3])
+                        else:
+                            wc = wc * floor_w * 0.1
                 if use_disks:
                     gain = _disk_gain(qx, qy, cx0, cy0, cstep, cnx, cny, covered, radius, False)
                     wc = wc * math.exp(-disk_w * abs(gain - demand) / per_disk)
@@ -225,6 +237,10 @@ def throw_darts(
             b2 = _bin(ang, dir_edges[t, : dir_ne[t]], False)
             if b2 >= 0:
                 dir_have[t, b2] += 1.0
+            if grad_on[t]:
+                b3 = _bin((z[choice_nb] - z[k]) / max(choice_d, 1e-9), grad_edges[t, : grad_ne[t]], grad_open[t])
+                if b3 >= 0:
+                    grad_have[t, b3] += 1.0
         if n_covered[0] < n_centres:
             n_covered[0] += _disk_gain(qx, qy, cx0, cy0, cstep, cnx, cny, covered, radius, True)
         ci, cj = _cell_of(qx, qy, gx0, gy0, gcell, gnx, gny)

@@ -122,6 +122,7 @@ def place_peaks(
     disks: list | None = None,
     disk_weight: float = 0.0,
     elevation_tolerance: float = 0.05,
+    gradients: list | None = None,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Positions of peaks sorted by decreasing elevation ``z``.
@@ -139,6 +140,9 @@ def place_peaks(
         (:mod:`orokit.synthesis.disks`) and the strength of the per-disk target: the share of
         disk centres holding one of the highest peaks follows the type's ``top_rank``
         distribution (0, or a type without the record: off).
+    gradients : per type, the histogram of the elevation gradient from a peak to its nearest
+        higher peak (:attr:`orokit.synthesis.terrain_type.TerrainType.gradient`), followed like
+        the isolation histograms; None (for the list or a type): not followed.
 
     Returns
     -------
@@ -175,6 +179,18 @@ def place_peaks(
         dopen[t] = iso_dist[t].open_last
     dh = np.zeros_like(dt)
     ah = np.zeros_like(at)
+    grads = list(gradients) if gradients is not None else [None] * n_types
+    ne_g = np.array([2 if h is None else len(h.edges) for h in grads], np.int64)
+    ge = np.full((n_types, ne_g.max()), np.inf)
+    gt = np.zeros((n_types, ne_g.max() - 1))
+    gopen = np.zeros(n_types, np.bool_)
+    gon = np.array([h is not None for h in grads], np.bool_)
+    for t, h in enumerate(grads):
+        if h is not None:
+            ge[t, : ne_g[t]] = h.edges
+            gt[t, : ne_g[t] - 1] = h.probabilities() * max(counts_t[t] - 1, 0)
+            gopen[t] = h.open_last
+    gh = np.zeros_like(gt)
     # grid hash of placed peaks: cells about the final mean spacing
     spacing = np.sqrt(domain.width * domain.height / max(n, 1))
     gcell = max(spacing, 1e-6)
@@ -208,9 +224,9 @@ def place_peaks(
                 g = np.exp(-0.5 * ((chv - z[s:e][rows][:, None]) / sigma) ** 2)
                 cand_w[rows] = np.where(np.isfinite(g), g, 1.0)
         _kernels.throw_darts(
-            px, py, s, e, fixed, fx, fy, cand_x, cand_y, cand_w, ptype.astype(np.int64), u,
+            px, py, np.ascontiguousarray(z, dtype=float), s, e, fixed, fx, fy, cand_x, cand_y, cand_w, ptype.astype(np.int64), u,
             de, ne_d, dopen, dt, dh, ae, ne_a, at, ah, head, nxt,
-            domain.x0, domain.y0, gcell, gnx, gny, floor_w, *cover,
+            domain.x0, domain.y0, gcell, gnx, gny, floor_w, *cover, ge, ne_g, gopen, gt, gh, gon,
         )
         if p_i + 1 < len(passes):
             fa = fb = None

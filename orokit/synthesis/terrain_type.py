@@ -209,6 +209,11 @@ class TerrainType:
         elevation bins ``i_k .. i_{k+1} - 1``. Synthesis draws saddle targets per band so
         prominence stays paired with elevation as in the real region. Edits that change
         the elevation bins or hand-edit those histograms drop them.
+    gradient : histogram of ``(h_q - h_p) / d(p, q)`` from every peak p to its nearest higher
+        peak q (m/m; None for types made before it). The dart throwing follows it, so a low peak
+        lands as far from the higher peaks around it as in the source (issue 11: with the C_H
+        alone, neighbouring twin peaks were too alike in elevation, or too close to a much higher
+        one). Edits of the elevation or isolation-distance histograms drop it.
     """
 
     name: str
@@ -223,6 +228,7 @@ class TerrainType:
     source_center: tuple[float, float] | None = None
     texture: Mapping[str, float] | None = None
     disks: Mapping[str, Any] | None = None
+    gradient: FeatureHistogram | None = None
 
     def __post_init__(self) -> None:
         missing = set(FEATURES) - set(self.histograms)
@@ -249,6 +255,11 @@ class TerrainType:
             if not (np.isfinite(t.get("rms_m", np.nan)) and t["rms_m"] >= 0 and np.isfinite(t.get("beta", np.nan))):
                 raise SchemaError(f"texture needs a finite rms_m >= 0 and beta, got {self.texture!r}")
             object.__setattr__(self, "texture", t)
+        if self.gradient is not None and not isinstance(self.gradient, FeatureHistogram):
+            raise SchemaError(f"gradient must be a FeatureHistogram or None, got {type(self.gradient).__name__}")
+        if self.gradient is not None and self.gradient.edges[0] < 0:
+            raise SchemaError(f"gradient histogram starts below 0 ({self.gradient.edges[0]:g}); the gradient to "
+                              "a higher peak is >= 0")
         if self.disks is not None:
             from orokit.synthesis.disks import check_disk_quantiles
 
@@ -322,16 +333,20 @@ class TerrainType:
         prom = p["prominence"].to_numpy(float)
         sx, sy = p["saddle_x"].to_numpy(float), p["saddle_y"].to_numpy(float)
         keyed = np.isfinite(sx) & np.isfinite(sy)
+        near = nearest_higher_peak(*planar_xy(x, y, crs), z)
+        ok = near >= 0
+        nx_ = np.where(ok, x[np.maximum(near, 0)], np.nan)
+        ny_ = np.where(ok, y[np.maximum(near, 0)], np.nan)
+        near_d, near_dir = point_distance(x, y, nx_, ny_, crs=crs)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            grad = (z[np.maximum(near, 0)] - z) / near_d
+        grad = grad[ok & np.isfinite(grad)]
         if isolation_basis == "terrain":
             ix, iy = p["isolation_x"].to_numpy(float), p["isolation_y"].to_numpy(float)
             iso = p["isolation"].to_numpy(float)
             _, iso_dir = point_distance(x, y, ix, iy, crs=crs)
         else:
-            near = nearest_higher_peak(*planar_xy(x, y, crs), z)
-            ok = near >= 0
-            ix = np.where(ok, x[np.maximum(near, 0)], np.nan)
-            iy = np.where(ok, y[np.maximum(near, 0)], np.nan)
-            iso, iso_dir = point_distance(x, y, ix, iy, crs=crs)
+            ix, iy, iso, iso_dir = nx_, ny_, near_d, near_dir
         iso = np.where(np.isfinite(ix) & np.isfinite(iy), iso, np.nan)
         saddle_dist, saddle_dir = point_distance(x, y, sx, sy, crs=crs)
         has_iso = np.isfinite(iso)
@@ -359,6 +374,10 @@ class TerrainType:
             hists[k] = FeatureHistogram.from_values(values[k], e, open_last=op)
         for k in ("isolation_direction", "saddle_direction"):
             hists[k] = FeatureHistogram.from_values(values[k], _direction_edges())
+        gradient = None
+        if grad.size >= 2:
+            e, op = _linear_edges(np.maximum(grad, 0.0), lo=0.0, q_hi=0.99, n=n)
+            gradient = FeatureHistogram.from_values(np.maximum(grad, 0.0), e, open_last=op)
         if rho is None:
             rho = estimate_rho(tree, min_prominence_m) if tree is not None else 1.0
         prov = {
@@ -372,7 +391,7 @@ class TerrainType:
         src_crs, center = source_location(crs, 0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max()))
         return cls(name, hists, len(p) / float(area_km2), float(rho), float(min_prominence_m),
                    isolation_basis, prov, bands, source_crs=src_crs, source_center=center,
-                   disks=_disk_record(x, y, z, prom, crs, extent, min_prominence_m))
+                   disks=_disk_record(x, y, z, prom, crs, extent, min_prominence_m), gradient=gradient)
 
     @classmethod
     def from_divide_tree(cls, tree: Any, *, area_km2: float, min_prominence_m: float = 30.0,
@@ -450,7 +469,8 @@ class TerrainType:
         hists = dict(self.histograms)
         hists[feature] = h
         keep = self.bands if feature not in ("elevation", "prominence", "dominance") else None
-        return self._edited(f"set {feature} histogram", histograms=hists, bands=keep)
+        return self._edited(f"set {feature} histogram", histograms=hists, bands=keep,
+                            gradient=self._gradient_after(feature))
 
     def with_counts(self, feature: str, counts: Any) -> "TerrainType":
         """New type with the counts of one histogram replaced (hand-edited bins)."""
@@ -481,7 +501,8 @@ class TerrainType:
                 **self.histograms, feature: FeatureHistogram(tuple(edges), tuple(counts), h.open_last)})
         new = FeatureHistogram(tuple(float(v) for v in edges), h.counts, h.open_last)
         _check_range(feature, new)
-        return self._edited(f"scale {feature} x{factor:g}", histograms={**self.histograms, feature: new})
+        return self._edited(f"scale {feature} x{factor:g}", histograms={**self.histograms, feature: new},
+                            gradient=self._gradient_after(feature))
 
     def shifted(self, feature: str, offset: float) -> "TerrainType":
         """New type with a linear feature's values shifted by ``offset`` (elevation: metres)."""
@@ -491,7 +512,12 @@ class TerrainType:
         h = self.histograms[feature]
         new = FeatureHistogram(tuple(float(v) + float(offset) for v in h.edges), h.counts, h.open_last)
         _check_range(feature, new)
-        return self._edited(f"shift {feature} {offset:+g}", histograms={**self.histograms, feature: new})
+        return self._edited(f"shift {feature} {offset:+g}", histograms={**self.histograms, feature: new},
+                            gradient=self.gradient if feature == "elevation" else self._gradient_after(feature))
+
+    def _gradient_after(self, feature: str) -> FeatureHistogram | None:
+        """The gradient record after an edit of ``feature`` (dropped when it no longer holds)."""
+        return None if feature in ("elevation", "isolation_distance") else self.gradient
 
     def with_density(self, peak_density_per_km2: float) -> "TerrainType":
         return self._edited(f"density {peak_density_per_km2:g}", peak_density_per_km2=float(peak_density_per_km2))
@@ -517,6 +543,7 @@ class TerrainType:
             "source_center": None if self.source_center is None else list(self.source_center),
             "texture": None if self.texture is None else dict(self.texture),
             "disks": None if self.disks is None else dict(self.disks),
+            "gradient": None if self.gradient is None else self.gradient.to_dict(),
         }
 
     @classmethod
@@ -538,7 +565,10 @@ class TerrainType:
                        dict(data.get("provenance", {})), data.get("bands"),
                        source_crs=data.get("source_crs"),
                        source_center=None if data.get("source_center") is None else tuple(data["source_center"]),
-                       texture=data.get("texture"), disks=data.get("disks"))
+                       texture=data.get("texture"), disks=data.get("disks"),
+                       gradient=None if data.get("gradient") is None else FeatureHistogram(
+                           tuple(float(e) for e in data["gradient"]["edges"]), tuple(data["gradient"]["counts"]),
+                           bool(data["gradient"].get("open_last", False))))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, SchemaError):
                 raise
