@@ -333,24 +333,6 @@ def _unpack_pass_table(keys, vals, count, npk):
 
 
 @njit(cache=True, nogil=True)
-def dedupe_passes(ea, eb, ec, zf, npk):
-    """Each basin pair (``ea`` < ``eb``) once, with the highest of its pass cells ``ec`` (total order).
-
-    One hash-table pass (the stripes of :func:`basin_graph` share only the pairs across
-    their seams). Returns ``(ea, eb, ec)`` in table order.
-    """
-    size = 1024
-    while size < 2 * ea.size + 2:
-        size *= 2
-    keys = np.full(size, -1, np.int64)
-    vals = np.empty(size, np.int64)
-    count = 0
-    for e in range(ea.size):
-        count += _insert(keys, vals, ea[e] * np.int64(npk) + eb[e], ec[e], zf)
-    return _unpack_pass_table(keys, vals, count, npk)
-
-
-@njit(cache=True, nogil=True)
 def basin_passes(z, label, npk):
     """Highest pass between every pair of adjacent basins.
 

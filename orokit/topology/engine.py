@@ -94,9 +94,22 @@ def basin_graph(z: np.ndarray, label: np.ndarray, n_max: int) -> tuple[np.ndarra
     nmin = np.minimum.reduce([p[1] for p in parts])
     ea, eb, ec = (np.concatenate([p[i] for p in parts]) for i in (2, 3, 4))
     del parts
-    # a pair seen in several stripes: keep its highest pass (elevation, then raster order)
-    ea, eb, ec = _kernels.dedupe_passes(ea, eb, ec, z.ravel(), n_max)
-    return bmax, nmin, ea, eb, ec
+    # A pair seen in several stripes keeps its highest pass (elevation, then raster order).
+    # Basins are 8-connected, so a pair found in two stripes has both basins on the first
+    # row of a later stripe: only the pairs of such seam basins are compared.
+    W = z.shape[1]
+    seam = np.zeros(n_max, bool)
+    for r0, _ in bounds[1:]:
+        rows = label[(r0 - 1) * W:(r0 + 1) * W]
+        seam[rows[rows >= 0]] = True
+    cand = np.flatnonzero(seam[ea] & seam[eb])
+    key = ea[cand] * np.int64(n_max) + eb[cand]
+    order = np.lexsort((ec[cand], -z.ravel()[ec[cand]], key))
+    key = key[order]
+    dup = np.zeros(ea.size, bool)
+    dup[cand[order[1:][key[1:] == key[:-1]]]] = True
+    keep = ~dup
+    return bmax, nmin, ea[keep], eb[keep], ec[keep]
 
 
 def orometry(z: np.ndarray, *, min_prominence_m: float, outside: str = "unknown") -> Orometry:
