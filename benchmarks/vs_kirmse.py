@@ -7,7 +7,8 @@
    tile loader turns every sample more than 1000 units above a 4-neighbour into nodata;
    z / 32 is exact in float32 and stays below that), and a float32 GeoTIFF in metres
    (z x 0.3048) for orokit.
-3. Times, as whole processes with ``/usr/bin/time -v`` and alternating, ``--reps`` times:
+3. After one untimed run of each (numba's cache, page cache), times, as whole processes
+   with ``/usr/bin/time -v`` and alternating, ``--reps`` times:
    Kirmse ``prominence -t 1`` + ``merge_divide_trees -f -t 1`` (sum of both, RSS = max),
    ``orokit -q analyze DEM -o OUT --no-progress --no-isolation`` and the same with isolation.
 4. Checks that the peak sets are identical (cells, elevations and prominences).
@@ -295,6 +296,10 @@ def main() -> None:
             s = write_kirmse_tile(z_ft, folder / "tiles")
             tif = write_geotiff_m(z_ft, folder / "mosaic.tif")
             runs: dict[str, list[dict]] = {"kirmse": [], "orokit": [], "orokit_isolation": []}
+            # untimed: fills numba's cache after a code change (a first run compiles the kernels) and the
+            # page cache of both inputs, so the timed repetitions all start alike
+            run_kirmse(bin_dir, folder / "tiles", folder / "kirmse", s)
+            run_orokit(tif, folder / "orokit_iso", isolation=True, env=env)
             loads = []
             for _ in range(args.reps):
                 loads.append(os.getloadavg()[0])
