@@ -173,7 +173,7 @@ def finalize_graph(
     n = node_key.size
     # canonical order: saddle from high to low, then the basin pair (monkey saddles list
     # several pairs at one cell; their order must not depend on how they were found)
-    order = np.lexsort((eb, ea, ekey, -ez))
+    order = saddle_order(ea, eb, ez, ekey)
     ea, eb, ez, ekey = ea[order], eb[order], ez[order], ekey[order]
     bmax = np.full(n, -np.inf) if outside == "sea" else node_bmax
     in_tree, key_edge, parent, touched = _kernels.kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, bmax)
@@ -228,6 +228,30 @@ def finalize_graph(
         ridge_saddle_cell=tkey[oe],
         ridge_saddle_z=tz[oe],
     )
+
+
+def saddle_order(ea: np.ndarray, eb: np.ndarray, ez: np.ndarray, ekey: np.ndarray) -> np.ndarray:
+    """The edges' order by saddle from high to low, then basin pair: ``np.lexsort((eb, ea, ekey, -ez))``.
+
+    When every elevation is a float32 and every cell < 2**32 (the in-memory engine), one
+    argsort of a 64-bit key (elevation bits, descending, then cell) and a lexsort of the
+    edges sharing a cell (monkey saddles) only; otherwise the 4-key lexsort.
+    """
+    z32 = ez.astype(np.float32) + np.float32(0.0)  # + 0: -0.0 and 0.0 are one elevation
+    if ekey.size == 0 or not (np.array_equal(z32, ez) and 0 <= ekey.min() and ekey.max() < 2**32):
+        return np.lexsort((eb, ea, ekey, -ez))
+    bits = z32.view(np.uint32)
+    up = np.where(bits >> np.uint32(31) == 1, ~bits, bits | np.uint32(0x80000000))  # ascending with z
+    key = ((~up).astype(np.uint64) << np.uint64(32)) | ekey.astype(np.uint64)
+    del z32, bits, up
+    order = np.argsort(key)
+    ks = key[order]
+    tied = np.flatnonzero(ks[1:] == ks[:-1])
+    if tied.size:  # edges at one saddle cell: by basin pair
+        at = np.unique(np.concatenate([tied, tied + 1]))
+        sub = order[at]
+        order[at] = sub[np.lexsort((eb[sub], ea[sub], key[sub]))]
+    return order
 
 
 def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | None,
