@@ -252,8 +252,12 @@ def orokit_command(tif: Path, out: Path, *, isolation: bool, eps_ft: float = EPS
     return cmd + ([] if isolation else ["--no-isolation"])
 
 
-def run_orokit(tif: Path, out: Path, *, isolation: bool, env: dict | None = None) -> dict:
-    return timed(orokit_command(tif, out, isolation=isolation), env=env)
+def run_orokit(tif: Path, out: Path, *, isolation: bool, env: dict | None = None, cores: int | None = None) -> dict:
+    """orokit's process; with ``cores``, pinned to that many cores (``taskset``: every thread of it)."""
+    cmd = orokit_command(tif, out, isolation=isolation)
+    if cores:
+        cmd = ["taskset", "-c", f"0-{cores - 1}", *cmd]
+    return timed(cmd, env=env)
 
 
 def main() -> None:
@@ -263,8 +267,9 @@ def main() -> None:
     ap.add_argument("--dem", default="himalaya-everest")
     ap.add_argument("--kirmse-bin", type=Path, default=None, help="folder of already built Kirmse binaries")
     ap.add_argument("--workdir", type=Path, default=None, help="default: a temporary folder, removed at the end")
-    ap.add_argument("--threads", type=int, default=None,
-                    help="NUMBA_NUM_THREADS for orokit (default: all cores)")
+    ap.add_argument("--threads", type=int, default=None,  # also pins orokit to that many cores (taskset)
+                    help="NUMBA_NUM_THREADS for orokit, and orokit pinned to that many cores (taskset; default: all "
+                         "cores, unpinned)")
     ap.add_argument("--no-record", action="store_true", help="do not write reports/benchmarks/vs_kirmse.json")
     args = ap.parse_args()
 
@@ -299,13 +304,14 @@ def main() -> None:
             # untimed: fills numba's cache after a code change (a first run compiles the kernels) and the
             # page cache of both inputs, so the timed repetitions all start alike
             run_kirmse(bin_dir, folder / "tiles", folder / "kirmse", s)
-            run_orokit(tif, folder / "orokit_iso", isolation=True, env=env)
+            run_orokit(tif, folder / "orokit_iso", isolation=True, env=env, cores=args.threads)
             loads = []
             for _ in range(args.reps):
                 loads.append(os.getloadavg()[0])
                 runs["kirmse"].append(run_kirmse(bin_dir, folder / "tiles", folder / "kirmse", s))
-                runs["orokit"].append(run_orokit(tif, folder / "orokit", isolation=False, env=env))
-                runs["orokit_isolation"].append(run_orokit(tif, folder / "orokit_iso", isolation=True, env=env))
+                runs["orokit"].append(run_orokit(tif, folder / "orokit", isolation=False, env=env, cores=args.threads))
+                runs["orokit_isolation"].append(run_orokit(tif, folder / "orokit_iso", isolation=True, env=env,
+                                                           cores=args.threads))
             loads.append(os.getloadavg()[0])
             cmp = compare_peaks(parse_kirmse_results(folder / "kirmse" / "results.txt", s, z_ft.shape),
                                 orokit_peaks_ft(folder / "orokit"), z_ft)
@@ -331,6 +337,7 @@ def main() -> None:
 
                 path = record("vs_kirmse", {"dem": args.dem, "eps_ft": EPS_FT, "reps": args.reps,
                                             "orokit_numba_threads": env.get("NUMBA_NUM_THREADS", "all cores"),
+                                            "orokit_cores": args.threads or "all (unpinned)",
                                             "mosaics": rows})
         print("ratio = Kirmse (prominence -t 1 + merge_divide_trees -f) / orokit, whole processes, "
               "median wall time; > 1: orokit faster")
