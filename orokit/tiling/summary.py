@@ -35,6 +35,7 @@ from orokit.topology.engine import Orometry, finalize_graph
 __all__ = ["ChunkSummary", "chunk_summary", "merge_summaries", "finalize_summary"]
 
 _FIELDS = ("key", "z", "ismax", "bmax", "nmin", "nexit", "ea", "eb", "ez", "ekey")
+_NO_EDGES = np.empty(0, np.int64)
 _OFFSETS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 
 
@@ -90,20 +91,28 @@ def _reduce(s: ChunkSummary, min_prominence_m: float, needed: np.ndarray) -> Chu
 
     Kept: ``needed`` nodes (side cells) and maxima that are roots or whose
     prominence within the rectangle reaches the threshold (and is > 0).
+    ``s`` is a temporary of the caller and is consumed: its edges are replaced by their
+    sorted copies, then dropped, so the unsorted ones are freed during the sweep (the
+    top merges hold several hundred bytes per node at their peak).
     """
     n = s.n_nodes
     if n == 0:
         return s
     order = np.lexsort((s.ekey, -s.ez))
-    ea, eb, ez, ekey = s.ea[order], s.eb[order], s.ez[order], s.ekey[order]
+    s.ea, s.eb, s.ez, s.ekey = s.ea[order], s.eb[order], s.ez[order], s.ekey[order]
+    del order
+    ea, eb, ez, ekey = s.ea, s.eb, s.ez, s.ekey
     _, key_edge, _, _ = _k.kruskal_sweep(s.z, s.key, ea, eb, ez, ekey, s.bmax)
-    root = key_edge < 0
+    nonroot = np.flatnonzero(key_edge >= 0)
     prom = np.full(n, np.inf)
-    prom[~root] = s.z[~root] - ez[key_edge[~root]]
-    keep = needed | (s.ismax & (root | ((prom >= min_prominence_m) & (prom > 0))))
+    prom[nonroot] = s.z[nonroot] - ez[key_edge[nonroot]]
+    keep = needed | (s.ismax & ((key_edge < 0) | ((prom >= min_prominence_m) & (prom > 0))))
+    del nonroot, prom, key_edge
     # defer: where one saddle joins several kept parts, a removed part stays and every edge of
     # that saddle is kept, until the final prune (same choices as the in-memory engine)
     oa, ob, oe, nb, nm, keep = _k.prune_edges(n, ea, eb, ez, ekey, keep, s.bmax, s.nmin, s.z, s.key, True)
+    del ea, eb
+    s.ea = s.eb = _NO_EDGES
     tz, tk = ez, ekey
     new_id = np.full(n, -1, np.int64)
     kept = np.flatnonzero(keep)
