@@ -117,6 +117,16 @@ def test_gpkg_round_trip(small_txt, tmp_path):
     layers = dict(pyogrio.list_layers(path))
     assert layers["peaks"] == "Point" and layers["ridges"] == "LineString"
     assert not list(tmp_path.glob(".*tmp*"))  # no temporary file left behind
+    # the GeoPackage is written without SQLite's per-transaction syncs (atomic_path syncs the file once):
+    # the process-wide GDAL setting is restored after the write
+    assert pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS") is None
+    pyogrio.set_gdal_config_options({"OGR_SQLITE_SYNCHRONOUS": "NORMAL"})
+    try:
+        write_divide_tree_gpkg(tree, tmp_path / "again.gpkg")
+        assert pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS") == "NORMAL"
+    finally:
+        pyogrio.set_gdal_config_options({"OGR_SQLITE_SYNCHRONOUS": None})
+    assert read_divide_tree_gpkg(tmp_path / "again.gpkg").equals(tree)
 
 
 def test_gpkg_keeps_crs(tmp_path):
