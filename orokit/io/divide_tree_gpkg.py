@@ -51,6 +51,10 @@ def _gdal_crs(crs) -> str | None:
     """A pyproj CRS as GDAL takes it (what geopandas passes): ``EPSG:n`` when it has a code, else WKT1."""
     if crs is None:
         return None
+    if not hasattr(crs, "to_epsg"):  # a string or EPSG code, as trees built in memory may carry
+        from pyproj import CRS
+
+        crs = CRS.from_user_input(crs)
     epsg = crs.to_epsg()
     return f"EPSG:{epsg}" if epsg else crs.to_wkt("WKT1_GDAL")
 
