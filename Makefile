@@ -115,7 +115,7 @@ analysis: $(ANALYSIS_README)  ## exact analysis of every DEM, table + Divide Tre
 REGION_MODEL := models/regions-10km.skops
 $(CLASSIFICATION_README) $(REGION_MODEL) &: $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
 	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(REPORTS)/classification --radius 10km \
-	  --features orometry --classifier et --runs 30 --feature-runs 5 --block-runs 3 --open-set-runs 3 --model $(REGION_MODEL) --overwrite
+	  --features terrain --classifier et --runs 30 --feature-runs 5 --block-runs 3 --open-set-runs 3 --model $(REGION_MODEL) --overwrite
 
 # the paper's protocol and feature set (reference mode), kept beside the default figures
 $(CLASSIFICATION_PAPER_README): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)

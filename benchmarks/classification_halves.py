@@ -1,6 +1,6 @@
 """North-half-trained / south-half-classified protocol, exactly as a new user runs it (issue 12).
 
-Usage: python benchmarks/classification_halves.py [--features orometry paper] [--classifier rf]
+Usage: python benchmarks/classification_halves.py [--features terrain orometry paper] [--classifier rf]
        [--radius 10km] [--out reports/classification/halves.md]
 
 For every DEM of the manifest (the 13 shared crops): the north half and the south half
@@ -150,7 +150,7 @@ def markdown(results: list[dict]) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--features", nargs="+", default=["orometry", "paper"])
+    ap.add_argument("--features", nargs="+", default=["terrain", "orometry", "paper"])
     ap.add_argument("--classifier", default=None, help="default: the train command's default")
     ap.add_argument("--radius", default="10km")
     ap.add_argument("--out", type=Path, default=ROOT / "reports" / "classification" / "halves.md")

@@ -156,7 +156,7 @@ def feature_table(peaks: pd.DataFrame, disks: pd.DataFrame, *, feature_set: Feat
     if fs.terrain:
         from orokit.classify.terrain import terrain_fields
 
-        terrain = terrain_fields(dem)
+        terrain = terrain_fields(dem, cell_size_m=fs.terrain_cell_size_m)
     geo = is_geographic(crs)
     keep = peaks["prominence"].to_numpy(dtype=float) >= min_prominence_m
     if exact_only:

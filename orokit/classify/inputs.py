@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -105,6 +106,32 @@ def open_input_dem(source: PathLike, *, z_units: str | None = None, cell_size_m:
     dem = open_dataset_dem(str(source))
     dem.attrs.setdefault("source", str(source))
     return dem
+
+
+def has_dem(source: PathLike) -> bool:
+    """True when an input brings its DEM: a raster file, a DEM of the datasets manifest, or an
+    ``orokit analyze`` folder whose source DEM (``analysis.json``) still exists."""
+    p = Path(source)
+    if p.is_dir():
+        try:
+            src = read_analysis_meta(p).get("source")
+        except (InputError, AttributeError):
+            return False
+        return bool(src) and Path(str(src)).is_file()
+    if p.exists():
+        return p.is_file() and p.suffix.lower() in RASTER_SUFFIXES and not _is_table(p)
+    from orokit.data import load_manifest
+
+    return str(source) in {d.name for d in load_manifest().dems()}
+
+
+def auto_feature_set(sources: Sequence[PathLike]) -> FeatureSet:
+    """The feature set ``--features auto`` means: ``terrain`` (orometry plus the DEM's terrain in
+    each disk, chosen on the spatial hold-out) when every input has a DEM (:func:`has_dem`),
+    else ``orometry`` (peak lists and Divide Trees have no raster)."""
+    name = "terrain" if sources and all(has_dem(s) for s in sources) else "orometry"
+    logger.info("--features auto: %s", name)
+    return FeatureSet.named(name)
 
 
 def features_for_input(source: PathLike, *, radius_m: float, label: str | None = None,

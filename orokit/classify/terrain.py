@@ -18,8 +18,9 @@ real and a synthetic DEM:
 
 Every field is computed once per DEM (:func:`terrain_fields`), then cut per disk. All
 values are unchanged by rotating the DEM by 90 degrees or flipping it (square cells)
-up to floating point and flow-routing ties. They depend on the cell size: a model
-trained on 90 m DEMs should classify DEMs of about that cell size.
+up to floating point and flow-routing ties. Slopes and curvatures depend on the cell
+size, so the DEM is first averaged over blocks of whole cells to about the feature set's
+``terrain_cell_size_m`` (90 m: a 30 m DEM over 3 x 3 cells, SRTM-3 kept as it is).
 """
 from __future__ import annotations
 
@@ -42,7 +43,7 @@ _HQ = (0.25, 0.5, 0.75)
 #: drainage area above which a cell counts as a channel (m^2), as in orokit.validate.landform
 CHANNEL_AREA_M2 = 1.0e6
 
-__all__ = ["TERRAIN_GROUPS", "TERRAIN_COLUMNS", "TerrainFields", "disk_terrain_vector", "terrain_fields", "terrain_matrix"]
+__all__ = ["TERRAIN_GROUPS", "TERRAIN_COLUMNS", "TerrainFields", "coarsen_dem", "disk_terrain_vector", "terrain_fields", "terrain_matrix"]
 
 #: slope below which a cell counts as flat (degrees)
 FLAT_SLOPE_DEG = 2.0
@@ -88,11 +89,47 @@ def _channels(z: NDArray[np.float64], dx: float, dy: float) -> NDArray[np.bool_]
     return (area > CHANNEL_AREA_M2) & ok
 
 
-def terrain_fields(dem: xr.DataArray) -> TerrainFields:
-    """Slope, relief, curvature and channel fields of a DEM (metres; NaN = nodata)."""
+def coarsen_dem(dem: xr.DataArray, cell_size_m: float | None) -> xr.DataArray:
+    """``dem`` averaged over blocks of ``f x f`` cells, ``f = round(cell_size_m / cell)`` (>= 1; the
+    cell measured at the centre row), so DEMs of 30 m and 90 m give comparable slopes; a block
+    touching nodata is nodata, trailing rows / columns that fill no block are dropped. Returns
+    ``dem`` itself when ``f`` is 1 or ``cell_size_m`` is None."""
+    from affine import Affine
+
+    from orokit.raster.shade import row_cell_sizes_m
+
+    if cell_size_m is None:
+        return dem
+    dxr, dy = row_cell_sizes_m(dem)
+    cell = float(np.sqrt(float(dxr[len(dxr) // 2]) * float(dy)))
+    f = max(int(round(cell_size_m / cell)), 1)
+    if f == 1:
+        return dem
+    z = np.asarray(dem.values, dtype=np.float64)
+    ny, nx = (z.shape[0] // f) * f, (z.shape[1] // f) * f
+    if min(ny, nx) < 3 * f:
+        raise InputError(f"terrain features: the DEM ({z.shape[1]} x {z.shape[0]} cells of {cell:.1f} m) is too small "
+                         f"to average to {cell_size_m:g} m cells")
+    zc = z[:ny, :nx].reshape(ny // f, f, nx // f, f).mean(axis=(1, 3))
+    t = dem.rio.transform() * Affine.scale(f)
+    import xarray as xr
+
+    out = xr.DataArray(zc, dims=("y", "x"), attrs=dict(dem.attrs),
+                       coords={"y": t.f + t.e * (np.arange(zc.shape[0]) + 0.5),
+                               "x": t.c + t.a * (np.arange(zc.shape[1]) + 0.5)})
+    crs = dem.rio.crs
+    if crs is not None:
+        out = out.rio.write_crs(crs)
+    return out.rio.write_transform(t)
+
+
+def terrain_fields(dem: xr.DataArray, *, cell_size_m: float | None = None) -> TerrainFields:
+    """Slope, relief, curvature and channel fields of a DEM (metres; NaN = nodata), computed on the
+    DEM averaged to about ``cell_size_m`` (:func:`coarsen_dem`; None: the DEM's own cells)."""
     from orokit.raster.shade import row_cell_sizes_m
     from orokit.validate.landform import slope_and_relief
 
+    dem = coarsen_dem(dem, cell_size_m)
     z = np.asarray(dem.values, dtype=np.float64)
     if z.ndim != 2 or min(z.shape) < 3:
         raise InputError(f"terrain features need a 2-D DEM of at least 3 x 3 cells; got shape {z.shape}")
@@ -154,10 +191,11 @@ def disk_terrain_vector(fields: TerrainFields, row: float, col: float, radius_m:
     return np.concatenate([np.asarray(p, dtype=float) for p in parts])
 
 
-def terrain_matrix(dem: xr.DataArray, disks: pd.DataFrame, *, fields: TerrainFields | None = None
-                   ) -> NDArray[np.float64]:
-    """Terrain features (one row per disk of ``disks``: columns x, y, radius_m in the DEM's CRS)."""
-    fields = fields if fields is not None else terrain_fields(dem)
+def terrain_matrix(dem: xr.DataArray, disks: pd.DataFrame, *, cell_size_m: float | None = None,
+                   fields: TerrainFields | None = None) -> NDArray[np.float64]:
+    """Terrain features (one row per disk of ``disks``: columns x, y, radius_m in the DEM's CRS) of the DEM
+    averaged to about ``cell_size_m`` (or of ``fields`` already computed)."""
+    fields = fields if fields is not None else terrain_fields(dem, cell_size_m=cell_size_m)
     if len(disks) == 0:
         return np.zeros((0, len(TERRAIN_COLUMNS)))
     inv = ~fields.transform

@@ -30,12 +30,13 @@ from orokit.cli.options import (
               help="Minimum disk-centre distance as a fraction of R.")
 @click.option("--label", "labels", multiple=True,
               help="Region label: once for all inputs, or once per input (default: dataset / file name).")
-@click.option("--features", "feature_set_name", type=click.Choice(["orometry", "terrain", "paper"]), default="orometry",
-              show_default=True,
-              help="Feature set: orometry (default: histograms plus disk summaries at R, chosen on the "
-                   "spatial hold-out; works on peak lists), terrain (orometry plus slope, relief, curvature, "
-                   "hypsometry, spectral slope and drainage of the DEM in each disk; DEM inputs only) or paper "
-                   "(Argudo et al. 2019, Table 1, the reference mode).")
+@click.option("--features", "feature_set_name", type=click.Choice(["auto", "orometry", "terrain", "paper"]),
+              default="auto", show_default=True,
+              help="Feature set: terrain (orometry plus slope, relief, curvature, hypsometry, spectral slope and "
+                   "drainage of the DEM in each disk; inputs with a DEM only), orometry (histograms and disk "
+                   "summaries of the peaks at R; works on peak lists), auto (terrain when every input has a DEM, "
+                   "else orometry; both chosen on the spatial hold-out) or paper (Argudo et al. 2019, Table 1, the "
+                   "reference mode).")
 @click.option("--relative-elevation", type=click.Choice(["minmax", "max"]), default="minmax", show_default=True,
               help="Relative elevation (h-min)/(max-min) over the disk, or h/max.")
 @click.option("--exact-only", is_flag=True, help="Drop peaks whose prominence is flagged not exact (edge effects).")
@@ -58,7 +59,7 @@ def features(inputs, output, radius, min_prominence_m, min_peaks, max_disks, sep
 
     from orokit.classify.features import concat_features
     from orokit.io.model_io import write_feature_table
-    from orokit.classify.inputs import features_for_input
+    from orokit.classify.inputs import auto_feature_set, features_for_input
     from orokit.sampling.feature_sets import FeatureSet
 
     from orokit.cli.outputs import claim_outputs
@@ -70,6 +71,7 @@ def features(inputs, output, radius, min_prominence_m, min_peaks, max_disks, sep
         raise click.BadParameter(f"give --label once or once per input ({len(inputs)}), got {len(labels)}",
                                  param_hint="--label")
     seeds = np.random.SeedSequence(seed).spawn(len(inputs))
+    fs = auto_feature_set([str(s) for s in inputs]) if feature_set_name == "auto" else FeatureSet.named(feature_set_name)
     tables = []
     it = list(enumerate(inputs))
     if progress and len(inputs) > 1:
@@ -82,11 +84,11 @@ def features(inputs, output, radius, min_prominence_m, min_peaks, max_disks, sep
         tables.append(features_for_input(
             str(src), radius_m=radius, label=label, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
             max_disks=max_disks, separation=separation, relative_elevation=relative_elevation,
-            feature_set=FeatureSet.named(feature_set_name),
+            feature_set=fs,
             exact_only=exact_only, z_units=z, cell_size_m=cell, region=region, isolation=isolation,
             rng=np.random.default_rng(seeds[i])))
     table = concat_features(tables)
     write_feature_table(table, output)
     counts = table["label"].value_counts().to_dict() if len(table) else {}
-    click.echo(f"{len(table)} disks of radius {radius / 1000:g} km ({table.attrs.get('n_disks_skipped', 0)} skipped "
+    click.echo(f"features {fs.name!r}: {len(table)} disks of radius {radius / 1000:g} km ({table.attrs.get('n_disks_skipped', 0)} skipped "
                f"with < {min_peaks} peaks) from {len(inputs)} input(s) -> {output}; per label: {counts}")

@@ -221,7 +221,14 @@ _FEATURE_SETS = {"paper": "the paper's Table 1 histograms at R ({n} numbers, `--
                              "key-saddle distance, dominance); quantiles of peak and key-saddle elevation; the key "
                              "saddles against their peaks (relief peaks to key saddles, col ratio, key-saddle height "
                              "in the disk). Chosen on the spatial hold-out: see `ablation.md` and `layouts.md` (mean "
-                             "over three disk layouts)"}
+                             "over three disk layouts)",
+                 "terrain": "orokit's default for inputs with a DEM (`--features terrain`, `auto` on DEMs; {n} "
+                            "numbers): the `orometry` set (five Table 1 histograms at R made cumulative, disk "
+                            "summaries, peak and key-saddle elevation quantiles, the key saddles against their "
+                            "peaks) plus the DEM's terrain in each disk (slope quantiles and flat share, local "
+                            "relief in ~1 and ~5 km windows, Laplacian curvature, hypsometry in the disk, spectral "
+                            "slope, share of cells draining > 1 km2). Chosen on the spatial hold-out over three "
+                            "disk layouts: see `layouts.md`; peak lists use `orometry`"}
 
 
 def _readme(t2: pd.DataFrame, evals: Mapping[float, Mapping[str, Any]], meta: dict[str, Any]) -> str:

@@ -165,6 +165,9 @@ class FeatureSet:
         Add terrain (raster) features at R (:data:`TERRAIN_GROUPS`, :mod:`orokit.classify.terrain`),
         computed from the DEM cells within each disk: only inputs with a DEM have them (not peak
         lists nor Divide Trees). Appended after the columns of every radius.
+    terrain_cell_size_m : float or None
+        Cell size (m) the DEM is averaged to, over whole blocks of cells, before the terrain
+        features (90: a 30 m DEM over 3 x 3 cells; None: the DEM's own cells).
     """
 
     name: str
@@ -177,6 +180,7 @@ class FeatureSet:
     pattern: bool = False
     saddles: bool = False
     terrain: bool = False
+    terrain_cell_size_m: float | None = 90.0
 
     def __post_init__(self) -> None:
         if not self.radii or any(not (0 < f <= 1.0) for f in self.radii) or len(set(self.radii)) != len(self.radii):
@@ -256,7 +260,7 @@ class FeatureSet:
                 "summaries": self.summaries, "elevation": self.elevation, "cumulative": self.cumulative,
                 **({"saddles": True} if self.saddles else {}),  # absent when False: older files compare equal
                 **({"pattern": True} if self.pattern else {}),
-                **({"terrain": True} if self.terrain else {})}
+                **({"terrain": True, "terrain_cell_size_m": self.terrain_cell_size_m} if self.terrain else {})}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> FeatureSet:
@@ -267,7 +271,9 @@ class FeatureSet:
                        histograms=None if h is None else tuple(str(x) for x in h),
                        summaries=bool(d.get("summaries", False)), elevation=bool(d.get("elevation", False)),
                        cumulative=bool(d.get("cumulative", False)), pattern=bool(d.get("pattern", False)),
-                       saddles=bool(d.get("saddles", False)), terrain=bool(d.get("terrain", False)))
+                       saddles=bool(d.get("saddles", False)), terrain=bool(d.get("terrain", False)),
+                       terrain_cell_size_m=None if d.get("terrain_cell_size_m", 90.0) is None
+                       else float(d.get("terrain_cell_size_m", 90.0)))
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise SchemaError(f"not a feature set dictionary ({exc!r}): {str(d)[:200]}") from exc
 

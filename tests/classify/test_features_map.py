@@ -188,3 +188,24 @@ def test_disk_map_polygons_are_geodesic_circles_on_lonlat():
         lon, lat = np.asarray(poly.exterior.xy)
         _, _, d = geod.inv(np.full(len(lon), row["x"]), np.full(len(lat), row["y"]), lon, lat)
         np.testing.assert_allclose(d, 10_000.0, rtol=1e-6)
+
+
+def test_auto_features_are_terrain_for_dems_and_a_terrain_model_refuses_a_peak_list(dems_and_model):
+    """`orokit features` on DEMs defaults to the terrain set; its model names the fix for a peak list."""
+    import orokit
+    from orokit.classify.inputs import auto_feature_set, has_dem
+    from orokit.io.dem import read_dem
+    from orokit.io.model_io import read_feature_table
+
+    tmp, paths, model = dems_and_model
+    assert read_feature_table(tmp / "f.parquet").attrs["feature_set"]["name"] == "terrain"
+    peaks_csv = tmp / "peaks.csv"
+    orokit.analyze(read_dem(str(paths[1])), min_prominence_m=30.0).peaks.to_csv(peaks_csv, index=False)
+    assert has_dem(paths[0]) and not has_dem(peaks_csv)
+    assert auto_feature_set([paths[0], peaks_csv]).name == "orometry"
+    from orokit.errors import OrokitWarning
+
+    with pytest.warns(OrokitWarning, match="convex hull"):  # a bare peak list: disks in the hull of its peaks
+        res = CliRunner().invoke(cli, ["classify", str(model), str(peaks_csv)])
+    assert res.exit_code == 1 and "needs the DEM" in res.output and "--features orometry" in res.output
+    assert "Traceback" not in res.output

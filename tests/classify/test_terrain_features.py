@@ -85,10 +85,38 @@ def test_terrain_feature_set_needs_a_dem():
 
     fs = FeatureSet.named("terrain")
     assert fs.terrain and fs.columns[-len(TERRAIN_COLUMNS):] == TERRAIN_COLUMNS
-    assert FeatureSet.from_dict(fs.to_dict()) == fs
+    assert FeatureSet.from_dict(fs.to_dict()) == fs and fs.to_dict()["terrain_cell_size_m"] == 90.0
     assert "terrain" not in FeatureSet.orometry().to_dict()  # files written before stay equal
     peaks = pd.DataFrame({"x": [0.0, 10.0], "y": [0.0, 5.0], "elevation": [900.0, 500.0],
                           "prominence": [900.0, 100.0]})
     disks = pd.DataFrame({"disk_id": [0], "x": [0.0], "y": [0.0], "radius_m": [1000.0]})
     with pytest.raises(InputError, match="needs the DEM.*--features orometry"):
         feature_table(peaks, disks, feature_set=fs, min_peaks=1)
+
+
+def test_a_30m_dem_is_averaged_to_90m_before_the_terrain_features():
+    """The same ground at 30 m and as its 3 x 3 block means at 90 m gives the same disk features."""
+    import rioxarray  # noqa: F401
+    import xarray as xr
+    from rasterio.transform import Affine
+
+    from orokit.classify.terrain import coarsen_dem
+
+    def dem(z, res):
+        ny, nx = z.shape
+        da = xr.DataArray(z, dims=("y", "x"), coords={"y": 4e6 - (np.arange(ny) + 0.5) * res,
+                                                     "x": 5e5 + (np.arange(nx) + 0.5) * res})
+        return da.rio.write_crs("EPSG:32633").rio.write_transform(Affine(res, 0, 5e5, 0, -res, 4e6))
+
+    rng = np.random.default_rng(1)
+    z30 = np.cumsum(np.cumsum(rng.normal(size=(363, 363)), 0), 1) + 3.0 * rng.normal(size=(363, 363))
+    z90 = z30.reshape(121, 3, 121, 3).mean(axis=(1, 3))
+    assert coarsen_dem(dem(z90, 90.0), 90.0) is not None
+    np.testing.assert_allclose(coarsen_dem(dem(z30, 30.0), 90.0).values, z90)
+    disks = pd.DataFrame({"x": [5e5 + 5400.0, 5e5 + 4000.0], "y": [4e6 - 5400.0, 4e6 - 6000.0],
+                          "radius_m": [3000.0, 2500.0]})
+    fine = terrain_matrix(dem(z30, 30.0), disks, cell_size_m=90.0)
+    np.testing.assert_allclose(fine, terrain_matrix(dem(z90, 90.0), disks, cell_size_m=90.0), atol=1e-9)
+    raw = terrain_matrix(dem(z30, 30.0), disks, cell_size_m=None)  # at 30 m the white noise makes it steeper
+    k = TERRAIN_COLUMNS.index("q50_slope_deg")
+    assert (raw[:, k] > fine[:, k] + 1.0).all()
