@@ -210,9 +210,12 @@ def power_law_fit(z: np.ndarray, res: float, *, fit_m: tuple[float, float] = (10
 
 def _radial_density(z: np.ndarray, res: float, k: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """Radially averaged power spectral density ``|FFT|^2 res^2 / N`` of ``z`` (plane removed,
-    periodic: no taper) in the wavenumber bins ``edges``; NaN for an empty bin."""
-    zz = remove_plane(z).astype(np.float32)
-    p = np.abs(np.fft.rfft2(zz)) ** 2 * np.float32(res * res / zz.size)
+    2-D Hann taper against the leakage of the edges' jump, power divided by its mean square) in
+    the wavenumber bins ``edges``; NaN for an empty bin."""
+    wy, wx = np.hanning(z.shape[0]).astype(np.float32), np.hanning(z.shape[1]).astype(np.float32)
+    zz = remove_plane(z).astype(np.float32) * wy[:, None] * wx[None, :]
+    w2 = float(np.mean(wy.astype(np.float64) ** 2) * np.mean(wx.astype(np.float64) ** 2))
+    p = np.abs(np.fft.rfft2(zz)) ** 2 * np.float32(res * res / zz.size / w2)
     idx = np.searchsorted(edges, k.ravel(), side="right") - 1
     ok = (idx >= 0) & (idx < edges.size - 1)
     cnt = np.bincount(idx[ok], minlength=edges.size - 1)
@@ -222,7 +225,8 @@ def _radial_density(z: np.ndarray, res: float, k: np.ndarray, edges: np.ndarray)
 
 
 def power_law_noise(shape: tuple[int, int], res: float, *, c: float, beta: float, largest_m: float = 1000.0,
-                    minus: np.ndarray | None = None, rng: SeedLike = None) -> np.ndarray:
+                    minus: np.ndarray | None = None, steepen: float = 0.0, steepen_below_m: float = 400.0,
+                    rng: SeedLike = None) -> np.ndarray:
     """Gaussian noise whose power spectral density is ``c k^-beta`` (see :func:`power_law_fit`)
     at wavelengths below ``largest_m`` (smooth high-pass ``1 - exp(-(k largest_m)^4)``), 0 above.
 
@@ -230,7 +234,9 @@ def power_law_noise(shape: tuple[int, int], res: float, *, c: float, beta: float
     by ``c`` (not renormalised), so it is the same in metres at any cell size. With ``minus``
     (a grid of ``shape``), only the deficit ``max(0, c k^-beta - S_minus(k))`` is made, ``S_minus``
     being the radially averaged density of ``minus`` in 16 log-spaced bins per decade: the
-    noise adds what that surface lacks of the power law, nothing where it has enough.
+    noise adds what that surface lacks of the power law, nothing where it has enough. With
+    ``steepen`` > 0 the law steepens to ``beta + steepen`` below ``steepen_below_m`` (real
+    spectra roll over at hillslope scales).
     """
     rng = np.random.default_rng(rng)
     ny, nx = shape
@@ -242,6 +248,8 @@ def power_law_noise(shape: tuple[int, int], res: float, *, c: float, beta: float
     k = np.hypot(ky[:, None], kx[None, :])
     k[0, 0] = np.inf
     target = np.float32(c) * k ** np.float32(-float(beta)) * _highpass(k, largest_m).astype(np.float32)
+    if steepen > 0:
+        target *= np.maximum(k * np.float32(steepen_below_m), np.float32(1.0)) ** np.float32(-float(steepen))
     if minus is not None:
         k[0, 0] = 0.0
         kmax = float(k.max())

@@ -246,7 +246,8 @@ def render_elevation(
         fade = 1.0 - falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
         weight = _slope_weight(z, grid.cell_size_m, params.detail_largest_m, params.detail_slope_power) * fade
         d = power_law_noise(z.shape, grid.cell_size_m, c=c * params.detail_gain ** 2, beta=beta,
-                            largest_m=params.detail_largest_m, minus=z, rng=rng) * weight
+                            largest_m=params.detail_largest_m, minus=z, steepen=params.detail_steepen,
+                            steepen_below_m=params.detail_fit_m[0], rng=rng) * weight
         detail["detail_rms_m"] = round(float(d.std()), 3)
         z += d
         del fade, weight, d

@@ -75,3 +75,13 @@ def test_render_with_detail_keeps_the_tree_orometry_and_is_deterministic():
     assert comp.recovered_share == 1.0 and len(comp.extra) == 0
     np.testing.assert_allclose(comp.peaks["raster_prominence"].to_numpy(), [1500.0, 200.0, 200.0, 150.0, 100.0],
                                atol=6.0)
+
+
+def test_steepened_noise_keeps_long_and_loses_short_wavelengths_as_k_to_the_minus_steepen():
+    kw = {"c": 1.0e-3, "beta": 3.0, "largest_m": 1e6, "rng": 6}
+    plain = power_law_noise((512, 512), 25.0, **kw)
+    steep = power_law_noise((512, 512), 25.0, **kw, steepen=1.0, steepen_below_m=400.0)
+    bands = ((50.0, 70.0), (900.0, 1500.0))
+    ps, pp = band_power(steep, (25.0, 25.0), bands_m=bands), band_power(plain, (25.0, 25.0), bands_m=bands)
+    np.testing.assert_allclose(ps[1] / pp[1], 1.0, rtol=0.02)  # above 400 m: the same law
+    assert 60.0 / 400.0 * 0.8 < ps[0] / pp[0] < 60.0 / 400.0 * 1.25  # (k 400 m)^-1 at ~60 m
