@@ -6,8 +6,8 @@ from scipy import ndimage
 
 from orokit._typing import SeedLike
 
-__all__ = ["fractal_noise", "falloff", "power_law_fit", "power_law_noise", "remove_plane", "spectral_noise",
-           "texture_spectrum"]
+__all__ = ["fractal_noise", "falloff", "lowpass", "power_law_fit", "power_law_noise", "remove_plane",
+           "spectral_noise", "texture_spectrum"]
 
 
 def _octave(shape: tuple[int, int], cells_per_node: float, rng: np.random.Generator) -> np.ndarray:
@@ -226,7 +226,7 @@ def _radial_density(z: np.ndarray, res: float, k: np.ndarray, edges: np.ndarray)
 
 def power_law_noise(shape: tuple[int, int], res: float, *, c: float, beta: float, largest_m: float = 1000.0,
                     minus: np.ndarray | None = None, steepen: float = 0.0, steepen_below_m: float = 400.0,
-                    rng: SeedLike = None) -> np.ndarray:
+                    min_beta: float = 0.0, sharp: bool = False, rng: SeedLike = None) -> np.ndarray:
     """Gaussian noise whose power spectral density is ``c k^-beta`` (see :func:`power_law_fit`)
     at wavelengths below ``largest_m`` (smooth high-pass ``1 - exp(-(k largest_m)^4)``), 0 above.
 
@@ -236,7 +236,10 @@ def power_law_noise(shape: tuple[int, int], res: float, *, c: float, beta: float
     being the radially averaged density of ``minus`` in 16 log-spaced bins per decade: the
     noise adds what that surface lacks of the power law, nothing where it has enough. With
     ``steepen`` > 0 the law steepens to ``beta + steepen`` below ``steepen_below_m`` (real
-    spectra roll over at hillslope scales).
+    spectra roll over at hillslope scales), and never shallower than ``min_beta`` there (the
+    variance of the slope, the integral of ``k^2 S`` over the plane, stays finite as cells shrink
+    only for a law steeper than ``k^-4``). ``sharp``: the high-pass is ``1 - exp(-(k largest_m)^8)``,
+    the complement of :func:`lowpass` (what it removes, this makes).
     """
     rng = np.random.default_rng(rng)
     ny, nx = shape
@@ -247,9 +250,12 @@ def power_law_noise(shape: tuple[int, int], res: float, *, c: float, beta: float
     kx = np.fft.rfftfreq(nx, res).astype(np.float32)
     k = np.hypot(ky[:, None], kx[None, :])
     k[0, 0] = np.inf
-    target = np.float32(c) * k ** np.float32(-float(beta)) * _highpass(k, largest_m).astype(np.float32)
-    if steepen > 0:
-        target *= np.maximum(k * np.float32(steepen_below_m), np.float32(1.0)) ** np.float32(-float(steepen))
+    hp = (1.0 - _sharp_lowpass(k, largest_m)) if sharp else _highpass(k, largest_m)
+    target = np.float32(c) * k ** np.float32(-float(beta)) * hp.astype(np.float32)
+    del hp
+    extra = max(float(steepen), float(min_beta) - float(beta), 0.0)
+    if extra > 0:
+        target *= np.maximum(k * np.float32(steepen_below_m), np.float32(1.0)) ** np.float32(-extra)
     if minus is not None:
         k[0, 0] = 0.0
         kmax = float(k.max())
@@ -272,3 +278,34 @@ def power_law_noise(shape: tuple[int, int], res: float, *, c: float, beta: float
     f *= filt
     del filt
     return np.fft.irfft2(f, s=shape).astype(np.float32, copy=False)
+
+
+def _sharp_lowpass(k: np.ndarray, largest_m: float) -> np.ndarray:
+    """``exp(-(k largest_m)^8)``: 1 at long wavelengths, ~0.37 at ``largest_m``, 0 below."""
+    return np.exp(-(k * np.float32(largest_m)) ** 8)
+
+
+def lowpass(z: np.ndarray, res: float, largest_m: float) -> np.ndarray:
+    """``z`` without its wavelengths below ``largest_m`` (Fourier filter ``exp(-(k largest_m)^8)``).
+
+    The grid is mirrored by ``2 largest_m`` on every side first, so its edges make no jump
+    (the filter acts within ~``largest_m``); float32.
+
+    >>> y, x = np.mgrid[0:64, 0:64] * 10.0
+    >>> long, short = np.sin(2 * np.pi * x / 640.0), np.sin(2 * np.pi * y / 40.0)
+    >>> bool(np.abs(lowpass(long + short, 10.0, 100.0) - long)[20:-20, 20:-20].max() < 0.01)
+    True
+    """
+    from scipy import fft as sfft
+
+    z = np.asarray(z, np.float32)
+    m = min(int(np.ceil(2.0 * largest_m / res)), min(z.shape) - 1)
+    zp = np.pad(z, m, mode="reflect") if m > 0 else z
+    sy, sx = sfft.next_fast_len(zp.shape[0], real=True), sfft.next_fast_len(zp.shape[1], real=True)
+    ky = np.fft.fftfreq(sy, res).astype(np.float32)
+    kx = np.fft.rfftfreq(sx, res).astype(np.float32)
+    filt = _sharp_lowpass(np.hypot(ky[:, None], kx[None, :]), largest_m)
+    f = sfft.rfft2(zp, s=(sy, sx), workers=-1)
+    f *= filt
+    out = sfft.irfft2(f, s=(sy, sx), workers=-1)[m:m + z.shape[0], m:m + z.shape[1]]
+    return np.ascontiguousarray(out, dtype=np.float32)

@@ -25,7 +25,7 @@ from orokit.raster.enforce import enforce_orometry
 from orokit.raster.erosion import erode_multiscale
 from orokit.raster.hillslope import limit_slope
 from orokit.raster.interpolate import field_elevation, valley_width
-from orokit.raster.noise import falloff, fractal_noise, power_law_fit, power_law_noise, spectral_noise
+from orokit.raster.noise import falloff, fractal_noise, lowpass, power_law_fit, power_law_noise, spectral_noise
 from orokit.raster.params import RenderParams
 from orokit.raster.profiles import hillslope_profile
 from orokit.raster.rasterize import MAX_CELLS, as_extent, burn_max, make_grid, rasterize_tin, set_cells
@@ -240,14 +240,28 @@ def render_elevation(
         zs = ndimage.gaussian_filter(z, params.smooth_m / grid.cell_size_m, mode="nearest")
         z += (zs - z) * (1.0 - keep)
         del zs, keep
-    if params.detail_gain > 0 and c > 0:
+    if params.detail_replace and params.detail_gain > 0 and c > 0:
+        # the TIN carries nothing below its meshing distance but facets: its wavelengths below
+        # detail_largest_m are replaced by the power law continued there (peaks and saddles kept)
+        keep = falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
+        z += (lowpass(z, grid.cell_size_m, params.detail_largest_m) - z) * (1.0 - keep)
+        weight = _slope_weight(z, grid.cell_size_m, params.detail_largest_m, params.detail_slope_power) * (1.0 - keep)
+        d = power_law_noise(z.shape, grid.cell_size_m, c=c * params.detail_gain ** 2, beta=beta,
+                            largest_m=params.detail_largest_m, steepen=params.detail_steepen,
+                            steepen_below_m=params.detail_fit_m[0], min_beta=params.detail_min_beta, sharp=True,
+                            rng=rng) * weight
+        detail["detail_rms_m"] = round(float(d.std()), 3)
+        z += d
+        del keep, weight, d
+    elif params.detail_gain > 0 and c > 0:
         # sub-lambda relief: the power law continued below detail_largest_m, minus what the
         # (smoothed) skeleton has there already, where the skeleton is steep, away from peaks and saddles
         fade = 1.0 - falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
         weight = _slope_weight(z, grid.cell_size_m, params.detail_largest_m, params.detail_slope_power) * fade
         d = power_law_noise(z.shape, grid.cell_size_m, c=c * params.detail_gain ** 2, beta=beta,
                             largest_m=params.detail_largest_m, minus=z, steepen=params.detail_steepen,
-                            steepen_below_m=params.detail_fit_m[0], rng=rng) * weight
+                            steepen_below_m=params.detail_fit_m[0], min_beta=params.detail_min_beta,
+                            rng=rng) * weight
         detail["detail_rms_m"] = round(float(d.std()), 3)
         z += d
         del fade, weight, d

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import orokit
-from orokit.raster.noise import power_law_fit, power_law_noise, spectral_noise
+from orokit.raster.noise import lowpass, power_law_fit, power_law_noise, spectral_noise
 from orokit.raster.params import RenderParams
 from orokit.raster.render import render_elevation
 from orokit.validate.landform import band_power
@@ -64,8 +64,12 @@ def _render(params, seed=7):
     return render_elevation(small_tree(), cell_size_m=50.0, erosion=False, params=params, rng=seed)
 
 
-def test_render_with_detail_keeps_the_tree_orometry_and_is_deterministic():
-    params = RenderParams(smooth_m=100.0, detail_gain=1.0, detail_fit_m=(400.0, 2000.0), detail_largest_m=1000.0)
+@pytest.mark.parametrize("params", [
+    RenderParams(smooth_m=100.0, detail_gain=1.0, detail_replace=False, detail_fit_m=(400.0, 2000.0),
+                 detail_largest_m=1000.0, detail_steepen=0.0),
+    RenderParams(detail_gain=1.0),
+], ids=["smooth+deficit", "replace"])
+def test_render_with_detail_keeps_the_tree_orometry_and_is_deterministic(params):
     a, b = _render(params), _render(params)
     np.testing.assert_array_equal(a.values, b.values)
     plain = _render(RenderParams())
@@ -85,3 +89,27 @@ def test_steepened_noise_keeps_long_and_loses_short_wavelengths_as_k_to_the_minu
     ps, pp = band_power(steep, (25.0, 25.0), bands_m=bands), band_power(plain, (25.0, 25.0), bands_m=bands)
     np.testing.assert_allclose(ps[1] / pp[1], 1.0, rtol=0.02)  # above 400 m: the same law
     assert 60.0 / 400.0 * 0.8 < ps[0] / pp[0] < 60.0 / 400.0 * 1.25  # (k 400 m)^-1 at ~60 m
+
+
+def test_lowpass_and_sharp_noise_split_the_spectrum_at_the_same_wavelength():
+    """What :func:`lowpass` removes below L, ``power_law_noise(sharp=True)`` makes: the two are complements."""
+    z = spectral_noise((256, 256), 25.0, rms=10.0, beta=3.0, largest_m=1e6, rng=8)
+    bands = ((50.0, 150.0), (400.0, 1000.0))
+    low = band_power(lowpass(z, 25.0, 200.0), (25.0, 25.0), bands_m=bands)
+    full = band_power(z, (25.0, 25.0), bands_m=bands)
+    assert low[0] < 1e-3 * full[0] and abs(low[1] / full[1] - 1.0) < 0.05
+    d = band_power(power_law_noise((256, 256), 25.0, c=1e-3, beta=3.0, largest_m=200.0, sharp=True, rng=9),
+                   (25.0, 25.0), bands_m=((50.0, 150.0), (800.0, 2000.0)))
+    assert d[1] < 1e-2 * d[0]  # k^-3 is 100-1000 x larger there: the high-pass removes it
+
+
+def test_min_beta_bounds_the_continuation_of_a_shallow_spectrum():
+    """A dune field's shallow law (beta ~1) continued below 1 km would make metres of detail at 100 m;
+    ``min_beta`` 4 steepens it there, long wavelengths untouched."""
+    kw = {"c": 1.0, "beta": 1.0, "largest_m": 1e6, "steepen_below_m": 1000.0, "rng": 10}
+    bands = ((50.0, 150.0), (2000.0, 5000.0))
+    free = band_power(power_law_noise((512, 512), 25.0, **kw), (25.0, 25.0), bands_m=bands)
+    bound = band_power(power_law_noise((512, 512), 25.0, **kw, min_beta=4.0), (25.0, 25.0), bands_m=bands)
+    np.testing.assert_allclose(bound[1] / free[1], 1.0, rtol=0.02)
+    # at ~100 m the extra k^-3 below 1 km: (1000 / 100)^3 = 1000 x less power (band average: 300-3000)
+    assert 300.0 < free[0] / bound[0] < 3000.0
