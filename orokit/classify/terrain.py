@@ -3,7 +3,7 @@
 Peak tables say nothing about the slopes, valleys and drainage between the peaks; a DEM
 does. When the input has a DEM, a feature set with ``terrain=True`` adds, per disk
 (:data:`TERRAIN_GROUPS`), statistics of the cells whose centre lies within R of the
-disk centre, the same quantities :mod:`orokit.validate.landform` compares between a
+disk centre, the same quantities (:mod:`orokit.metrics.landform`) that :mod:`orokit.validate.landform` compares between a
 real and a synthetic DEM:
 
 - slope quantiles (degrees, central differences);
@@ -12,7 +12,7 @@ real and a synthetic DEM:
 - hypsometry: elevation normalised by the disk's min and max (mean = hypsometric
   integral, quantiles);
 - spectral slope beta over 0.5 km ... min(10 km, 2 R) of the square around the disk
-  (:func:`orokit.validate.landform.spectral_slope`, mean of the square and its transpose);
+  (:func:`orokit.metrics.landform.spectral_slope`, mean of the square and its transpose);
 - drainage share: cells draining more than 1 km2 (fastscapelib single-direction flow
   routing with priority flood over the whole DEM, outlets on its border).
 
@@ -40,13 +40,8 @@ if TYPE_CHECKING:  # pragma: no cover
 _SQ = (0.1, 0.25, 0.5, 0.75, 0.9)
 _RQ = (0.25, 0.5, 0.75, 0.9)
 _HQ = (0.25, 0.5, 0.75)
-#: drainage area above which a cell counts as a channel (m^2), as in orokit.validate.landform
-CHANNEL_AREA_M2 = 1.0e6
-
 __all__ = ["TERRAIN_GROUPS", "TERRAIN_COLUMNS", "TerrainFields", "coarsen_dem", "disk_terrain_vector", "terrain_fields", "terrain_matrix"]
 
-#: slope below which a cell counts as flat (degrees)
-FLAT_SLOPE_DEG = 2.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,31 +57,6 @@ class TerrainFields:
     dx_m: NDArray[np.float64]  # east-west cell size per row
     dy_m: float
     transform: Any
-
-
-def _laplacian_per_km(z: NDArray[np.float64], dx: NDArray[np.float64], dy: float) -> NDArray[np.float64]:
-    """5-point Laplacian (1/km) on interior cells, NaN on the border."""
-    out = np.full(z.shape, np.nan)
-    if min(z.shape) >= 3:
-        c = z[1:-1, 1:-1]
-        dxx = (z[1:-1, 2:] - 2 * c + z[1:-1, :-2]) / dx[1:-1, None] ** 2
-        dyy = (z[2:, 1:-1] - 2 * c + z[:-2, 1:-1]) / dy**2
-        out[1:-1, 1:-1] = 1000.0 * (dxx + dyy)
-    return out
-
-
-def _channels(z: NDArray[np.float64], dx: float, dy: float) -> NDArray[np.bool_]:
-    """Cells draining more than :data:`CHANNEL_AREA_M2` (fastscapelib, outlets on the border)."""
-    import fastscapelib as fs
-
-    ny, nx = z.shape
-    grid = fs.RasterGrid([ny, nx], [dy, dx], fs.NodeStatus.FIXED_VALUE)
-    graph = fs.FlowGraph(grid, [fs.SingleFlowRouter(), fs.PFloodSinkResolver()])
-    ok = np.isfinite(z)
-    filled = np.where(ok, z, np.nanmin(z) if ok.any() else 0.0)
-    graph.update_routes(np.ascontiguousarray(filled))
-    area = np.asarray(graph.accumulate(1.0)).reshape(z.shape)
-    return (area > CHANNEL_AREA_M2) & ok
 
 
 def coarsen_dem(dem: xr.DataArray, cell_size_m: float | None) -> xr.DataArray:
@@ -126,8 +96,8 @@ def coarsen_dem(dem: xr.DataArray, cell_size_m: float | None) -> xr.DataArray:
 def terrain_fields(dem: xr.DataArray, *, cell_size_m: float | None = None) -> TerrainFields:
     """Slope, relief, curvature and channel fields of a DEM (metres; NaN = nodata), computed on the
     DEM averaged to about ``cell_size_m`` (:func:`coarsen_dem`; None: the DEM's own cells)."""
+    from orokit.metrics.landform import CHANNEL_AREA_M2, drainage_area, laplacian, slope_and_relief
     from orokit.raster.shade import row_cell_sizes_m
-    from orokit.validate.landform import slope_and_relief
 
     dem = coarsen_dem(dem, cell_size_m)
     z = np.asarray(dem.values, dtype=np.float64)
@@ -137,9 +107,10 @@ def terrain_fields(dem: xr.DataArray, *, cell_size_m: float | None = None) -> Te
     _, r5 = slope_and_relief(dem, window_m=5000.0)
     dxr, dy = row_cell_sizes_m(dem)
     dxr = np.asarray(dxr, dtype=np.float64)
+    area, _ = drainage_area(z, float(np.mean(dxr)), float(dy))
     return TerrainFields(z=z, slope_deg=slope, relief_1km=r1 / 1000.0, relief_5km=r5 / 1000.0,
-                         curvature_per_km=_laplacian_per_km(z, dxr, float(dy)),
-                         channel=_channels(z, float(np.mean(dxr)), float(dy)), dx_m=dxr, dy_m=float(dy),
+                         curvature_per_km=1000.0 * laplacian(z, dxr, float(dy)),
+                         channel=(area > CHANNEL_AREA_M2) & np.isfinite(z), dx_m=dxr, dy_m=float(dy),
                          transform=dem.rio.transform())
 
 
@@ -151,7 +122,7 @@ def _q(v: NDArray[np.float64], qs: tuple[float, ...]) -> NDArray[np.float64]:
 def disk_terrain_vector(fields: TerrainFields, row: float, col: float, radius_m: float) -> NDArray[np.float64]:
     """The :data:`TERRAIN_COLUMNS` of the cells within ``radius_m`` of the cell position (``row``, ``col``),
     cell centres at integers. Every value is finite (zeros for a disk without valid cells)."""
-    from orokit.validate.landform import spectral_slope
+    from orokit.metrics.landform import FLAT_SLOPE_DEG, spectral_slope
 
     ny, nx = fields.z.shape
     kr = int(np.ceil(radius_m / fields.dy_m))
