@@ -61,6 +61,8 @@ READ_CACHE_BYTES = 32 * 2**20
 #: threads reading a whole raster (row stripes, one GDAL handle each) and rows a stripe has at least
 READ_THREADS = min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
 READ_MIN_ROWS = 512
+#: formats whose rows GDAL reads at any offset (a PNG or an ASCII grid is decoded from its start: one thread)
+READ_SPLIT_DRIVERS = frozenset({"GTiff", "COG", "SRTMHGT", "EHdr", "ENVI", "VRT"})
 
 
 @contextlib.contextmanager
@@ -232,7 +234,8 @@ class _BandReader:
         out = raw if self._in_place(raw.dtype) else np.empty(self.shape, np.float32)
         with _open(self.path) as src:
             block_rows = max(1, int(src.block_shapes[self.band - 1][0]))
-        k = max(1, min(READ_THREADS, h // max(block_rows, READ_MIN_ROWS)))
+            seekable = src.driver in READ_SPLIT_DRIVERS
+        k = max(1, min(READ_THREADS, h // max(block_rows, READ_MIN_ROWS))) if seekable else 1
         cuts = sorted({min(h, -(-(i * h // k) // block_rows) * block_rows) for i in range(k)} | {h})
 
         def stripe(r0: int, r1: int) -> tuple[int, list[NDArray[Any]]]:

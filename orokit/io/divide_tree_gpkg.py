@@ -48,7 +48,8 @@ _GPKG = {"driver": "GPKG", "layer_options": {"SPATIAL_INDEX": "NO"}}
 
 
 def _gdal_crs(crs) -> str | None:
-    """A pyproj CRS as GDAL takes it (what geopandas passes): ``EPSG:n`` when it has a code, else WKT1."""
+    """A CRS (pyproj CRS or anything it reads, e.g. "EPSG:32633") as GDAL takes it (what geopandas passes):
+    ``EPSG:n`` when it has a code, else WKT1."""
     if crs is None:
         return None
     if not hasattr(crs, "to_epsg"):  # a string or EPSG code, as trees built in memory may carry

@@ -138,6 +138,9 @@ def test_gpkg_keeps_crs(tmp_path):
     assert back.crs.to_epsg() == 32633
     assert back.attrs["min_prominence_m"] == 30.0
     assert back.equals(tree)
+    text = DivideTree.from_arrays([[500000, 4e6, 10], [500100, 4e6, 12]], [[500050, 4e6, 5]], [[0, 1, 0]],
+                                  crs="EPSG:32633")  # a CRS given as text (synthesized trees carry one)
+    assert read_divide_tree_gpkg(write_divide_tree_gpkg(text, tmp_path / "s.gpkg")).crs.to_epsg() == 32633
 
 
 def test_gpkg_of_older_versions_reads_the_old_attr_keys(tmp_path):
