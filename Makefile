@@ -111,7 +111,7 @@ $(ANALYSIS_README): $(ANALYSIS_JSONS) orokit/reports/analysis_report.py orokit/v
 
 analysis: $(ANALYSIS_README)  ## exact analysis of every DEM, table + Divide Tree figures
 
-# grouped target: the report and the default model (orometry features) are written by one command
+# grouped target: the report and the default model (terrain features) are written by one command
 REGION_MODEL := models/regions-10km.skops
 $(CLASSIFICATION_README) $(REGION_MODEL) &: $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
 	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(REPORTS)/classification --radius 10km \
