@@ -2,8 +2,12 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
+
+if TYPE_CHECKING:  # pragma: no cover
+    import pandas as pd
 
 from orokit.cli.options import (
     INPUT,
@@ -43,9 +47,11 @@ from orokit.cli.options import (
 @common_input_options
 @seed_option(what="the disk placement")
 @overwrite_option("an existing OUTPUT")
+@click.option("--n-jobs", type=click.IntRange(min=1), default=2, show_default=True,
+              help="Inputs measured at once, each in its own process (the table does not depend on it).")
 @progress_option()
 def features(inputs, output, radius, min_prominence_m, min_peaks, max_disks, separation, labels, feature_set_name,
-             relative_elevation, exact_only, z_units, cell_size_m, region, isolation, seed, overwrite, progress):
+             relative_elevation, exact_only, z_units, cell_size_m, region, isolation, seed, overwrite, n_jobs, progress):
     """Orometric histograms of disks of radius R placed by blue noise in each INPUT.
 
     INPUT is a DEM file or the name of a DEM of the datasets manifest (analysed on the
@@ -72,23 +78,51 @@ def features(inputs, output, radius, min_prominence_m, min_peaks, max_disks, sep
                                  param_hint="--label")
     seeds = np.random.SeedSequence(seed).spawn(len(inputs))
     fs = auto_feature_set([str(s) for s in inputs]) if feature_set_name == "auto" else FeatureSet.named(feature_set_name)
-    tables = []
-    it = list(enumerate(inputs))
-    if progress and len(inputs) > 1:
-        from tqdm.auto import tqdm
-
-        it = tqdm(it, desc="features", unit="input")
-    for i, src in it:
+    jobs = []
+    for i, src in enumerate(inputs):
         label = (labels[i] if len(labels) == len(inputs) else labels[0]) if labels else src.label
         z, cell = src.dem_options(z_units, cell_size_m)
-        tables.append(features_for_input(
-            str(src), radius_m=radius, label=label, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
+        jobs.append(dict(
+            source=str(src), radius_m=radius, label=label, min_prominence_m=min_prominence_m, min_peaks=min_peaks,
             max_disks=max_disks, separation=separation, relative_elevation=relative_elevation,
             feature_set=fs,
             exact_only=exact_only, z_units=z, cell_size_m=cell, region=region, isolation=isolation,
             rng=np.random.default_rng(seeds[i])))
+    bar = None
+    if progress and len(inputs) > 1:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(jobs), desc="features", unit="input")
+    workers = min(n_jobs, len(jobs))
+    if workers <= 1:
+        tables = []
+        for job in jobs:
+            tables.append(features_for_input(**job))
+            if bar is not None:
+                bar.update()
+    else:  # one process per input at a time: each input's disks come from its own seed, so the order does not matter
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(method)) as pool:
+            futures = [pool.submit(_features_job, job) for job in jobs]
+            tables = []
+            for fut in futures:
+                tables.append(fut.result())
+                if bar is not None:
+                    bar.update()
+    if bar is not None:
+        bar.close()
     table = concat_features(tables)
     write_feature_table(table, output)
     counts = table["label"].value_counts().to_dict() if len(table) else {}
     click.echo(f"features {fs.name!r}: {len(table)} disks of radius {radius / 1000:g} km ({table.attrs.get('n_disks_skipped', 0)} skipped "
                f"with < {min_peaks} peaks) from {len(inputs)} input(s) -> {output}; per label: {counts}")
+
+
+def _features_job(job: dict) -> "pd.DataFrame":
+    """One input's feature table, in a worker process."""
+    from orokit.classify.inputs import features_for_input
+
+    return features_for_input(**job)

@@ -209,3 +209,13 @@ def test_auto_features_are_terrain_for_dems_and_a_terrain_model_refuses_a_peak_l
         res = CliRunner().invoke(cli, ["classify", str(model), str(peaks_csv)])
     assert res.exit_code == 1 and "needs the DEM" in res.output and "--features orometry" in res.output
     assert "Traceback" not in res.output
+
+
+def test_features_in_worker_processes_equal_one_process(dems_and_model):
+    """`--n-jobs 2` (the default: one process per input at a time) writes the same bytes as `--n-jobs 1`."""
+    tmp, paths, _ = dems_and_model
+    one = tmp / "f1.parquet"
+    res = CliRunner().invoke(cli, ["features", *map(str, paths), "-o", str(one), "--radius", "5km", "--min-peaks", "5",
+                                   "--no-progress", "--n-jobs", "1"])
+    assert res.exit_code == 0, res.output
+    assert one.read_bytes() == (tmp / "f.parquet").read_bytes()
