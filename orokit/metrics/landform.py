@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from orokit.errors import InputError
-from orokit.raster.noise import remove_plane
+from orokit.raster.noise import radial_bins, remove_plane
 from orokit.raster.shade import row_cell_sizes_m
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -159,19 +159,10 @@ def spectral_slope(z: NDArray[np.floating], cell_size_m: tuple[float, float], *,
     if spec is None:
         return float("nan")
     k, power = spec
-    kmin, kmax = 1.0 / wavelengths_m[1], 1.0 / wavelengths_m[0]
-    edges = np.geomspace(kmin, kmax, n_bins + 1)
-    sel = (k >= kmin) & (k <= kmax)
-    idx = np.clip(np.searchsorted(edges, k[sel], side="right") - 1, 0, n_bins - 1)
-    cnt = np.bincount(idx, minlength=n_bins)
-    psum = np.bincount(idx, weights=power[sel], minlength=n_bins)
-    ksum = np.bincount(idx, weights=k[sel], minlength=n_bins)
-    has = (cnt > 0) & (psum > 0)
-    if has.sum() < 3:
+    kb, pb = radial_bins(k, power, (1.0 / wavelengths_m[1], 1.0 / wavelengths_m[0]), n_bins)
+    if len(kb) < 3:
         return float("nan")
-    lk = np.log10(ksum[has] / cnt[has])
-    lp = np.log10(psum[has] / cnt[has])
-    slope = np.polyfit(lk, lp, 1)[0]
+    slope = np.polyfit(np.log10(kb), np.log10(pb), 1)[0]
     return float(-slope)
 
 

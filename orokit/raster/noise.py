@@ -194,7 +194,18 @@ def power_law_fit(z: np.ndarray, res: float, *, fit_m: tuple[float, float] = (10
     w = np.outer(np.hanning(zc.shape[0]), np.hanning(zc.shape[1]))
     power = np.abs(np.fft.rfft2(zc * w)) ** 2 * d * d / zc.size / float(np.mean(w * w))
     k = np.hypot(np.fft.fftfreq(zc.shape[0], d)[:, None], np.fft.rfftfreq(zc.shape[1], d)[None, :])
-    kmin, kmax = 1.0 / fit_m[1], 1.0 / fit_m[0]
+    kb, pb = radial_bins(k, power, (1.0 / fit_m[1], 1.0 / fit_m[0]), n_bins)
+    if len(kb) < 3:
+        return 0.0, 3.0
+    slope, icpt = np.polyfit(np.log(kb), np.log(pb), 1)
+    return float(np.exp(icpt)), float(-slope)
+
+
+def radial_bins(k: np.ndarray, power: np.ndarray, band: tuple[float, float], n_bins: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Mean wavenumber and mean power of the ``n_bins`` log-spaced bins of ``band = (kmin, kmax)``
+    that hold a wavenumber with positive summed power (empty bins left out)."""
+    kmin, kmax = band
     sel = (k >= kmin) & (k <= kmax)
     edges = np.geomspace(kmin, kmax, n_bins + 1)
     idx = np.clip(np.searchsorted(edges, k[sel], side="right") - 1, 0, n_bins - 1)
@@ -202,10 +213,7 @@ def power_law_fit(z: np.ndarray, res: float, *, fit_m: tuple[float, float] = (10
     ps = np.bincount(idx, weights=power[sel], minlength=n_bins)
     ks = np.bincount(idx, weights=k[sel], minlength=n_bins)
     has = (cnt > 0) & (ps > 0)
-    if has.sum() < 3:
-        return 0.0, 3.0
-    slope, icpt = np.polyfit(np.log(ks[has] / cnt[has]), np.log(ps[has] / cnt[has]), 1)
-    return float(np.exp(icpt)), float(-slope)
+    return ks[has] / cnt[has], ps[has] / cnt[has]
 
 
 def _radial_density(z: np.ndarray, res: float, k: np.ndarray, edges: np.ndarray) -> np.ndarray:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -123,23 +124,28 @@ def ranking_tables(runs: list[dict]) -> tuple[Any, Any, Any]:
     return per_run, agg, mean_rank
 
 
+def _target_checks(runs: list[dict]) -> Iterator[tuple[str, str, str, int]]:
+    """``(generator, region, statistic, 1 if within target else 0)`` for every landform statistic
+    with a target, over the successful runs."""
+    for r in runs:
+        if r.get("failed") or not r.get("landform") or not r.get("landform_target"):
+            continue
+        for k, d in r["landform"].items():
+            t = r["landform_target"].get(k)
+            if t is not None:
+                yield r["generator"], r.get("region", ""), k, int(float(d) <= float(t))
+
+
 def landform_target_counts(runs: list[dict]) -> Any:
     """Per generator (rows) and landform statistic (columns): how many of its successful runs
     meet the region's target (distance <= target), as ``"k/n"`` strings."""
     import pandas as pd
 
     counts: dict[str, dict[str, list[int]]] = {}
-    for r in runs:
-        if r.get("failed") or not r.get("landform") or not r.get("landform_target"):
-            continue
-        row = counts.setdefault(r["generator"], {})
-        for k, d in r["landform"].items():
-            t = r["landform_target"].get(k)
-            if t is None:
-                continue
-            c = row.setdefault(k, [0, 0])
-            c[0] += int(float(d) <= float(t))
-            c[1] += 1
+    for gen, _, k, ok in _target_checks(runs):
+        c = counts.setdefault(gen, {}).setdefault(k, [0, 0])
+        c[0] += ok
+        c[1] += 1
     table = pd.DataFrame({g: {k: f"{a}/{n}" for k, (a, n) in row.items()} for g, row in counts.items()}).T
     return table.sort_index()
 
@@ -159,17 +165,10 @@ def landform_target_counts_by_region(runs: list[dict]) -> tuple[Any, dict[str, s
             n += 1
         tags[reg] = reg[:n].capitalize() if n > 1 else reg[:1].upper()
     counts: dict[str, dict[str, dict[str, list[int]]]] = {}
-    for r in runs:
-        if r.get("failed") or not r.get("landform") or not r.get("landform_target"):
-            continue
-        row = counts.setdefault(r["generator"], {})
-        for k, d in r["landform"].items():
-            t = r["landform_target"].get(k)
-            if t is None:
-                continue
-            c = row.setdefault(k, {}).setdefault(r["region"], [0, 0])
-            c[0] += int(float(d) <= float(t))
-            c[1] += 1
+    for gen, region, k, ok in _target_checks(runs):
+        c = counts.setdefault(gen, {}).setdefault(k, {}).setdefault(region, [0, 0])
+        c[0] += ok
+        c[1] += 1
     table = pd.DataFrame({g: {k: " ".join(f"{tags[reg]}{a}" for reg, (a, _) in sorted(per.items()))
                               for k, per in row.items()} for g, row in counts.items()}).T
     return table.sort_index(), tags
