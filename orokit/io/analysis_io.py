@@ -9,16 +9,18 @@ from __future__ import annotations
 import json
 import logging
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from orokit._typing import PathLike
 from orokit.errors import InputError
 from orokit.io.atomic import atomic_path, staged_folder, write_text_atomic
 from orokit.io.files import read_json_file
 from orokit.topology.tables import AnalysisResult, upgrade_attrs, validate_peak_table, validate_saddle_table
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 logger = logging.getLogger(__name__)
 
@@ -215,6 +217,8 @@ def read_peak_cells(outdir: PathLike) -> pd.DataFrame:
     p = Path(outdir) / "peaks.parquet"
     if not p.exists():
         raise InputError(f"no peaks table at {p}; pass an `orokit analyze` output folder")
+    import pandas as pd
+
     return pd.read_parquet(p, columns=["row", "col", "x", "y"])
 
 
@@ -229,5 +233,7 @@ def read_peaks(source: PathLike):
         raise InputError(f"no peaks table at {p}")
     if p.suffix == ".parquet":
         return gpd.read_parquet(p)
+    import pandas as pd
+
     frame = pd.read_csv(p, index_col="peak_id")
     return gpd.GeoDataFrame(frame, geometry=gpd.points_from_xy(frame["x"], frame["y"]))

@@ -3,16 +3,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 from affine import Affine
 
 from orokit.errors import CRSError
 from orokit.geodesy import WGS84 as _GEOD
 from orokit.geodesy import CellMetric
 from orokit.metrics import _kernels
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["isolation", "KernelMetric"]
 
@@ -122,6 +124,8 @@ def finish_isolation(metric: KernelMetric, rows, cols, best, cand_flat, width, e
     distances go to the first cell in raster order, so results do not depend on the
     search order (in memory or chunked).
     """
+    import pandas as pd
+
     n = rows.size
     dist = np.full(n, np.inf)
     target = np.full(n, -1, np.int64)

@@ -8,13 +8,15 @@ pruned at a prominence threshold without changing any surviving peak's prominenc
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from orokit.errors import DivideTreeError
 from orokit.topology import _kernels
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["DivideTree"]
 
@@ -80,6 +82,8 @@ class DivideTree:
         """Build a tree from (n, 3) peak and (m, 3) saddle arrays and (k, 3) edges."""
         peak_xyz = np.asarray(peak_xyz, dtype=float).reshape(-1, 3)
         saddle_xyz = np.asarray(saddle_xyz, dtype=float).reshape(-1, 3)
+        import pandas as pd
+
         edges = np.asarray(edges, dtype=np.int64).reshape(-1, 3)
         peaks = pd.DataFrame(peak_xyz, columns=["x", "y", "elevation"])
         saddles = pd.DataFrame(saddle_xyz, columns=["x", "y", "elevation"])
@@ -123,6 +127,8 @@ class DivideTree:
         key_saddle[has] = s[order][key_edge[has]]
         prom = pz.copy()
         prom[has] = pz[has] - sz[key_saddle[has]]
+        import pandas as pd
+
         return pd.DataFrame(
             {"prominence": prom, "key_saddle": key_saddle, "island_parent": parent}, index=self.peaks.index
         )
@@ -198,6 +204,8 @@ class DivideTree:
         prom = table["prominence"].to_numpy(float).copy()
         prom[table["key_saddle"].to_numpy() < 0] = np.inf
         pp = _kernels.first_ancestor_above(lp, prom, rank)
+        import pandas as pd
+
         return pd.DataFrame({"line_parent": lp, "prominence_parent": pp}, index=self.peaks.index)
 
     # ----------------------------------------------------------------- pruning
@@ -236,6 +244,8 @@ class DivideTree:
         saddle_sorted = np.unique(saddle_ids)
         new_saddle = np.full(self.n_saddles, -1, np.int64)
         new_saddle[saddle_sorted] = np.arange(saddle_sorted.size)
+        import pandas as pd
+
         edges = pd.DataFrame(
             {"peak_a": new_id[oa], "peak_b": new_id[ob], "saddle": new_saddle[saddle_ids]}
         ).sort_values("saddle", kind="stable", ignore_index=True)

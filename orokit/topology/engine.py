@@ -16,14 +16,17 @@ Steps (DESIGN.md §2):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from orokit.errors import InputError
 from orokit.topology import _kernels
 from orokit.topology.divide_tree import DivideTree
 from orokit.topology.tables import PEAK_COLUMNS, SADDLE_COLUMNS, AnalysisResult, validate_peak_table, validate_saddle_table
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 @dataclass
@@ -261,6 +264,8 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     ``geometry=False``: plain DataFrames without point geometries (``x``/``y`` hold the
     places; the files written are the same), ~45 % less memory per peak.
     """
+    import pandas as pd  # here, not at import: the engine's peak memory is reached without it
+
     H, W = core.shape
 
     def xy(rows, cols):

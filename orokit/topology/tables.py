@@ -14,8 +14,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-import pandas as pd
-
 from orokit.errors import SchemaError
 from orokit.geodesy import cell_size_key
 from orokit.topology.divide_tree import DivideTree
@@ -119,6 +117,8 @@ SADDLE_COLUMNS: list[str] = [c.name for c in SADDLE_SCHEMA]
 
 
 def _validate(table: Any, schema: tuple[Column, ...], index: str, what: str, source: str | None) -> None:
+    import pandas as pd
+
     where = f"{source}: " if source else ""
     if not isinstance(table, pd.DataFrame):
         raise SchemaError(f"{where}the {what} table must be a (Geo)DataFrame, got {type(table).__name__}")
