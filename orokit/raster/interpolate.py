@@ -27,9 +27,27 @@ def poisson_samples(extent: tuple[float, float, float, float], radius: float, *,
     return _kernels.poisson_disk(float(xmin), float(ymin), float(xmax), float(ymax), float(radius), n_trials, seed)
 
 
-def valley_width(drainage_area_m2: np.ndarray, *, coef: float = 0.15, exponent: float = 0.4) -> np.ndarray:
-    """Valley floor width ``w = coef * A^exponent`` in metres (May et al. 2013: w ~ A^0.4)."""
-    return coef * np.power(np.maximum(drainage_area_m2, 0.0), exponent)
+def valley_width(drainage_area_m2: np.ndarray, *, coef: float = 0.15, exponent: float = 0.4,
+                 bed_slope: np.ndarray | None = None, min_bed_slope: float = 0.01,
+                 slope_exponent: float = 0.0, ref_bed_slope: float | None = None) -> np.ndarray:
+    """Valley floor width ``w = coef * A^exponent`` in metres (May et al. 2013: w ~ A^0.4).
+
+    With ``bed_slope`` and ``slope_exponent`` > 0 the width also follows the bed slope S,
+    ``w * (max(S, min_bed_slope) / ref_bed_slope)^-slope_exponent`` (Finnegan et al. 2005:
+    w ~ A^3/8 S^-3/16; wide flat floors only where large drainage meets a gentle bed);
+    ``ref_bed_slope`` defaults to ``min_bed_slope`` (never wider than ``coef * A^exponent``).
+
+    >>> valley_width(np.array([1e6]), coef=1.0).round(1).tolist()
+    [251.2]
+    >>> valley_width(np.array([1e6, 1e6]), coef=1.0, bed_slope=np.array([0.01, 0.16]), slope_exponent=0.5).round(1).tolist()
+    [251.2, 62.8]
+    """
+    w = coef * np.power(np.maximum(drainage_area_m2, 0.0), exponent)
+    if bed_slope is not None and slope_exponent > 0:
+        ref = float(min_bed_slope if ref_bed_slope is None else ref_bed_slope)
+        ratio = np.maximum(np.asarray(bed_slope, float), float(min_bed_slope)) / ref
+        w = w * ratio ** -float(slope_exponent)
+    return w
 
 
 def sample_elevation(
@@ -44,6 +62,7 @@ def sample_elevation(
     ridge_floor: np.ndarray | None = None,
     k_neighbours: int = 16,
     floor_slope: float = 0.05,
+    floor_relief_ratio: float = 0.0,
     profile: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elevation of ``points`` from the nearest ridge point q and river point r.
@@ -56,7 +75,10 @@ def sample_elevation(
     envelope ``max_q h(q) - s_q |p - q|`` over the ``k_neighbours`` nearest ridge points
     (orokit): flanks then fall faster than the ridge rises, so the ground beside a
     saddle stays below it and the saddle stays the highest pass; the floor is
-    ``h(r) + floor_slope * max(d(p, R) - w, 0)`` (no pit below the drainage).
+    ``h(r) + g * max(d(p, R) - w, 0)`` (no pit below the drainage), with
+    ``g = max(floor_slope, floor_relief_ratio * (h(q) - h(r)) / (d(p, R) + d(p, T) - w))``: a
+    share of the local ridge-to-river gradient, so below steep ridges the valley sides stay
+    steep instead of a gentle ramp where the cones have fallen.
     ``ridge_floor`` (one value per ridge point) bounds how deep the cones dig
     (:func:`flank_envelope`).
     Returns ``(h, d_ridge, d_river)``.
@@ -77,7 +99,10 @@ def sample_elevation(
                              k_neighbours=k_neighbours, tree=tree)
         # the cones only cap; far from every ridge they would dig pits far below the rivers, so
         # the floor rises gently from the nearest river bed (valley sides, not flat plains)
-        floor = np.minimum(hr + floor_slope * np.maximum(dR - w, 0.0), h)
+        g = floor_slope
+        if floor_relief_ratio > 0:
+            g = np.maximum(floor_slope, floor_relief_ratio * np.maximum(hq - hr, 0.0) / denom)
+        floor = np.minimum(hr + g * np.maximum(dR - w, 0.0), h)
         h = np.maximum(np.minimum(h, env), floor)
     return h, dT, dR
 

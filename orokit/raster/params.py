@@ -18,6 +18,17 @@ class RenderParams:
     river_max_sink_m : river beds lie at most this far below the bound the ridges around them
         set (None: no limit; :func:`orokit.raster.rivers.river_network`).
     valley_coef : valley width ``w = valley_coef * A^0.4`` (A in m^2).
+    river_relief_ratio : the minimum bed slope of a river node is ``max(river_slope, river_relief_ratio x g)``,
+        g the gradient from its nearest ridge point down to the bed's bound (valleys deepen below steep
+        ridges, not on plateaus; :func:`orokit.raster.rivers.river_network`); 0 = off.
+    valley_slope_exponent : the valley floor narrows on steep river beds,
+        ``w * min(1, (S / river_slope)^-valley_slope_exponent)`` (S the bed slope;
+        :func:`orokit.raster.interpolate.valley_width`); 0 = off.
+    valley_slope_ref : the bed slope at which the floor has its ``A^0.4`` width (None: ``river_slope``):
+        beds gentler than it get wider floors, steeper ones narrower.
+    floor_relief_ratio : where the flank cones fall below it, the ground rises from the river at
+        ``max(0.05, floor_relief_ratio x (ridge - river) / distance)`` instead of a gentle 0.05 ramp
+        (:func:`orokit.raster.interpolate.sample_elevation`); 0 = off.
     min_prominence_m : eps of the orometry to keep; noise amplitude is ``noise_ratio * eps``.
     noise_ratio : noise amplitude as a fraction of eps (< 0.5 so no new peak reaches eps).
     uplift_radius : R of the compensating uplift and noise mask around peaks and saddles.
@@ -95,6 +106,10 @@ class RenderParams:
     river_margin: float = 5.0
     river_max_sink_m: float | None = None
     valley_coef: float = 0.15
+    valley_slope_exponent: float = 0.0
+    valley_slope_ref: float | None = None
+    river_relief_ratio: float = 0.0
+    floor_relief_ratio: float = 0.0
     min_prominence_m: float = 30.0
     noise_ratio: float = 0.3
     uplift_radius: float = 1500.0

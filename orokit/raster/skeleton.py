@@ -186,7 +186,7 @@ def build_skeleton(
 
     rivers = river_network(fine_ridges, ridge_lines.xy, extent, base_elevation=base,
                            margin_m=params.river_margin, slope=params.river_slope, cap=envelope,
-                           max_sink_m=params.river_max_sink_m)
+                           max_sink_m=params.river_max_sink_m, relief_ratio=params.river_relief_ratio)
     t["rivers"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -214,10 +214,16 @@ def build_skeleton(
     t0 = time.perf_counter()
     dense = lam / 4.0
     vxy, vz, va = densify(river_lines, dense) if river_seg.size else (rivers.xy, rivers.elevation, area)
+    vslope = None
+    if params.valley_slope_exponent > 0 and river_seg.size:
+        vslope = densify(river_lines, dense, value="slope")[2]
+    vw = valley_width(va, coef=params.valley_coef, bed_slope=vslope, min_bed_slope=params.river_slope,
+                      slope_exponent=params.valley_slope_exponent, ref_bed_slope=params.valley_slope_ref)
     pts = np.concatenate([samples, ring])
-    h, dT, dR = sample_elevation(pts, rxy, rz, vxy, vz, valley_width(va, coef=params.valley_coef), ridge_slope=rs,
+    h, dT, dR = sample_elevation(pts, rxy, rz, vxy, vz, vw, ridge_slope=rs,
                                  ridge_floor=rfloor, profile=hillslope_profile if learned else None,
-                                 k_neighbours=params.flank_neighbours)
+                                 k_neighbours=params.flank_neighbours,
+                                 floor_relief_ratio=params.floor_relief_ratio)
     far = (np.minimum(dT, dR) >= 0.5 * lam)
     far[samples.shape[0]:] = True  # keep the ring
     pts, h = pts[far], h[far]

@@ -315,3 +315,70 @@ def test_limit_slope_fills_cliff_feet_only():
         z, footprint=fp, mode="constant", cval=-np.inf)).tolist()
     with pytest.raises(InputError):
         RenderParams(max_slope_deg=95.0)
+
+
+def test_river_relief_ratio_deepens_beds_below_steep_ridges_only():
+    """``relief_ratio``: the minimum bed slope follows the gradient from the nearest ridge; beds
+    are never higher than with the plain slope, 0 gives the same beds, beds still fall downstream,
+    and under a flat-topped (gentle) ridge set nothing changes."""
+    from orokit.raster.rivers import ridge_segments, river_network
+
+    rng = np.random.default_rng(3)
+    peaks = np.column_stack([rng.uniform(1000, 19000, (12, 2)), rng.uniform(1800, 2200, 12)])
+    saddles = np.column_stack([(peaks[:-1, :2] + peaks[1:, :2]) / 2, np.full(11, 1500.0)])
+    edges = np.column_stack([np.arange(11), np.arange(1, 12), np.arange(11)])
+    ridges = ridge_segments(peaks, saddles, edges)
+    nodes = np.concatenate([peaks[:, :2], saddles[:, :2]])
+    kw = dict(base_elevation=0.0, margin_m=5.0, slope=0.01)
+    ext = (0, 0, 20000, 20000)
+    plain = river_network(ridges, nodes, ext, **kw)
+    same = river_network(ridges, nodes, ext, relief_ratio=0.0, **kw)
+    steep = river_network(ridges, nodes, ext, relief_ratio=0.5, **kw)
+    assert np.array_equal(plain.elevation, same.elevation)
+    assert np.array_equal(plain.receiver, steep.receiver)
+    assert (steep.elevation <= plain.elevation + 1e-9).all()
+    assert (steep.elevation < plain.elevation - 50.0).any()
+    has = steep.receiver >= 0
+    assert (steep.elevation[steep.receiver[has]] <= steep.elevation[has] + 1e-9).all()
+    # level ridges (no gradient down to any bed's bound): nothing changes
+    low = ridge_segments(np.column_stack([peaks[:, :2], np.full(12, 1500.0)]), saddles, edges)
+    a = river_network(low, nodes, ext, **kw)
+    b = river_network(low, nodes, ext, relief_ratio=0.5, **kw)
+    np.testing.assert_allclose(a.elevation, b.elevation)
+
+
+def test_valley_width_narrows_on_steep_beds():
+    """Floor width: A^0.4 on beds at the reference slope (default the minimum), S^-p narrower on steeper ones."""
+    from orokit.raster.interpolate import valley_width
+
+    area = np.full(5, 4e6)
+    s = np.array([0.001, 0.01, 0.04, 0.16, 1.0])
+    plain = valley_width(area, coef=0.15)
+    w = valley_width(area, coef=0.15, bed_slope=s, min_bed_slope=0.01, slope_exponent=0.5)
+    np.testing.assert_allclose(plain, 0.15 * 4e6 ** 0.4)
+    np.testing.assert_allclose(w, plain * np.array([1.0, 1.0, 0.5, 0.25, 0.1]))
+    np.testing.assert_array_equal(valley_width(area, bed_slope=s), valley_width(area))
+    # a reference slope above the minimum: gentler beds get wider floors (S^-p both ways)
+    wr = valley_width(area, coef=0.15, bed_slope=s, min_bed_slope=0.01, slope_exponent=0.5, ref_bed_slope=0.04)
+    np.testing.assert_allclose(wr, plain * np.array([2.0, 2.0, 1.0, 0.5, 0.2]))
+
+
+def test_floor_relief_ratio_keeps_valley_sides_steep():
+    """Where the flank cone has fallen below it, the ground rises from the river at
+    ``floor_relief_ratio`` x the ridge-to-river gradient (a hand-computed case), not at 0.05."""
+    from orokit.raster.interpolate import sample_elevation
+
+    ridge_xy = np.array([[0.0, 0.0]])
+    river_xy = np.array([[1000.0, 0.0]])
+    p = np.array([[500.0, 0.0], [800.0, 0.0]])
+    kw = dict(ridge_slope=np.array([2.0]), floor_slope=0.05)  # a steep cone: 1000 - 2 d
+    h0, _, _ = sample_elevation(p, ridge_xy, np.array([1000.0]), river_xy, np.array([0.0]), np.array([0.0]), **kw)
+    # cone at 500 m: 0; at 800 m: -600 -> the floor 0.05 x (d to river) wins: 25 and 10
+    np.testing.assert_allclose(h0, [25.0, 10.0])
+    h1, _, _ = sample_elevation(p, ridge_xy, np.array([1000.0]), river_xy, np.array([0.0]), np.array([0.0]),
+                                floor_relief_ratio=0.5, **kw)
+    # gradient (1000 - 0) / 1000 = 1, half of it: 0.5 x 500 = 250 and 0.5 x 200 = 100
+    np.testing.assert_allclose(h1, [250.0, 100.0])
+    h2, _, _ = sample_elevation(p, ridge_xy, np.array([1000.0]), river_xy, np.array([0.0]), np.array([0.0]),
+                                floor_relief_ratio=2.0, **kw)
+    np.testing.assert_allclose(h2, [500.0, 200.0])  # never above the linear profile
