@@ -21,6 +21,9 @@ class RenderParams:
     river_relief_ratio : the minimum bed slope of a river node is ``max(river_slope, river_relief_ratio x g)``,
         g the gradient from its nearest ridge point down to the bed's bound (valleys deepen below steep
         ridges, not on plateaus; :func:`orokit.raster.rivers.river_network`); 0 = off.
+    river_sink_relief_ratio : a bed sinks at most this times the height of its nearest ridge point above
+        its bound below that bound (plateaus and basins keep shallow valleys, high ridges deep ones;
+        :func:`orokit.raster.rivers.river_network`); None = off.
     valley_slope_exponent : the valley floor narrows on steep river beds,
         ``w * min(1, (S / river_slope)^-valley_slope_exponent)`` (S the bed slope;
         :func:`orokit.raster.interpolate.valley_width`); 0 = off.
@@ -109,6 +112,7 @@ class RenderParams:
     valley_slope_exponent: float = 0.0
     valley_slope_ref: float | None = None
     river_relief_ratio: float = 0.0
+    river_sink_relief_ratio: float | None = None
     floor_relief_ratio: float = 0.0
     min_prominence_m: float = 30.0
     noise_ratio: float = 0.3

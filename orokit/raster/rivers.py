@@ -136,6 +136,7 @@ def river_network(
     cap=None,
     max_sink_m: float | None = None,
     relief_ratio: float = 0.0,
+    sink_relief_ratio: float | None = None,
 ) -> RiverNetwork:
     """Rivers of a Divide Tree: dual Voronoi edges not crossing a ridge, oriented to outlets.
 
@@ -256,14 +257,17 @@ def river_network(
     bound_all = h0 + margin_m  # the ground each bed must stay below (inf: none)
     h0 = np.where(np.isfinite(h0), h0, base_elevation + slope * flowdist)
     h0[outlet] = np.minimum(h0[outlet], base_elevation)
-    if relief_ratio > 0 and ridges.p0.shape[0] and xy.shape[0]:
+    relief = dq = None
+    if (relief_ratio > 0 or sink_relief_ratio is not None) and ridges.p0.shape[0] and xy.shape[0]:
         from scipy.spatial import cKDTree
 
         rxy = np.concatenate([ridges.p0, ridges.p1])
         rzz = np.concatenate([ridges.z0, ridges.z1])
         dq, iq = cKDTree(rxy).query(xy, workers=-1)
         ref = np.where(np.isfinite(bound_all), bound_all, rzz[iq])
-        g = np.maximum(rzz[iq] - ref, 0.0) / np.maximum(dq, 1.0)
+        relief = np.maximum(rzz[iq] - ref, 0.0)  # how far the nearest ridge point rises above the bound
+    if relief_ratio > 0 and relief is not None and dq is not None:
+        g = relief / np.maximum(dq, 1.0)
         node_slope = np.maximum(float(slope), float(relief_ratio) * g)
         # the kernel drops slope x length per edge: a per-node slope is a per-node drop
         h = _kernels.river_elevations(order_arr, receiver, length * node_slope, h0, 1.0, float(base_elevation))
@@ -271,5 +275,7 @@ def river_network(
         h = _kernels.river_elevations(order_arr, receiver, length, h0, float(slope), float(base_elevation))
     if max_sink_m is not None:
         h = np.maximum(h, h0 - float(max_sink_m))
+    if sink_relief_ratio is not None and relief is not None:
+        h = np.maximum(h, np.where(outlet, h, h0 - float(sink_relief_ratio) * relief))
     logger.info("rivers: %d nodes, %d outlets", h.size, int(outlet.sum()))
     return RiverNetwork(xy=xy, elevation=h, receiver=receiver, length=length, order=order_arr, outlet=outlet)

@@ -186,7 +186,8 @@ def build_skeleton(
 
     rivers = river_network(fine_ridges, ridge_lines.xy, extent, base_elevation=base,
                            margin_m=params.river_margin, slope=params.river_slope, cap=envelope,
-                           max_sink_m=params.river_max_sink_m, relief_ratio=params.river_relief_ratio)
+                           max_sink_m=params.river_max_sink_m, relief_ratio=params.river_relief_ratio,
+                           sink_relief_ratio=params.river_sink_relief_ratio)
     t["rivers"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

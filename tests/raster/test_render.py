@@ -382,3 +382,36 @@ def test_floor_relief_ratio_keeps_valley_sides_steep():
     h2, _, _ = sample_elevation(p, ridge_xy, np.array([1000.0]), river_xy, np.array([0.0]), np.array([0.0]),
                                 floor_relief_ratio=2.0, **kw)
     np.testing.assert_allclose(h2, [500.0, 200.0])  # never above the linear profile
+
+
+def test_river_sink_relief_ratio_keeps_beds_near_low_ridges():
+    """``sink_relief_ratio``: a bed sinks below its bound at most that many times the height of its
+    nearest ridge point above the bound; beds are never lower than after the plain sweep, a huge
+    ratio changes nothing, and where the ridges are no higher than the bound the beds stay on it."""
+    from orokit.raster.rivers import ridge_segments, river_network
+
+    rng = np.random.default_rng(3)
+    peaks = np.column_stack([rng.uniform(1000, 19000, (12, 2)), rng.uniform(800, 1200, 12)])
+    saddles = np.column_stack([(peaks[:-1, :2] + peaks[1:, :2]) / 2, np.full(11, 700.0)])
+    edges = np.column_stack([np.arange(11), np.arange(1, 12), np.arange(11)])
+    nodes = np.concatenate([peaks[:, :2], saddles[:, :2]])
+
+    def cap(xy):
+        return np.full(xy.shape[0], 650.0)
+
+    kw = dict(base_elevation=0.0, margin_m=5.0, slope=0.05, cap=cap)
+    ext = (0, 0, 20000, 20000)
+    ridges = ridge_segments(peaks, saddles, edges)
+    plain = river_network(ridges, nodes, ext, **kw)
+    held = river_network(ridges, nodes, ext, sink_relief_ratio=0.1, **kw)
+    loose = river_network(ridges, nodes, ext, sink_relief_ratio=1e6, **kw)
+    assert np.array_equal(plain.receiver, held.receiver)
+    assert (held.elevation >= plain.elevation - 1e-9).all()
+    assert (held.elevation > plain.elevation + 1.0).any()
+    np.testing.assert_allclose(loose.elevation, plain.elevation)
+    # ridges at the cap's height: no relief above any bound, so every inner bed stays at cap - margin
+    level = ridge_segments(np.column_stack([peaks[:, :2], np.full(12, 650.0)]),
+                           np.column_stack([saddles[:, :2], np.full(11, 650.0)]), edges)
+    flat = river_network(level, nodes, ext, sink_relief_ratio=0.5, **kw)
+    inner = ~flat.outlet
+    np.testing.assert_allclose(flat.elevation[inner], 645.0)
