@@ -335,6 +335,30 @@ def _depressions(dem, transform, crs, *, min_prominence_m, outside, sea_level_m,
     return gpd.GeoDataFrame(table, geometry=gpd.points_from_xy(table["x"], table["y"]), crs=crs)
 
 
+def load_kernels(*, isolation: bool = True) -> None:
+    """Load the in-memory engine's compiled kernels (numba's cache) for float32 rasters, on tiny ones.
+
+    The first call of each kernel loads it (~0.3 s of CPU in all, one thread);
+    ``orokit analyze`` calls this while GDAL reads the DEM in other threads, which
+    release the GIL. The tiny rasters cover both isolation searches (with and
+    without nodata). Imports no pandas.
+    """
+    from affine import Affine
+
+    from orokit.metrics.isolation import KernelMetric, nearest_higher
+    from orokit.topology import engine
+
+    z = np.random.default_rng(0).random((8, 8)).astype(np.float32)
+    core = engine.orometry(z, min_prominence_m=0.0)
+    if not isolation:
+        return
+    metric = KernelMetric.from_grid(Affine(1.0, 0.0, 0.0, 0.0, -1.0, 0.0), None)
+    rows, cols = core.peak_row.astype(np.int64), core.peak_col.astype(np.int64)
+    nearest_higher(z, rows, cols, metric)
+    z[0, 0] = np.nan
+    nearest_higher(z, rows, cols, metric)
+
+
 #: bytes per cell the in-memory engine needs at most (measured: ~50 B/cell at 15 M cells)
 BYTES_PER_CELL_IN_MEMORY = 64
 #: chunk side used when a raster is too large for the in-memory engine

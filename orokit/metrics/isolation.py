@@ -100,6 +100,16 @@ def isolation(z: np.ndarray, rows: np.ndarray, cols: np.ndarray, *, transform, c
     rows = np.asarray(rows, dtype=np.int64)
     cols = np.asarray(cols, dtype=np.int64)
     z = np.ascontiguousarray(z)
+    best, cand, edge = nearest_higher(z, rows, cols, metric)
+    return finish_isolation(metric, rows, cols, best, cand, z.shape[1], edge)
+
+
+def nearest_higher(z: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                   metric: KernelMetric) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The kernels' search of :func:`isolation`: ``(best, cand_flat, edge)`` for :func:`finish_isolation`.
+
+    ``z`` C-contiguous, ``rows``/``cols`` int64.
+    """
     H, W = z.shape
     pz = z[rows, cols].astype(np.float64)
     inf = np.full(rows.size, np.inf)
@@ -112,7 +122,7 @@ def isolation(z: np.ndarray, rows: np.ndarray, cols: np.ndarray, *, transform, c
         # no nodata: the pyramid of z itself, in z's dtype (no NaN-free copy, no NaN pyramid)
         best, cand = _kernels.nearest_query(z, *_kernels.build_pyramid(z), rows, cols, pz, inf, *metric.args(),
                                             metric.slack, metric.ncand)
-    return finish_isolation(metric, rows, cols, best, cand, W, edge)
+    return best, cand, edge
 
 
 def finish_isolation(metric: KernelMetric, rows, cols, best, cand_flat, width, edge) -> pd.DataFrame:

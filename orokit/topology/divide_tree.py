@@ -13,7 +13,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from orokit.errors import DivideTreeError
-from orokit.topology import _kernels
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -119,6 +118,7 @@ class DivideTree:
         pz = self.peaks["elevation"].to_numpy(float)
         sz = self.saddles["elevation"].to_numpy(float)
         keys = np.arange(self.n_peaks, dtype=np.int64)
+        from orokit.topology import _kernels  # numba: imported when first used
         _, key_edge, parent, _ = _kernels.kruskal_sweep(
             pz, keys, a[order], b[order], sz[s[order]], s[order], np.full(self.n_peaks, -np.inf)
         )
@@ -200,6 +200,7 @@ class DivideTree:
         pz = self.peaks["elevation"].to_numpy(float)
         rank = np.empty(n, np.int64)
         rank[np.lexsort((-np.arange(n), pz))] = np.arange(n)  # larger = higher
+        from orokit.topology import _kernels  # numba: imported when first used
         lp, _ = _kernels.line_parents(rank, a[order], b[order])
         prom = table["prominence"].to_numpy(float).copy()
         prom[table["key_saddle"].to_numpy() < 0] = np.inf
@@ -235,6 +236,7 @@ class DivideTree:
         inf = np.full(self.n_peaks, np.inf)
         pz = self.peaks["elevation"].to_numpy(float)
         ids = np.arange(self.n_peaks, dtype=np.int64)
+        from orokit.topology import _kernels  # numba: imported when first used
         oa, ob, oe, _, _, _ = _kernels.prune_edges(
             self.n_peaks, a[order], b[order], sz, s[order], keep, -inf, inf, pz, ids, False
         )

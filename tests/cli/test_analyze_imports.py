@@ -12,7 +12,9 @@ CODE = """
 import sys
 import numpy as np
 import orokit.cli.analyze, orokit.analysis, orokit.io.dem, orokit.io.analysis_io  # what the CLI imports first
+from orokit.analysis import load_kernels
 from orokit.topology import engine
+load_kernels()  # what `orokit analyze` runs while GDAL reads
 z = np.random.default_rng(0).random((40, 50))
 core = engine.orometry(z, min_prominence_m=0.1)
 assert core.n_kept > 0
