@@ -116,6 +116,53 @@ def test_ksvd_dictionary_keeps_pairs_and_codes():
     assert np.corrcoef(low.ravel(), d.low.ravel())[0, 1] > 0.9
 
 
+def test_atoms_with_more_detail_than_coarse_relief_are_dropped():
+    """A nearly flat low patch carrying fine relief is not an atom (its 1 / norm scale blew up)."""
+    ex = fractal(96, 8)
+    rng = np.random.default_rng(0)
+    ex[40:72, 40:72] = 1000.0 + 30.0 * rng.choice([-1.0, 1.0], size=(32, 32))  # block means nearly flat
+    f, R = 4, 8
+    keep = build_dictionary(ex, GuerinParams(radius=R, factor=f, max_detail=1.0), np.random.default_rng(0))
+    every = build_dictionary(ex, GuerinParams(radius=R, factor=f, max_detail=float("inf")), np.random.default_rng(0))
+    unresolved = build_dictionary(ex, GuerinParams(radius=R, factor=f), np.random.default_rng(0))  # NaN: every one
+    assert unresolved.n_atoms == every.n_atoms
+
+    def ratio(d):  # detail rms over the low patch's rms, both in the atom's own (normalised) scale
+        up = np.repeat(np.repeat(d.high.reshape(-1, 2 * R // f, f, 2 * R // f, f).mean(axis=(2, 4)), f, 1), f, 2)
+        return np.sqrt(np.mean((d.high - up) ** 2, axis=(1, 2))) / np.sqrt(np.mean(d.low ** 2, axis=1))
+
+    assert ratio(keep).max() <= 1.0 + 1e-9
+    assert ratio(every).max() > 3.0 and every.n_atoms > keep.n_atoms > 0
+    # amplifying a rough coarse terrain (every low pattern occurs): the added detail stays bounded
+    coarse = 1000.0 + 200.0 * np.random.default_rng(1).normal(size=(24, 24))
+    tr = np.ones((coarse.shape[0] * f, coarse.shape[1] * f))
+    def detail(d):  # the amplified terrain minus its own block means: the relief added below the coarse cell
+        out = synthesize(coarse, d, 1, tr.shape)[2 * R:-2 * R, 2 * R:-2 * R]
+        return np.abs(out - np.kron(block_mean(out, f), np.ones((f, f)))).max()
+
+    dev = {k: detail(d) for k, d in (("keep", keep), ("every", every))}
+    assert dev["keep"] < 0.5 * dev["every"], dev
+
+
+def test_max_detail_follows_the_coarse_source():
+    """NaN: 1 on the tree's coarse terrain, every primitive (inf) on a coarse DEM; recorded as derived."""
+    import json
+
+    import xarray as xr
+
+    from orokit.generators.guerin import TREE_MAX_DETAIL, resolve_max_detail
+
+    assert resolve_max_detail(GuerinParams(max_detail=2.0), coarse_dem=False).max_detail == 2.0
+    exemplar = xr.DataArray(fractal(160, 7), dims=("y", "x"), attrs={"cell_size_m": 50.0})
+    dem = render_terrain(small_tree(), generator="guerin", cell_size_m=50.0, exemplar=exemplar, seed=0,
+                         params={"radius": 8, "factor": 4})
+    assert json.loads(dem.attrs["derived"])["max_detail"] == TREE_MAX_DETAIL == 1.0
+    coarse = dem.copy(data=np.asarray(dem.values))
+    amp = render_terrain(small_tree(), generator="guerin", cell_size_m=50.0, exemplar=exemplar, seed=0,
+                         params={"radius": 8, "factor": 4}, inputs={"coarse": coarse})
+    assert json.loads(amp.attrs["derived"])["max_detail"] == "inf"
+
+
 @pytest.mark.realdata
 @pytest.mark.slow
 def test_8x_amplification_beats_bicubic(real_data):
@@ -131,7 +178,7 @@ def test_8x_amplification_beats_bicubic(real_data):
     ex, truth = z[:, :320], z[:, 328:648]  # disjoint halves
     coarse = block_mean(truth, 8)
     truth = truth[: coarse.shape[0] * 8, : coarse.shape[1] * 8]
-    p = GuerinParams()  # R = 16, factor 8, s = 1, complete dictionary
+    p = GuerinParams()  # R = 8, factor 8, s = 1, complete dictionary, every primitive (max_detail NaN: the paper)
     amp = synthesize(coarse, build_dictionary(ex, p, np.random.default_rng(0)), 1, truth.shape)
     tr, tc = ((np.arange(n) + 0.5) / 8 - 0.5 for n in truth.shape)
     bic = map_coordinates(coarse, np.meshgrid(tr, tc, indexing="ij"), order=3, mode="nearest")
@@ -198,6 +245,7 @@ def test_a_learned_dictionary_passed_in_gives_the_same_raster(kind):
     ({"sparsity": 0}, "sparsity must be"), ({"radius": 4, "factor": 8}, "at least 2 cells"),
     ({"sparsity": 5, "radius": 8, "factor": 8}, "exceeds the coarse patch"), ({"n_atoms": 0}, "n_atoms"),
     ({"dictionary": "pca"}, "not one of"), ({"iterations": -1}, "iterations"), ({"step": "quarter"}, "not one of"),
+    ({"max_detail": -1.0}, "max_detail"),
 ])
 def test_out_of_range_parameters_are_refused(kv, msg):
     with pytest.raises(InputError, match=msg):
