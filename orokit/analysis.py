@@ -188,14 +188,25 @@ def analyze(
         if not np.issubdtype(z.dtype, np.floating):
             z = z.astype(np.float64)
         z = np.ascontiguousarray(z)
-        core = engine.orometry(z, min_prominence_m=min_prominence_m, outside=outside)
+        from orokit.metrics.isolation import KernelMetric, finish_isolation, nearest_higher
+
+        graph = engine.saddle_graph(z)
+        # the engine's peak memory is past: the libraries of the tables and files load in a second
+        # thread while this one finishes the tree and searches the isolation (wall time)
+        libraries = _import_in_thread(_table_libraries)
+        core = engine.finalize_graph(**graph, min_prominence_m=min_prominence_m, outside=outside)
+        del graph
         t_core = time.perf_counter()
         _advance(bar)
         iso = None
         if isolation and core.n_kept:
-            from orokit.metrics.isolation import isolation as _isolation
-
-            iso = _isolation(z, core.peak_row, core.peak_col, transform=transform, crs=crs)
+            metric = KernelMetric.from_grid(transform, crs)
+            rows, cols = core.peak_row.astype(np.int64), core.peak_col.astype(np.int64)
+            best, cand, edge = nearest_higher(z, rows, cols, metric)
+            libraries.join()  # no import in this thread while that one imports
+            iso = finish_isolation(metric, rows, cols, best, cand, z.shape[1], edge)
+            del best, cand, edge
+        libraries.join()
         t_iso = time.perf_counter()
         _advance(bar)
     result = engine.build_result(core, transform=transform, crs=crs, isolation=iso, geometry=geometry)
@@ -333,6 +344,29 @@ def _depressions(dem, transform, crs, *, min_prominence_m, outside, sea_level_m,
     logger.info("%d depressions with depth >= %g m in %.2f s", len(table), min_prominence_m,
                 time.perf_counter() - t0)
     return gpd.GeoDataFrame(table, geometry=gpd.points_from_xy(table["x"], table["y"]), crs=crs)
+
+
+def _table_libraries() -> None:
+    """Import what the tables and their files need: pandas, pyarrow's writers, pyogrio (with shapely, geopandas)."""
+    import pandas  # noqa: F401
+    import pyarrow.csv  # noqa: F401
+    import pyarrow.parquet  # noqa: F401
+    import pyogrio  # noqa: F401
+
+
+def _import_in_thread(target):
+    """Run ``target`` (imports) in a daemon thread; a failure is left to the later import that needs it."""
+    import threading
+
+    def run() -> None:
+        try:
+            target()
+        except Exception:  # noqa: BLE001 - the import in the main thread raises it again, with its context
+            logger.debug("background import failed", exc_info=True)
+
+    thread = threading.Thread(target=run, name="orokit-imports", daemon=True)
+    thread.start()
+    return thread
 
 
 def load_kernels(*, isolation: bool = True) -> None:

@@ -16,7 +16,7 @@ Steps (DESIGN.md §2):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -120,6 +120,14 @@ def orometry(z: np.ndarray, *, min_prominence_m: float, outside: str = "unknown"
 
     Uses every numba thread (``NUMBA_NUM_THREADS``); results do not depend on it.
     """
+    return finalize_graph(**saddle_graph(z), min_prominence_m=min_prominence_m, outside=outside)
+
+
+def saddle_graph(z: np.ndarray) -> dict[str, Any]:
+    """Steps 1-3 of :func:`orometry`: the basins' saddle graph, as keyword arguments of :func:`finalize_graph`.
+
+    The engine's peak memory (a basin label per cell) is reached and freed here.
+    """
     if z.ndim != 2 or z.size == 0:
         raise InputError(f"the DEM must be a non-empty 2-D array; got shape {z.shape}")
     if np.isinf(z).any():
@@ -134,21 +142,19 @@ def orometry(z: np.ndarray, *, min_prominence_m: float, outside: str = "unknown"
         raise InputError("the DEM has no valid cells (all nodata)")
     border_z, nmin, ea, eb, ec = basin_graph(z, label, n_max)
     del label
-    return finalize_graph(
-        node_key=max_cell,
-        node_z=zf[max_cell].astype(np.float64),
-        node_bmax=border_z,
-        node_nmin=nmin,
-        node_ismax=np.ones(n_max, bool),
-        ea=ea,
-        eb=eb,
-        ez=zf[ec].astype(np.float64),
-        ekey=ec,
-        min_prominence_m=min_prominence_m,
-        outside=outside,
-        shape=z.shape,
-        n_maxima=n_max,
-    )
+    return {
+        "node_key": max_cell,
+        "node_z": zf[max_cell].astype(np.float64),
+        "node_bmax": border_z,
+        "node_nmin": nmin,
+        "node_ismax": np.ones(n_max, bool),
+        "ea": ea,
+        "eb": eb,
+        "ez": zf[ec].astype(np.float64),
+        "ekey": ec,
+        "shape": z.shape,
+        "n_maxima": n_max,
+    }
 
 
 def finalize_graph(
