@@ -104,7 +104,7 @@ def _gap(p, lo, hi):
 
 
 @njit(cache=True, nogil=True)
-def _lower_bound(pr, pc, r0, r1, c0, c1, geo, dx, dy, lat0, dlat, dlon):
+def _lower_bound(pr, pc, r0, r1, c0, c1, geo, dx, dy, lat0, row0, dlat, dlon):
     """Lower bound of the distance from cell (pr, pc) to any cell of the block."""
     gr = _gap(pr, r0, r1)
     gc = _gap(pc, c0, c1)
@@ -113,9 +113,9 @@ def _lower_bound(pr, pc, r0, r1, c0, c1, geo, dx, dy, lat0, dlat, dlon):
     # sphere: hav(d) >= hav(dphi) + cos^2(phi_max) hav(dlambda)
     dphi = gr * abs(dlat)
     dlam = gc * abs(dlon)
-    la = abs(lat0 + (pr + 0.5) * dlat)
-    lb = abs(lat0 + (r0 + 0.5) * dlat)
-    lc = abs(lat0 + (r1 + 0.5) * dlat)
+    la = abs(lat0 + (row0 + pr + 0.5) * dlat)
+    lb = abs(lat0 + (row0 + r0 + 0.5) * dlat)
+    lc = abs(lat0 + (row0 + r1 + 0.5) * dlat)
     phimax = max(la, max(lb, lc))
     cm = math.cos(min(phimax, math.pi / 2))
     s = math.sin(dphi / 2) ** 2 + cm * cm * math.sin(dlam / 2) ** 2
@@ -123,18 +123,18 @@ def _lower_bound(pr, pc, r0, r1, c0, c1, geo, dx, dy, lat0, dlat, dlon):
 
 
 @njit(cache=True, nogil=True)
-def _cell_distance(pr, pc, r, c, geo, dx, dy, lat0, dlat, dlon):
+def _cell_distance(pr, pc, r, c, geo, dx, dy, lat0, row0, dlat, dlon):
     if not geo:
         return math.hypot((r - pr) * dy, (c - pc) * dx)
-    p1 = lat0 + (pr + 0.5) * dlat
-    p2 = lat0 + (r + 0.5) * dlat
+    p1 = lat0 + (row0 + pr + 0.5) * dlat
+    p2 = lat0 + (row0 + r + 0.5) * dlat
     dl = (c - pc) * dlon
     s = math.sin((p2 - p1) / 2) ** 2 + math.cos(p1) * math.cos(p2) * math.sin(dl / 2) ** 2
     return 2 * EARTH_RADIUS_M * math.asin(min(1.0, math.sqrt(s)))
 
 
 @njit(cache=True, nogil=True)
-def _nearest(level0, vals, offs, hs, ws, pr, pc, thresh, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, cand,
+def _nearest(level0, vals, offs, hs, ws, pr, pc, thresh, cutoff, geo, dx, dy, lat0, row0, dlat, dlon, slack, cand,
              ncand_max):
     """Best-first search of the nearest cell with value > thresh, up to ``cutoff``.
 
@@ -151,7 +151,7 @@ def _nearest(level0, vals, offs, hs, ws, pr, pc, thresh, cutoff, geo, dx, dy, la
         for c in range(ws[top]):
             size = 1 << top
             lb = _lower_bound(pr, pc, r * size, min((r + 1) * size, H0) - 1, c * size,
-                              min((c + 1) * size, W0) - 1, geo, dx, dy, lat0, dlat, dlon)
+                              min((c + 1) * size, W0) - 1, geo, dx, dy, lat0, row0, dlat, dlon)
             heapq.heappush(heap, (lb, np.int64(top), np.int64(r), np.int64(c)))
     best = np.inf
     n = 0
@@ -176,24 +176,24 @@ def _nearest(level0, vals, offs, hs, ws, pr, pc, thresh, cutoff, geo, dx, dy, la
                 cc = 2 * c + dc
                 if rr < hs[k - 1] and cc < ws[k - 1]:
                     if k - 1 == 0:
-                        lbc = _cell_distance(pr, pc, rr, cc, geo, dx, dy, lat0, dlat, dlon)
+                        lbc = _cell_distance(pr, pc, rr, cc, geo, dx, dy, lat0, row0, dlat, dlon)
                     else:
                         lbc = _lower_bound(pr, pc, rr * size, min((rr + 1) * size, H0) - 1, cc * size,
-                                           min((cc + 1) * size, W0) - 1, geo, dx, dy, lat0, dlat, dlon)
+                                           min((cc + 1) * size, W0) - 1, geo, dx, dy, lat0, row0, dlat, dlon)
                     heapq.heappush(heap, (lbc, np.int64(k - 1), rr, cc))
     # keep only candidates within slack of the best
     m = 0
     for i in range(n):
         rr = cand[i] // W0
         cc = cand[i] % W0
-        if _cell_distance(pr, pc, rr, cc, geo, dx, dy, lat0, dlat, dlon) <= best * (1.0 + slack):
+        if _cell_distance(pr, pc, rr, cc, geo, dx, dy, lat0, row0, dlat, dlon) <= best * (1.0 + slack):
             cand[m] = cand[i]
             m += 1
     return best, m
 
 
 @njit(cache=True, nogil=True)
-def _window_scan(block, pr, pc, thresh, cutoff, geo, dx, dy, lat0, dlat, dlon, radius, buf):
+def _window_scan(block, pr, pc, thresh, cutoff, geo, dx, dy, lat0, row0, dlat, dlon, radius, buf):
     """Exact answer from the cells within ``radius`` cells of (pr, pc), if it is there.
 
     Returns (best, n_candidates); best = inf when the window cannot prove the answer
@@ -227,8 +227,13 @@ def _window_scan(block, pr, pc, thresh, cutoff, geo, dx, dy, lat0, dlat, dlon, r
 
 @njit(cache=True, nogil=True)
 def block_pyramid(block):
-    """(zz, pyramid...) of a block: NaN replaced by -inf, and its block-maximum pyramid."""
-    zz = np.where(np.isnan(block), -np.inf, block)
+    """(zz, pyramid...) of a block: NaN replaced by -inf (in the block's dtype: a float32 block
+    stays float32, half the memory of a float64 copy), and its block-maximum pyramid."""
+    zz = block.copy()
+    flat = zz.reshape(-1)
+    for i in range(flat.size):
+        if np.isnan(flat[i]):
+            flat[i] = -np.inf
     vals, offs, hs, ws = build_pyramid(zz)
     return zz, vals, offs, hs, ws
 
@@ -242,12 +247,14 @@ def nan_pyramid(block):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def nearest_query(zz, vals, offs, hs, ws, prow, pcol, pz, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, ncand):
+def nearest_query(zz, vals, offs, hs, ws, prow, pcol, pz, cutoff, geo, dx, dy, lat0, row0, dlat, dlon, slack, ncand):
     """Nearest cell strictly higher than ``pz`` for every query, on a block's pyramid.
 
     Query cells ``(prow, pcol)`` are relative to the block's first cell and may lie
-    outside it (chunked isolation). ``lat0`` is the latitude (radians) of the block's
-    top edge for geographic grids. Searches stop at ``cutoff`` (per query).
+    outside it (chunked isolation). ``lat0`` is the latitude (radians) of the raster's
+    top edge for geographic grids and ``row0`` the block's first row in the raster (the
+    latitude of a cell is computed from its raster row, so a chunk and the whole raster
+    give bit-identical distances). Searches stop at ``cutoff`` (per query).
     Returns ``best`` (distance, inf if none within the cutoff) and ``cand`` (n x
     ncand flat indices in the block, -1 padded: every cell within ``slack`` of the
     best, for an exact check by the caller). Queries run in parallel threads.
@@ -263,9 +270,9 @@ def nearest_query(zz, vals, offs, hs, ws, prow, pcol, pz, cutoff, geo, dx, dy, l
         inside = prow[i] >= 0 and prow[i] < H and pcol[i] >= 0 and pcol[i] < W
         if inside and not geo:
             # most peaks have higher ground a few cells away: a small window proves it
-            b, m = _window_scan(zz, prow[i], pcol[i], pz[i], cutoff[i], geo, dx, dy, lat0, dlat, dlon, 6, buf)
+            b, m = _window_scan(zz, prow[i], pcol[i], pz[i], cutoff[i], geo, dx, dy, lat0, row0, dlat, dlon, 6, buf)
         if m == 0:
-            b, m = _nearest(zz, vals, offs, hs, ws, prow[i], pcol[i], pz[i], cutoff[i], geo, dx, dy, lat0, dlat,
+            b, m = _nearest(zz, vals, offs, hs, ws, prow[i], pcol[i], pz[i], cutoff[i], geo, dx, dy, lat0, row0, dlat,
                             dlon, slack, buf, ncand)
         best[i] = b
         for j in range(m):
@@ -274,7 +281,7 @@ def nearest_query(zz, vals, offs, hs, ws, prow, pcol, pz, cutoff, geo, dx, dy, l
 
 
 @njit(cache=True, nogil=True)
-def nearest_nan_query(mask, vals, offs, hs, ws, prow, pcol, cutoff, geo, dx, dy, lat0, dlat, dlon):
+def nearest_nan_query(mask, vals, offs, hs, ws, prow, pcol, cutoff, geo, dx, dy, lat0, row0, dlat, dlon):
     """Distance from each query cell to the nearest NaN cell (inf if none), on a NaN pyramid."""
     n = prow.size
     out = np.full(n, np.inf)
@@ -282,24 +289,24 @@ def nearest_nan_query(mask, vals, offs, hs, ws, prow, pcol, cutoff, geo, dx, dy,
         return out
     buf = np.empty(1, np.int64)
     for i in range(n):
-        d, _ = _nearest(mask, vals, offs, hs, ws, prow[i], pcol[i], 0.5, cutoff[i], geo, dx, dy, lat0, dlat, dlon,
+        d, _ = _nearest(mask, vals, offs, hs, ws, prow[i], pcol[i], 0.5, cutoff[i], geo, dx, dy, lat0, row0, dlat, dlon,
                         0.0, buf, 1)
         out[i] = d
     return out
 
 
-def nearest_in_block(block, prow, pcol, pz, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, ncand):
+def nearest_in_block(block, prow, pcol, pz, cutoff, geo, dx, dy, lat0, row0, dlat, dlon, slack, ncand):
     """:func:`nearest_query` on a block (pyramid built here)."""
-    return nearest_query(*block_pyramid(block), prow, pcol, pz, cutoff, geo, dx, dy, lat0, dlat, dlon, slack, ncand)
+    return nearest_query(*block_pyramid(block), prow, pcol, pz, cutoff, geo, dx, dy, lat0, row0, dlat, dlon, slack, ncand)
 
 
-def nearest_nan_in_block(block, prow, pcol, cutoff, geo, dx, dy, lat0, dlat, dlon):
+def nearest_nan_in_block(block, prow, pcol, cutoff, geo, dx, dy, lat0, row0, dlat, dlon):
     """:func:`nearest_nan_query` on a block (pyramid built here)."""
-    return nearest_nan_query(*nan_pyramid(block), prow, pcol, cutoff, geo, dx, dy, lat0, dlat, dlon)
+    return nearest_nan_query(*nan_pyramid(block), prow, pcol, cutoff, geo, dx, dy, lat0, row0, dlat, dlon)
 
 
 @njit(cache=True, nogil=True)
-def outside_distance(prow, pcol, H, W, geo, dx, dy, lat0, dlat, dlon):
+def outside_distance(prow, pcol, H, W, geo, dx, dy, lat0, row0, dlat, dlon):
     """Distance from each cell to the nearest cell outside an H x W raster."""
     n = prow.size
     out = np.empty(n)
@@ -307,9 +314,9 @@ def outside_distance(prow, pcol, H, W, geo, dx, dy, lat0, dlat, dlon):
         pr = prow[i]
         pc = pcol[i]
         out[i] = min(
-            min(_cell_distance(pr, pc, -1, pc, geo, dx, dy, lat0, dlat, dlon),
-                _cell_distance(pr, pc, H, pc, geo, dx, dy, lat0, dlat, dlon)),
-            min(_cell_distance(pr, pc, pr, -1, geo, dx, dy, lat0, dlat, dlon),
-                _cell_distance(pr, pc, pr, W, geo, dx, dy, lat0, dlat, dlon)),
+            min(_cell_distance(pr, pc, -1, pc, geo, dx, dy, lat0, row0, dlat, dlon),
+                _cell_distance(pr, pc, H, pc, geo, dx, dy, lat0, row0, dlat, dlon)),
+            min(_cell_distance(pr, pc, pr, -1, geo, dx, dy, lat0, row0, dlat, dlon),
+                _cell_distance(pr, pc, pr, W, geo, dx, dy, lat0, row0, dlat, dlon)),
         )
     return out

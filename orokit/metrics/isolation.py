@@ -63,9 +63,9 @@ class KernelMetric:
     def ncand(self) -> int:
         return NCAND if self.geo else 8
 
-    def args(self, row0: int = 0) -> tuple[bool, float, float, float, float, float]:
-        """Kernel arguments for a block whose first row is ``row0``."""
-        return (self.geo, self.dx, self.dy, self.lat0 + row0 * self.dlat, self.dlat, self.dlon)
+    def args(self, row0: int = 0) -> tuple[bool, float, float, float, int, float, float]:
+        """Kernel arguments for a block whose first row is ``row0`` (latitudes come from raster rows)."""
+        return (self.geo, self.dx, self.dy, self.lat0, int(row0), self.dlat, self.dlon)
 
 
 def isolation(z: np.ndarray, rows: np.ndarray, cols: np.ndarray, *, transform, crs=None) -> pd.DataFrame:

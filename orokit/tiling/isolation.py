@@ -61,7 +61,7 @@ class _BlockCache:
 
     @staticmethod
     def _size(e: dict) -> int:
-        raw = e["raw"].nbytes if e.get("raw") is not None else 0
+        raw = e["raw"].nbytes if e.get("raw") is not None and e["raw"] is not e["pyr"][0] else 0
         return raw + sum(a.nbytes for part in (e["pyr"], e.get("nan") or ()) for a in part)
 
     def get_many(self, ks, *, nan: bool = False) -> list[dict]:
@@ -75,7 +75,7 @@ class _BlockCache:
             for k, a in zip(missing, arrays):
                 a = np.ascontiguousarray(a)
                 # the raw chunk is kept only for a NaN pyramid, which only chunks with NaN need
-                self.entries[k] = {"shape": a.shape, "pyr": _mk.block_pyramid(a),
+                self.entries[k] = {"shape": a.shape, "pyr": _search_pyramid(a, bool(self.has_nan[k])),
                                    "raw": a if self.has_nan[k] else None}
                 self.largest = max(self.largest, self._size(self.entries[k]) + a.nbytes)
         out = []
@@ -98,6 +98,14 @@ class _BlockCache:
             total -= self._size(self.entries.pop(k))
 
 
+def _search_pyramid(block: np.ndarray, has_nan: bool) -> tuple:
+    """(level 0, pyramid...) for :func:`~orokit.metrics._kernels.nearest_query`: a chunk without NaN
+    is its own level 0 (no copy, in its own dtype, as the in-memory search does)."""
+    if has_nan:
+        return _mk.block_pyramid(block)
+    return (block, *_mk.build_pyramid(block))
+
+
 def chunk_isolation(core: np.ndarray, row0: int, col0: int, shape: tuple[int, int], keys: np.ndarray,
                     metric: KernelMetric) -> dict[str, np.ndarray]:
     """Isolation of candidate peaks (global flat ``keys``) that their own chunk settles.
@@ -115,10 +123,15 @@ def chunk_isolation(core: np.ndarray, row0: int, col0: int, shape: tuple[int, in
     pz = core[rows, cols].astype(np.float64)
     args = metric.args(row0)
     inf = np.full(keys.size, np.inf)
-    best, cand = _mk.nearest_query(*_mk.block_pyramid(core), rows, cols, pz, inf, *args, metric.slack, metric.ncand)
+    has_nan = bool(np.isnan(core).any())
+    best, cand = _mk.nearest_query(*_search_pyramid(core, has_nan), rows, cols, pz, inf, *args, metric.slack,
+                                   metric.ncand)
     exterior = _mk.outside_distance(rows, cols, h, w, *args)
     ok = best * (1.0 + metric.slack) < exterior
-    nan = _mk.nearest_nan_query(*_mk.nan_pyramid(core), rows[ok], cols[ok], best[ok], *args)
+    if has_nan:
+        nan = _mk.nearest_nan_query(*_mk.nan_pyramid(core), rows[ok], cols[ok], best[ok], *args)
+    else:
+        nan = np.full(int(ok.sum()), np.inf)
     c = cand[ok]
     # candidates fill each row from the left: keep only the columns some peak uses (one or two
     # on a projected grid instead of ncand), this travels with the summaries until the end

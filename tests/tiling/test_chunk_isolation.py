@@ -79,3 +79,48 @@ def test_tiled_isolation_with_a_tiny_chunk_cache_and_small_batches_equals_in_mem
         assert got.equals(want)
     assert loads[1].loads > loads[256 * 2**20].loads  # chunks were dropped and read again
     assert len(loads[1].entries) <= 9  # at most the chunks of one step stay
+
+
+@pytest.mark.parametrize("grid", GRIDS)
+def test_float32_chunks_are_searched_in_float32_without_copies(grid):
+    """A float32 raster: the search pyramid of a chunk without NaN is the chunk itself, that of a
+    chunk with NaN a float32 copy (was float64: twice the memory, so the cross-chunk cache held
+    half as many chunks); the chunk and cross-chunk searches give the in-memory table."""
+    import dask.array as da
+
+    from orokit.tiling import isolation as tiso
+
+    transform, crs = GRIDS[grid]
+    rng = np.random.default_rng(11)
+    z = (rng.normal(size=(80, 90)).cumsum(axis=1) + rng.normal(size=(80, 90))).astype(np.float32)
+    z[50:53, 5:40] = np.nan
+    block = np.ascontiguousarray(z[:20, :30])
+    zz, *_ = tiso._search_pyramid(block, False)
+    assert zz is block
+    hole = np.ascontiguousarray(z[40:60, :30])
+    zz, *_ = tiso._search_pyramid(hole, True)
+    assert zz.dtype == np.float32 and np.isneginf(zz[np.isnan(hole)]).all() and np.isnan(hole).any()
+    assert np.array_equal(zz[~np.isnan(hole)], hole[~np.isnan(hole)])
+    H, W = z.shape
+    peaks = np.flatnonzero(np.isfinite(z.ravel()))[::5]
+    rows, cols = peaks // W, peaks % W
+    want = isolation(z, rows, cols, transform=transform, crs=crs)
+    metric = KernelMetric.from_grid(transform, crs)
+    known = [chunk_isolation(np.ascontiguousarray(z[r:r + 20, c:c + 30]), r, c, (H, W),
+                             peaks[(rows >= r) & (rows < r + 20) & (cols >= c) & (cols < c + 30)], metric)
+             for r in range(0, H, 20) for c in range(0, W, 30)]
+    known = {f: np.concatenate([k[f] for k in known]) if f != "cand" else None for f in ("key", "best", "nan", "cand")}
+    width = 64
+    known["cand"] = np.full((known["key"].size, width), -1, np.int64)
+    i = 0
+    for r in range(0, H, 20):
+        for c in range(0, W, 30):
+            sel = peaks[(rows >= r) & (rows < r + 20) & (cols >= c) & (cols < c + 30)]
+            k = chunk_isolation(np.ascontiguousarray(z[r:r + 20, c:c + 30]), r, c, (H, W), sel, metric)
+            known["cand"][i:i + k["key"].size, :k["cand"].shape[1]] = k["cand"]
+            i += k["key"].size
+    assert 0 < known["key"].size < peaks.size  # some settled in their chunk, some searched across chunks
+    got = tiso.tiled_isolation(da.from_array(z, chunks=(20, 30)), rows, cols, z.ravel()[peaks].astype(np.float64),
+                               transform=transform, crs=crs, known=known,
+                               compute=lambda objs: [np.asarray(o.compute(scheduler="sync")) for o in objs])
+    assert got.equals(want)
