@@ -104,7 +104,8 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
                    "vote": rt2.get("predicted"),
                    "disk_drift": disk_drift(dem, result, twin, twin_analysis)}
     # steepness of the trees themselves, before rendering (the real tree vs the twin's)
-    out["ridges"] = {"real": ridge_statistics(tree), "twin": ridge_statistics(ttree)}
+    out["ridges"] = {"real": ridge_statistics(tree), "twin": ridge_statistics(ttree),
+                     "contrast": {"real": ttype.ridge_contrast, "twin": ttree.attrs.get("ridge_contrast")}}
     if figures is not None:
         panels = {"real DEM": dem, "render of its real tree": ren, "free twin": twin}
         _figure(figures / f"{name}.png", name, {k: v for k, v in panels.items() if v is not None})
@@ -225,16 +226,19 @@ def _drift_markdown(results: dict) -> str:
 
 def _ridges_markdown(results: dict) -> str:
     """Per region: the real tree's and the twin tree's steepness (:func:`ridge_statistics`)."""
-    cols = ("neighbour_gradient", "half_ridge_slope", "ridge_slope")
-    lines = ["### trees before rendering, real / twin: median and 90th percentile (m/m) of the elevation gradient "
-             "to the nearest peak, of each ridge half's drop to its saddle, and of the ridge's drops over its length",
+    cols = ("neighbour_gradient", "half_ridge_slope", "ridge_slope", "higher_end_drop_m", "ridge_length_m")
+    lines = ["### trees before rendering, real / twin: median and 90th percentile of the elevation gradient "
+             "to the nearest peak, of each ridge half's drop to its saddle, and of the ridge's drops over its length "
+             "(m/m), of the drop from each ridge's higher end to its saddle and of the ridge length (m)",
              "", "| region | " + " | ".join(f"{c} median | {c} p90" for c in cols) + " |",
              "|---|" + "---:|" * (2 * len(cols))]
     for name, r in results.items():
         rd = r.get("ridges")
         if not rd:
             continue
-        cells = [f"{rd['real'][c][i]:.2f} / {rd['twin'][c][i]:.2f}" for c in cols for i in (0, 1)]
+        digits = {c: 0 if c.endswith("_m") else 2 for c in cols}
+        cells = [f"{rd['real'][c][i]:.{digits[c]}f} / {rd['twin'][c][i]:.{digits[c]}f}" if c in rd["twin"] and c in rd["real"] else "-"
+                 for c in cols for i in (0, 1)]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

@@ -72,7 +72,9 @@ def ridge_statistics(tree: DivideTree, quantiles: tuple[float, ...] = (0.5, 0.9,
     (the smoothness of the peak elevations); ``half_ridge_slope``: ``(h_end - h_saddle) / d``
     from each end of every ridge to its saddle (what the renderer's ridge profiles and
     flank cones follow); ``ridge_slope``: ``(h_a + h_b - 2 h_saddle) / |AB|``, both drops over
-    the ridge's length (the slope at the even split of the ridge).
+    the ridge's length (the slope at the even split of the ridge); ``higher_end_drop_m`` and
+    ``lower_end_drop_m``: each ridge's drop from its higher and its lower end to its saddle (m);
+    ``ridge_length_m``: ``|AB|`` (m).
     """
     from scipy.spatial import cKDTree
 
@@ -92,6 +94,10 @@ def ridge_statistics(tree: DivideTree, quantiles: tuple[float, ...] = (0.5, 0.9,
     length = np.hypot(x[a] - x[b], y[a] - y[b])
     ok = length > 0
     out["ridge_slope"] = (z[a] + z[b] - 2 * sz)[ok] / length[ok]
+    out["higher_end_drop_m"] = np.maximum(z[a], z[b]) - sz
+    out["lower_end_drop_m"] = np.minimum(z[a], z[b]) - sz
+    out["ridge_length_m"] = length
     qs = list(quantiles)
     return {k: [float(v) for v in np.quantile(out[k], qs)] if k in out and out[k].size else [float("nan")] * len(qs)
-            for k in ("neighbour_gradient", "half_ridge_slope", "ridge_slope")}
+            for k in ("neighbour_gradient", "half_ridge_slope", "ridge_slope", "higher_end_drop_m",
+                      "lower_end_drop_m", "ridge_length_m")}

@@ -214,6 +214,11 @@ class TerrainType:
         lands as far from the higher peaks around it as in the source (issue 11: with the C_H
         alone, neighbouring twin peaks were too alike in elevation, or too close to a much higher
         one). Edits of the elevation or isolation-distance histograms drop it.
+    ridge_contrast : :func:`orokit.synthesis.ridges.ridge_contrast` of the source tree: median
+        ``|h_a - h_b|`` over its ridges against the median over the Delaunay edges of its peaks
+        (None: no tree was seen). Synthesis builds its ridges to the same value (issue 11: the
+        paper's MST joined neighbours of similar height, so twin ridges were too gentle). A ratio,
+        so edits keep it.
     """
 
     name: str
@@ -229,6 +234,7 @@ class TerrainType:
     texture: Mapping[str, float] | None = None
     disks: Mapping[str, Any] | None = None
     gradient: FeatureHistogram | None = None
+    ridge_contrast: float | None = None
 
     def __post_init__(self) -> None:
         missing = set(FEATURES) - set(self.histograms)
@@ -260,6 +266,11 @@ class TerrainType:
         if self.gradient is not None and self.gradient.edges[0] < 0:
             raise SchemaError(f"gradient histogram starts below 0 ({self.gradient.edges[0]:g}); the gradient to "
                               "a higher peak is >= 0")
+        if self.ridge_contrast is not None:
+            c = float(self.ridge_contrast)
+            if not (np.isfinite(c) and c >= 0):
+                raise SchemaError(f"ridge_contrast must be a finite number >= 0 or None, got {self.ridge_contrast!r}")
+            object.__setattr__(self, "ridge_contrast", c)
         if self.disks is not None:
             from orokit.synthesis.disks import check_disk_quantiles
 
@@ -380,6 +391,7 @@ class TerrainType:
             gradient = FeatureHistogram.from_values(np.maximum(grad, 0.0), e, open_last=op)
         if rho is None:
             rho = estimate_rho(tree, min_prominence_m) if tree is not None else 1.0
+        contrast = tree_ridge_contrast(tree, min_prominence_m) if tree is not None else None
         prov = {
             "area_km2": float(area_km2),
             "n_peaks": int(len(p)),
@@ -391,7 +403,8 @@ class TerrainType:
         src_crs, center = source_location(crs, 0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max()))
         return cls(name, hists, len(p) / float(area_km2), float(rho), float(min_prominence_m),
                    isolation_basis, prov, bands, source_crs=src_crs, source_center=center,
-                   disks=_disk_record(x, y, z, prom, crs, extent, min_prominence_m), gradient=gradient)
+                   disks=_disk_record(x, y, z, prom, crs, extent, min_prominence_m), gradient=gradient,
+                   ridge_contrast=contrast)
 
     @classmethod
     def from_divide_tree(cls, tree: Any, *, area_km2: float, min_prominence_m: float = 30.0,
@@ -544,6 +557,7 @@ class TerrainType:
             "texture": None if self.texture is None else dict(self.texture),
             "disks": None if self.disks is None else dict(self.disks),
             "gradient": None if self.gradient is None else self.gradient.to_dict(),
+            "ridge_contrast": self.ridge_contrast,
         }
 
     @classmethod
@@ -568,7 +582,8 @@ class TerrainType:
                        texture=data.get("texture"), disks=data.get("disks"),
                        gradient=None if data.get("gradient") is None else FeatureHistogram(
                            tuple(float(e) for e in data["gradient"]["edges"]), tuple(data["gradient"]["counts"]),
-                           bool(data["gradient"].get("open_last", False))))
+                           bool(data["gradient"].get("open_last", False))),
+                       ridge_contrast=data.get("ridge_contrast"))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, SchemaError):
                 raise
@@ -696,6 +711,21 @@ def _disk_record(x: np.ndarray, y: np.ndarray, z: np.ndarray, prom: np.ndarray, 
     if rec is not None:
         rec["border_rank"] = border_rank(px[:k], py[:k], z, box)
     return rec
+
+
+def tree_ridge_contrast(tree: Any, min_prominence_m: float = 30.0) -> float | None:
+    """:func:`orokit.synthesis.ridges.ridge_contrast` of a Divide Tree pruned at ``min_prominence_m``
+    (planar metres; None below 4 peaks or when undefined)."""
+    from orokit.synthesis.orometry import planar_xy
+    from orokit.synthesis.ridges import ridge_contrast
+
+    tree = tree.prune(min_prominence_m) if min_prominence_m > 0 else tree
+    if tree.n_peaks < 4:
+        return None
+    x, y = planar_xy(tree.peaks["x"].to_numpy(float), tree.peaks["y"].to_numpy(float), tree.crs)
+    c = ridge_contrast(x, y, tree.peaks["elevation"].to_numpy(float), tree.edges["peak_a"].to_numpy(np.int64),
+                       tree.edges["peak_b"].to_numpy(np.int64))
+    return c if np.isfinite(c) else None
 
 
 def estimate_rho(tree: Any, min_prominence_m: float = 30.0, choices: tuple[float, ...] = (0.0, 1.0, 2.0)) -> float:

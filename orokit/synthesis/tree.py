@@ -129,6 +129,9 @@ class SynthesisParams:
     follow_gradient : the dart throwing also follows the type's ``gradient`` histogram (elevation
         gradient from a peak to its nearest higher peak, demand feedback as for the isolation
         histograms; off for a type without it). Default True (issue 11, session 7).
+    follow_ridge_contrast : the ridges' MST weight favours steep edges just enough that the tree's
+        :func:`~orokit.synthesis.ridges.ridge_contrast` matches the type's (off for a type without
+        it; with several types, their mean weighted by peak count). Default True (issue 11, session 8).
     Measured for ``follow_gradient`` and the 4 km ``auto_elevation_m`` (``benchmarks/realism.py
     --twin-only``, 13 regions, seeds 0-2, session 7, load 6-9): twins' disks classified as their own
     region at least as often as the real disks under the spatial hold-out in 10, 9, 10 of 12 regions
@@ -153,11 +156,12 @@ class SynthesisParams:
     elevation_tolerance: float = 0.0125
     saddle_slope_ratio: float | None = 1.5
     follow_gradient: bool = True
+    follow_ridge_contrast: bool = True
 
     def __post_init__(self) -> None:
         if self.use_bands not in ("auto", True, False):
             raise InputError(f"use_bands must be 'auto', True or False, got {self.use_bands!r}")
-        for name in ("border_trend", "follow_gradient"):
+        for name in ("border_trend", "follow_gradient", "follow_ridge_contrast"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise InputError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.saddle_placement not in ("targeted", "paper"):
@@ -262,7 +266,8 @@ def synthesize_divide_tree(
        its isolation distance and direction bins (the paper's acceptance with the
        isolation probabilities replaced by a deficit feedback, so the final
        isolation histograms converge to the targets).
-    2. Ridges: Delaunay + MST with weight ``|Pi - Pj| / min(h)^rho``.
+    2. Ridges: Delaunay + MST with weight ``|Pi - Pj| / min(h)^rho``, times a factor favouring
+       steep edges tuned to the type's ridge contrast (``follow_ridge_contrast``).
     3. Saddles start at ``min(h_a, h_b)``; OT rounds (dominance, then prominence)
        lower them; finally every peak keeps prominence >= eps.
     4. Saddle positions realise sampled key-saddle distances / directions (OT).
@@ -322,7 +327,8 @@ def synthesize_divide_tree(
     timings["dart_throwing"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
-    a, b, sx, sy, sz, movable = _ridges(px, py, peaks, fragment, fragment_offset, rng)
+    contrast_target = _contrast_target(types, peaks.ptype) if p.follow_ridge_contrast else None
+    a, b, sx, sy, sz, movable, contrast = _ridges(px, py, peaks, fragment, fragment_offset, rng, contrast_target)
     timings["ridges"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
@@ -363,6 +369,7 @@ def synthesize_divide_tree(
             "saddle_targets": "elevation bands" if band_mode else "marginal",
             "timings_s": {k: round(v, 4) for k, v in timings.items()},
             "isolation": "nearest higher peak of the tree",
+            "ridge_contrast": contrast,
         },
     )
     logger.info("synthesized %d peaks, %d ridges in %.2f s (OT rounds %d)", tree.n_peaks, a.size,
@@ -479,13 +486,27 @@ def _peak_elevations(types: list[TerrainType], free_t: np.ndarray, fixed_xyz: np
     return _PeakSet(z, ptype, fixed, fxy, rho, forced, frag_edges)
 
 
+def _contrast_target(types: list[TerrainType], ptype: np.ndarray) -> float | None:
+    """The types' ridge contrast, weighted by their peak counts (None if any type lacks it)."""
+    if any(t.ridge_contrast is None for t in types):
+        return None
+    n = np.bincount(ptype, minlength=len(types)).astype(float)
+    return float(np.average([float(t.ridge_contrast) for t in types], weights=n)) if n.sum() else None
+
+
 def _ridges(px: np.ndarray, py: np.ndarray, peaks: _PeakSet, fragment: DivideTree | None,
-            offset: tuple[float, float], rng: np.random.Generator):
-    """Delaunay-MST ridges, initial saddles at min(h_a, h_b), the fragment's saddles frozen."""
-    from orokit.synthesis.ridges import delaunay_mst, place_saddles_on_ridges
+            offset: tuple[float, float], rng: np.random.Generator, contrast_target: float | None = None):
+    """Delaunay-MST ridges (fitted to the ridge contrast if given), initial saddles at min(h_a, h_b),
+    the fragment's saddles frozen."""
+    from orokit.synthesis.ridges import delaunay_mst, fit_ridge_contrast, place_saddles_on_ridges
 
     z = peaks.z
-    a, b = delaunay_mst(px, py, z, rho=peaks.rho, forced=peaks.forced)
+    contrast: dict[str, float] | None = None
+    if contrast_target is not None and z.size >= 4:
+        a, b, strength, reached = fit_ridge_contrast(px, py, z, contrast_target, rho=peaks.rho, forced=peaks.forced)
+        contrast = {"target": round(contrast_target, 4), "reached": round(reached, 4), "strength": round(strength, 4)}
+    else:
+        a, b = delaunay_mst(px, py, z, rho=peaks.rho, forced=peaks.forced)
     sx, sy, _ = place_saddles_on_ridges(px, py, a, b, rng=rng)
     sz = np.minimum(z[a], z[b])
     movable = np.ones(a.size, bool)
@@ -499,7 +520,7 @@ def _ridges(px: np.ndarray, py: np.ndarray, peaks: _PeakSet, fragment: DivideTre
                 sx[e_i] = float(fs["x"].iloc[s]) + offset[0]
                 sy[e_i] = float(fs["y"].iloc[s]) + offset[1]
                 sz[e_i] = float(fs["elevation"].iloc[s])
-    return a, b, sx, sy, sz, movable
+    return a, b, sx, sy, sz, movable, contrast
 
 
 def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray, py: np.ndarray, a: np.ndarray,

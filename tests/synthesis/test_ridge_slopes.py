@@ -89,3 +89,7 @@ def test_ridge_statistics_by_hand():
     assert r["half_ridge_slope"] == pytest.approx([0.3, 1.0])
     # ridges: (1000 + 800 - 1200) / 1000, (800 + 900 - 1000) / 2000
     assert r["ridge_slope"] == pytest.approx([0.35, 0.6])
+    # higher ends A (1000 - 600) and C (900 - 500), lower ends B (800 - 600, 800 - 500); lengths 1000, 2000
+    assert r["higher_end_drop_m"] == pytest.approx([400.0, 400.0])
+    assert r["lower_end_drop_m"] == pytest.approx([200.0, 300.0])
+    assert r["ridge_length_m"] == pytest.approx([1000.0, 2000.0])

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import rasterio
 from click.testing import CliRunner
 from pyproj import CRS, Geod, Transformer
@@ -124,3 +125,28 @@ def test_a_crs_without_centre_is_centred_on_its_area_of_use():
     d = make_domain(20_000.0, crs="EPSG:32645")
     lon, lat = Transformer.from_crs(d.crs, "EPSG:4326", always_xy=True).transform(d.x0 + 10_000, d.y0 + 10_000)
     assert 84.0 <= lon <= 90.0 and 0.0 < lat < 84.0  # in UTM 45N's zone, not at its false origin (about 82.5 E, 0 N)
+
+
+def test_render_like_a_manifest_dataset_takes_its_grid(real_data, tmp_path):
+    """`render TREE --like NAME` with a manifest dataset name (as `synthesize --like` takes it):
+    the render lands on that DEM's own extent and cells (issue 11)."""
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+    from orokit.io.dem import read_dem
+    from orokit.topology.divide_tree import DivideTree
+
+    real_data("gobi")  # CI: fail, not skip, when the data is missing
+    from orokit.cli.render import like_dem
+
+    like = like_dem("gobi")
+    t = like.rio.transform()
+    x0, y0 = t.c + 20_000.0, t.f - 30_000.0  # inside the DEM, whose row 0 is north
+    tree = DivideTree.from_arrays([[x0, y0, 1600.0], [x0 + 2000.0, y0, 1550.0]], [[x0 + 1000.0, y0, 1450.0]],
+                                  [[0, 1, 0]], crs=None)
+    write_divide_tree_gpkg(tree, tmp_path / "tree.gpkg")
+    out = tmp_path / "r.tif"
+    r = CliRunner().invoke(cli, ["render", str(tmp_path / "tree.gpkg"), "-o", str(out), "--like", "gobi",
+                                 "--no-erosion", "--seed", "1"])
+    assert r.exit_code == 0, r.output
+    back = read_dem(str(out))
+    assert back.shape == like.shape
+    assert tuple(back.rio.transform())[:6] == tuple(pytest.approx(v) for v in tuple(t)[:6])
