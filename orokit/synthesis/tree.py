@@ -492,10 +492,11 @@ def _peak_elevations(types: list[TerrainType], free_t: np.ndarray, fixed_xyz: np
 
 def _contrast_target(types: list[TerrainType], ptype: np.ndarray) -> float | None:
     """The types' ridge contrast, weighted by their peak counts (None if any type lacks it)."""
-    if any(t.ridge_contrast is None for t in types):
+    values = [t.ridge_contrast for t in types]
+    if any(v is None for v in values):
         return None
     n = np.bincount(ptype, minlength=len(types)).astype(float)
-    return float(np.average([float(t.ridge_contrast) for t in types], weights=n)) if n.sum() else None
+    return float(np.average([float(v) for v in values if v is not None], weights=n)) if n.sum() else None
 
 
 def _ridges(px: np.ndarray, py: np.ndarray, peaks: _PeakSet, fragment: DivideTree | None,
