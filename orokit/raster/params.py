@@ -65,6 +65,10 @@ class RenderParams:
     trench_slope, trench_depth_ratio : the trenches cut through saddles descend from the saddle at
         ``trench_slope`` (m/m) down to ``trench_depth_ratio * min_prominence_m`` below it (0: a level
         groove just below the saddle).
+    flank_relief_ratio, flank_relief_k : the cones also fall at least ``flank_relief_ratio`` x the tree's
+        local relief gradient at the ridge point (the steepest drop to its ``flank_relief_k`` nearest
+        peaks and saddles, :func:`orokit.raster.skeleton.tree_gradient`): gentle crests among deep
+        saddles get steep flanks, plateaus keep gentle ones; 0 = off.
     flank_max_slope : the flank cones fall at most this steeply (m/m) where they are not next to a
         saddle (None: no limit); see :func:`orokit.raster.skeleton.build_skeleton`.
     flank_neighbours : the cone envelope is the highest cone of this many nearest ridge points; far from
@@ -122,6 +126,8 @@ class RenderParams:
     erosion_k_dt: float = 0.02
     erosion_max_nodes: int = 4_000_000
     flank_slope: float = 0.05
+    flank_relief_ratio: float = 0.0
+    flank_relief_k: int = 8
     flank_ratio: float = 1.5
     profiles: str = "linear"
     max_slope_deg: float | None = None

@@ -20,7 +20,7 @@ from orokit.raster.tin import TIN, constrained_tin
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["TerrainSkeleton", "build_skeleton", "separate_saddles", "tree_extent"]
+__all__ = ["TerrainSkeleton", "build_skeleton", "separate_saddles", "tree_extent", "tree_gradient"]
 
 
 @dataclass(frozen=True)
@@ -108,6 +108,27 @@ def separate_saddles(p: np.ndarray, s: np.ndarray, e: np.ndarray, clearance_m: f
     return s
 
 
+def tree_gradient(xy: np.ndarray, z: np.ndarray, nodes: np.ndarray, *, k: int = 8,
+                  min_distance_m: float = 0.0) -> np.ndarray:
+    """Steepest descent from each point ``(xy, z)`` to its ``k`` nearest tree nodes (peaks and
+    saddles, ``nodes`` (n, 3)): ``max_j max(z - z_j, 0) / max(|p - p_j|, min_distance_m)``.
+
+    The local relief gradient of the Divide Tree itself: large among high peaks over low saddles,
+    small on plateaus and dune fields where the nodes have similar heights.
+
+    >>> nodes = np.array([[0.0, 0.0, 0.0], [1000.0, 0.0, 500.0], [0.0, 2000.0, 0.0]])
+    >>> tree_gradient(np.array([[0.0, 1000.0]]), np.array([800.0]), nodes, k=3).tolist()
+    [0.8]
+    """
+    if nodes.shape[0] == 0 or xy.shape[0] == 0:
+        return np.zeros(xy.shape[0])
+    kk = min(int(k), nodes.shape[0])
+    d, j = cKDTree(nodes[:, :2]).query(xy, k=kk, workers=-1)
+    d, j = d.reshape(xy.shape[0], -1), j.reshape(xy.shape[0], -1)
+    drop = np.maximum(z[:, None] - nodes[j, 2], 0.0)
+    return np.max(drop / np.maximum(d, max(float(min_distance_m), 1e-9)), axis=1)
+
+
 def _cone_floor(lines: Polylines, point_origin: np.ndarray, pieces: RidgeSegments, node_z: np.ndarray,
                 depth_ratio: float | None) -> np.ndarray | None:
     """Lowest elevation the flank cone of each densified ridge point may reach:
@@ -173,6 +194,9 @@ def build_skeleton(
                                 ridge_lines.z[fine[:, 0]], ridge_lines.z[fine[:, 1]], fine[:, 0], fine[:, 1])
     rxy, rz, rs, rorig = densify(ridge_lines, lam / 4.0, value="slope", origin=True)
     rs = np.maximum(params.flank_slope, params.flank_ratio * rs)
+    if params.flank_relief_ratio > 0:
+        rs = np.maximum(rs, params.flank_relief_ratio * tree_gradient(rxy, rz, nodes, k=params.flank_relief_k,
+                                                                      min_distance_m=lam))
     if params.flank_max_slope is not None and n < nodes.shape[0]:
         # steep cones dig valley walls that follow them (> 60 deg tails); beside a saddle
         # (within 2 lambda) they stay steep so the saddle stays the highest pass
