@@ -43,6 +43,9 @@ class RenderParams:
     profiles : ``"linear"`` (the paper's interpolation) or ``"learned"`` (concave hillslopes
         and ridges measured on real DEMs, :mod:`orokit.raster.profiles`; on the tuning
         regions it gives slope distances equal or worse, so it is not the default).
+    hillslope_convexity : with ``profiles="linear"``, the samples between ridge and river follow
+        :func:`orokit.raster.profiles.threshold_profile` of this convexity (steeper at the river,
+        rounded at the crest) instead of a straight line; 0 = the paper's line.
     flank_slope, flank_ratio : flanks fall at least ``max(flank_slope, flank_ratio * ridge slope)``
         from every ridge point (keeps saddles the highest passes).
     texture_rms_m, texture_beta, texture_largest_m : short-wavelength texture of the real terrain
@@ -130,6 +133,7 @@ class RenderParams:
     flank_relief_k: int = 8
     flank_ratio: float = 1.5
     profiles: str = "linear"
+    hillslope_convexity: float = 0.0
     max_slope_deg: float | None = None
     surface: str = "tin"
     field_smooth_m: float = 200.0
@@ -163,6 +167,8 @@ class RenderParams:
 
         if self.profiles not in ("learned", "linear"):
             raise InputError(f"profiles must be 'learned' or 'linear', got {self.profiles!r}")
+        if not 0.0 <= float(self.hillslope_convexity) <= 1.0:
+            raise InputError(f"hillslope_convexity must be in [0, 1], got {self.hillslope_convexity!r}")
         if self.max_slope_deg is not None and not 0.0 < float(self.max_slope_deg) < 90.0:
             raise InputError(f"max_slope_deg must be in (0, 90) degrees or None, got {self.max_slope_deg!r}")
         if self.surface not in ("tin", "field"):

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["HILLSLOPE", "RIDGE", "hillslope_profile", "ridge_profile"]
+__all__ = ["HILLSLOPE", "RIDGE", "hillslope_profile", "ridge_profile", "threshold_profile"]
 
 _U = np.concatenate([[0.0], (np.arange(20) + 0.5) / 20.0, [1.0]])
 #: f at u = 0, bin centres 0.025 ... 0.975, 1 (mean of the six regions' medians)
@@ -50,3 +50,18 @@ def ridge_profile(t: NDArray[np.floating]) -> NDArray[np.float64]:
     [1.0, 0.342, 0.0]
     """
     return np.interp(np.clip(t, 0.0, 1.0), _T, RIDGE)
+
+
+def threshold_profile(u: NDArray[np.floating], convexity: float) -> NDArray[np.float64]:
+    """Normalised height ``u + c sin(pi u) / pi`` at ``u`` (0 river, 1 ridge), ``0 <= c <= 1``.
+
+    Gradient ``1 + c cos(pi u)``: ``1 + c`` times the mean at the river (V-shaped valleys), ``1 - c``
+    at the ridge (rounded crests), monotone; ``c = 0`` is the paper's linear profile.
+
+    >>> threshold_profile(np.array([0.0, 0.5, 1.0]), 0.5).round(3).tolist()
+    [0.0, 0.659, 1.0]
+    """
+    if not 0.0 <= convexity <= 1.0:
+        raise ValueError(f"convexity must be in [0, 1], got {convexity!r}")
+    u = np.clip(np.asarray(u, dtype=np.float64), 0.0, 1.0)
+    return u + convexity * np.sin(np.pi * u) / np.pi

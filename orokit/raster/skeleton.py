@@ -13,7 +13,7 @@ from orokit._typing import SeedLike
 from orokit.errors import DivideTreeError
 from orokit.raster.interpolate import flank_envelope, poisson_samples, sample_elevation, valley_width
 from orokit.raster.params import RenderParams
-from orokit.raster.profiles import hillslope_profile, ridge_profile
+from orokit.raster.profiles import hillslope_profile, ridge_profile, threshold_profile
 from orokit.raster.refine import Polylines, densify, refine_segments
 from orokit.raster.rivers import RidgeSegments, RiverNetwork, ridge_segments, river_network
 from orokit.raster.tin import TIN, constrained_tin
@@ -149,6 +149,16 @@ def _cone_floor(lines: Polylines, point_origin: np.ndarray, pieces: RidgeSegment
     return out
 
 
+def _hillslope(params: RenderParams):
+    """The ridge-to-river profile of the samples (None: linear)."""
+    if params.profiles == "learned":
+        return hillslope_profile
+    if params.hillslope_convexity > 0:
+        c = float(params.hillslope_convexity)
+        return lambda u: threshold_profile(u, c)
+    return None
+
+
 def build_skeleton(
     tree, *, extent: tuple[float, float, float, float], params: RenderParams = RenderParams(),
     saddle_clearance_m: float = 0.0, rng: SeedLike = None
@@ -246,7 +256,7 @@ def build_skeleton(
                       slope_exponent=params.valley_slope_exponent, ref_bed_slope=params.valley_slope_ref)
     pts = np.concatenate([samples, ring])
     h, dT, dR = sample_elevation(pts, rxy, rz, vxy, vz, vw, ridge_slope=rs,
-                                 ridge_floor=rfloor, profile=hillslope_profile if learned else None,
+                                 ridge_floor=rfloor, profile=_hillslope(params),
                                  k_neighbours=params.flank_neighbours,
                                  floor_relief_ratio=params.floor_relief_ratio)
     far = (np.minimum(dT, dR) >= 0.5 * lam)

@@ -451,3 +451,35 @@ def test_limit_slope_sweeps_equal_relaxation(seed):
         ref = _limit_slope_brute(z, 30.0, deg)
         np.testing.assert_allclose(limit_slope(z, 30.0, deg), ref, rtol=0, atol=1e-9)
         np.testing.assert_allclose(limit_slope(z.astype(np.float32), 30.0, deg), ref, rtol=0, atol=1e-2)
+
+
+def test_threshold_profile_gradient_and_monotone():
+    """``threshold_profile``: 0 at the river, 1 at the ridge, gradient 1 + c at the river and 1 - c
+    at the crest (finite differences), monotone for c in [0, 1], linear for c = 0; c > 1 refused."""
+    from orokit.raster.profiles import threshold_profile
+
+    u = np.linspace(0.0, 1.0, 2001)
+    for c in (0.0, 0.3, 1.0):
+        f = threshold_profile(u, c)
+        assert f[0] == 0.0 and abs(f[-1] - 1.0) < 1e-12
+        assert (np.diff(f) >= -1e-15).all()
+        g = np.gradient(f, u)
+        assert abs(g[1] - (1 + c)) < 1e-3 and abs(g[-2] - (1 - c)) < 1e-3
+    np.testing.assert_allclose(threshold_profile(u, 0.0), u)
+    with pytest.raises(ValueError, match="convexity"):
+        threshold_profile(u, 1.5)
+
+
+def test_tree_gradient_matches_brute_force():
+    """With k covering every node, the steepest drop to the tree's nodes equals the brute force;
+    with fewer neighbours it is a lower bound."""
+    from orokit.raster.skeleton import tree_gradient
+
+    rng = np.random.default_rng(5)
+    nodes = np.column_stack([rng.uniform(0, 10_000, (40, 2)), rng.uniform(0, 2000, 40)])
+    p = rng.uniform(0, 10_000, (300, 2))
+    z = rng.uniform(0, 2500, 300)
+    d = np.hypot(*(p[:, None, :] - nodes[None, :, :2]).transpose(2, 0, 1))
+    full = np.max(np.maximum(z[:, None] - nodes[None, :, 2], 0.0) / np.maximum(d, 200.0), axis=1)
+    np.testing.assert_allclose(tree_gradient(p, z, nodes, k=40, min_distance_m=200.0), full)
+    assert (tree_gradient(p, z, nodes, k=8, min_distance_m=200.0) <= full + 1e-12).all()
