@@ -87,6 +87,33 @@ def _slope_weight(z: np.ndarray, res: float, smooth_m: float, power: float) -> n
     return (s / np.float32(m)).astype(np.float32) if m > 0 else np.ones(z.shape, np.float32)
 
 
+def _detail_weights(z: np.ndarray, res: float, near: np.ndarray, smooth_m: float, power: float,
+                    flat_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where the sub-lambda detail acts and how strongly, from one gradient of the skeleton raster ``z``.
+
+    ``act``: ``1 - near`` (the fade near peaks and saddles) times 0 where the slope (central
+    differences; the least of the cell's and its 8 neighbours') is below ``flat_deg``, rising linearly
+    to 1 at twice that slope, so lake, fjord and valley floors and their edge cells stay flat (no
+    flat test when ``flat_deg`` is 0). ``weight``: ``act`` times the slope smoothed over ``smooth_m``
+    (Gaussian sigma ``smooth_m / 2``) to ``power``, normalised to an RMS of 1 (1 when ``power`` is 0).
+    """
+    gy, gx = np.gradient(np.asarray(z, np.float32), np.float32(res))
+    s = np.hypot(gx, gy)
+    del gy, gx
+    act = 1.0 - near
+    if flat_deg > 0:
+        t = np.float32(np.tan(np.radians(flat_deg)))
+        act *= np.clip((ndimage.minimum_filter(s, size=3, mode="nearest") - t) / t, 0.0, 1.0)
+    if power == 0:
+        return act, act.copy()
+    w = ndimage.gaussian_filter(s, max(0.5 * smooth_m / res, 0.5), mode="nearest")
+    if power != 1:
+        w **= np.float32(power)
+    m = float(np.sqrt(np.mean(w * w, dtype=np.float64)))
+    w = w * np.float32(1.0 / m) if m > 0 else np.ones(z.shape, np.float32)
+    return act, (w * act).astype(np.float32, copy=False)
+
+
 def _median_relief(z: np.ndarray, res: float, window_m: float = 1000.0) -> float:
     """Median of ``max - min`` over non-overlapping ``window_m`` blocks of ``z`` (whole grid if smaller)."""
     f = max(int(round(window_m / res)), 1)
@@ -230,9 +257,13 @@ def render_elevation(
     dist = ndimage.distance_transform_edt(mask, sampling=grid.cell_size_m).astype(np.float32)
     uplift = falloff(dist / np.float32(params.uplift_radius))
     detail = {}
+    # the detail draws from its own stream: turning it on leaves the texture and noise of the render as they were
+    detail_rng = np.random.default_rng([seed, 1])
     if params.detail_gain > 0:
         # the skeleton's own power law, fitted where the TIN resolves the tree's relief
-        c, beta = power_law_fit(z, grid.cell_size_m, fit_m=params.detail_fit_m)
+        # (none on a grid narrower than the fit band: its few wavenumbers there give no law)
+        c, beta = (power_law_fit(z, grid.cell_size_m, fit_m=params.detail_fit_m)
+                   if min(grid.ny, grid.nx) * grid.cell_size_m >= params.detail_fit_m[1] else (0.0, 3.0))
         detail = {"detail_beta": round(beta, 3), "detail_log10_c": round(float(np.log10(c)), 3) if c > 0 else None}
     if params.smooth_m > 0:
         # round the TIN's planar facets and creases below the meshing scale; peaks and saddles kept
@@ -243,25 +274,27 @@ def render_elevation(
     if params.detail_replace and params.detail_gain > 0 and c > 0:
         # the TIN carries nothing below its meshing distance but facets: its wavelengths below
         # detail_largest_m are replaced by the power law continued there (peaks and saddles kept)
-        keep = falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
-        z += (lowpass(z, grid.cell_size_m, params.detail_largest_m) - z) * (1.0 - keep)
-        weight = _slope_weight(z, grid.cell_size_m, params.detail_largest_m, params.detail_slope_power) * (1.0 - keep)
+        act, weight = _detail_weights(z, grid.cell_size_m,
+                                      falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m))),
+                                      params.detail_largest_m, params.detail_slope_power, params.detail_flat_deg)
+        z += (lowpass(z, grid.cell_size_m, params.detail_largest_m) - z) * act
         d = power_law_noise(z.shape, grid.cell_size_m, c=c * params.detail_gain ** 2, beta=beta,
                             largest_m=params.detail_largest_m, steepen=params.detail_steepen,
                             steepen_below_m=params.detail_fit_m[0], min_beta=params.detail_min_beta, sharp=True,
-                            rng=rng) * weight
+                            rng=detail_rng) * weight
         detail["detail_rms_m"] = round(float(d.std()), 3)
         z += d
-        del keep, weight, d
+        del act, weight, d
     elif params.detail_gain > 0 and c > 0:
         # sub-lambda relief: the power law continued below detail_largest_m, minus what the
         # (smoothed) skeleton has there already, where the skeleton is steep, away from peaks and saddles
-        fade = 1.0 - falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
-        weight = _slope_weight(z, grid.cell_size_m, params.detail_largest_m, params.detail_slope_power) * fade
+        fade, weight = _detail_weights(z, grid.cell_size_m,
+                                       falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m))),
+                                       params.detail_largest_m, params.detail_slope_power, params.detail_flat_deg)
         d = power_law_noise(z.shape, grid.cell_size_m, c=c * params.detail_gain ** 2, beta=beta,
                             largest_m=params.detail_largest_m, minus=z, steepen=params.detail_steepen,
                             steepen_below_m=params.detail_fit_m[0], min_beta=params.detail_min_beta,
-                            rng=rng) * weight
+                            rng=detail_rng) * weight
         detail["detail_rms_m"] = round(float(d.std()), 3)
         z += d
         del fade, weight, d

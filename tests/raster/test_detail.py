@@ -72,7 +72,7 @@ def _render(params, seed=7):
 def test_render_with_detail_keeps_the_tree_orometry_and_is_deterministic(params):
     a, b = _render(params), _render(params)
     np.testing.assert_array_equal(a.values, b.values)
-    plain = _render(RenderParams())
+    plain = _render(RenderParams(detail_gain=0.0))
     assert not np.array_equal(a.values, plain.values)
     res = orokit.analyze(a, min_prominence_m=30.0, isolation=False)
     comp = compare_peaks(small_tree(), res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
@@ -113,3 +113,61 @@ def test_min_beta_bounds_the_continuation_of_a_shallow_spectrum():
     np.testing.assert_allclose(bound[1] / free[1], 1.0, rtol=0.02)
     # at ~100 m the extra k^-3 below 1 km: (1000 / 100)^3 = 1000 x less power (band average: 300-3000)
     assert 300.0 < free[0] / bound[0] < 3000.0
+
+
+def test_detail_weights_are_zero_on_flats_one_on_slopes_and_linear_between():
+    from orokit.raster.render import _detail_weights
+
+    xx = np.mgrid[0:40, 0:40][1] * 30.0
+    near = np.zeros(xx.shape, np.float32)
+    for deg, want in ((1.0, 0.0), (3.0, 0.5), (5.0, 1.0)):
+        act, weight = _detail_weights(np.tan(np.radians(deg)) * xx, 30.0, near, 200.0, 1.0, 2.0)
+        np.testing.assert_allclose(act[5:-5, 5:-5], want, atol=0.01)
+        np.testing.assert_allclose(weight[5:-5, 5:-5], want, atol=0.01)  # a plane: slope weight 1 (RMS 1)
+    act, _ = _detail_weights(np.tan(np.radians(1.0)) * xx, 30.0, near, 200.0, 1.0, 0.0)
+    assert (act == 1.0).all()  # flat_deg 0: the detail acts everywhere
+    near[:, :20] = 1.0  # next to a peak: no detail
+    act, weight = _detail_weights(np.tan(np.radians(5.0)) * xx, 30.0, near, 200.0, 1.0, 2.0)
+    assert (act[:, :20] == 0).all() and (weight[:, :20] == 0).all() and (act[5:-5, 25:-5] > 0.99).all()
+    # a flat floor beside a slope: the floor and its edge cell stay 0, the slope two cells away gets detail
+    z = np.maximum(xx - 600.0, 0.0) * np.tan(np.radians(10.0))
+    act, _ = _detail_weights(z, 30.0, np.zeros(z.shape, np.float32), 200.0, 1.0, 2.0)
+    assert (act[:, :21] == 0).all() and (act[5:-5, 23:-5] == 1.0).all()
+    # the slope weight follows the slope: twice as steep, twice the weight
+    z = np.where(xx < 600.0, 0.1 * xx, 60.0 + 0.2 * (xx - 600.0))
+    _, weight = _detail_weights(z, 30.0, np.zeros(z.shape, np.float32), 200.0, 1.0, 0.0)
+    np.testing.assert_allclose(weight[20, 30] / weight[20, 5], 2.0, rtol=0.02)
+
+
+def test_detail_leaves_the_flats_of_the_skeleton_flat():
+    """With ``detail_flat_deg`` the detail does not touch the cells whose skeleton is flatter than that:
+    a render of the same tree keeps at least as many cells below 2 deg as the render without detail's
+    flats it started from, and more than the detail applied everywhere."""
+    kw = {"detail_gain": 1.0, "noise_ratio": 0.0}
+
+    def flat_share(p):
+        z = _render(p).values
+        gy, gx = np.gradient(z, 50.0)
+        return float((np.degrees(np.arctan(np.hypot(gx, gy))) < 2.0).mean())
+
+    everywhere, kept = flat_share(RenderParams(**kw, detail_flat_deg=0.0)), flat_share(RenderParams(**kw, detail_flat_deg=2.0))
+    assert kept > everywhere
+
+
+@pytest.mark.parametrize("gain", [1.0, 40.0])
+def test_detail_never_makes_a_peak_of_the_tree_prominence(gain):
+    """Metamorphic: however strong the sub-lambda detail (at gain 40 it has ~37 m RMS, more than eps,
+    and makes hundreds of hills), with sub-eps hills kept, the render's peaks of prominence >= eps are
+    exactly the tree's, with the tree's prominences."""
+    p = RenderParams(detail_gain=gain, detail_flat_deg=2.0, keep_hill_ratio=0.5, cut_slope=0.05)
+    z = _render(p, seed=11)
+    res = orokit.analyze(z, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(small_tree(), res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+    np.testing.assert_allclose(comp.peaks["raster_prominence"].to_numpy(), [1500.0, 200.0, 200.0, 150.0, 100.0],
+                               atol=6.0)
+    if gain > 30.0:
+        import json
+
+        assert json.loads(z.attrs["parameters"])["detail_rms_m"] > 30.0
+        assert len(orokit.analyze(z, min_prominence_m=1.0, isolation=False).peaks) > 100
