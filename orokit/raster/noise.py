@@ -15,25 +15,10 @@ def _octave(shape: tuple[int, int], cells_per_node: float, rng: np.random.Genera
     gy = int(np.ceil(ny / cells_per_node)) + 2
     gx = int(np.ceil(nx / cells_per_node)) + 2
     g = rng.uniform(-1.0, 1.0, (gy, gx)).astype(np.float32)
-    # the window ny x nx at (oy, ox) of ``ndimage.zoom(g, cells_per_node, order=1, grid_mode=False)``,
-    # interpolated separably on that window only (the whole zoomed grid is never made)
-    uy, ux = int(round(gy * cells_per_node)), int(round(gx * cells_per_node))
-    oy = int(rng.integers(0, max(uy - ny, 0) + 1))
-    ox = int(rng.integers(0, max(ux - nx, 0) + 1))
-    return _lerp_axis(_lerp_axis(g, gy, uy, oy, min(ny, uy - oy), 0), gx, ux, ox, min(nx, ux - ox), 1)
-
-
-def _lerp_axis(a: np.ndarray, n_in: int, n_out: int, start: int, count: int, axis: int) -> np.ndarray:
-    """Rows (axis 0) or columns (axis 1) ``start .. start + count`` of ``a`` linearly resampled from
-    ``n_in`` to ``n_out`` samples with the end samples aligned (``ndimage.zoom(order=1, grid_mode=False)``)."""
-    pos = np.arange(start, start + count, dtype=np.float64) * ((n_in - 1) / max(n_out - 1, 1))
-    i0 = np.minimum(pos.astype(np.int64), n_in - 2) if n_in > 1 else np.zeros(count, np.int64)
-    w = (pos - i0).astype(np.float32)
-    if axis == 0:
-        lo, hi = a[i0], a[np.minimum(i0 + 1, n_in - 1)]
-        return lo + (hi - lo) * w[:, None]
-    lo, hi = a[:, i0], a[:, np.minimum(i0 + 1, n_in - 1)]
-    return lo + (hi - lo) * w[None, :]
+    up = ndimage.zoom(g, cells_per_node, order=1, prefilter=False, grid_mode=False)
+    oy = int(rng.integers(0, max(up.shape[0] - ny, 0) + 1))
+    ox = int(rng.integers(0, max(up.shape[1] - nx, 0) + 1))
+    return up[oy:oy + ny, ox:ox + nx]
 
 
 def fractal_noise(

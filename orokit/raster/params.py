@@ -158,7 +158,7 @@ class RenderParams:
     texture_slope_power: float = 1.0
     texture_relief_ratio: float = 0.0
     smooth_m: float = 0.0
-    detail_gain: float = 1.0
+    detail_gain: float = 0.0
     detail_fit_m: tuple[float, float] = (1000.0, 5000.0)
     detail_largest_m: float = 200.0
     detail_slope_power: float = 1.0
