@@ -28,11 +28,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from orokit.topology import _kernels as _k
 from orokit.topology.engine import Orometry, finalize_graph
 
-__all__ = ["ChunkSummary", "chunk_summary", "merge_summaries", "finalize_summary"]
+__all__ = ["ChunkSummary", "chunk_summary", "merge_summaries", "finalize_summary", "settled_peaks"]
 
 _FIELDS = ("key", "z", "ismax", "bmax", "nmin", "nexit", "ea", "eb", "ez", "ekey")
 _NO_EDGES = np.empty(0, np.int64)
@@ -243,3 +244,74 @@ def finalize_summary(s: ChunkSummary, *, min_prominence_m: float, outside: str) 
         ea=s.ea, eb=s.eb, ez=s.ez, ekey=s.ekey, min_prominence_m=min_prominence_m, outside=outside,
         shape=s.shape, n_maxima=s.n_maxima,
     )
+
+
+@njit(cache=True, nogil=True)
+def _root(uf, x):
+    while uf[x] != x:
+        uf[x] = uf[uf[x]]  # path halving
+        x = uf[x]
+    return x
+
+
+@njit(cache=True, nogil=True)
+def _side_above_key(n, ea, eb, ekey, side, key_edge):
+    """Per node: a ``side`` node is in its component just before the event (saddle cell) of its
+    key edge. Edges sorted as for :func:`~orokit.topology._kernels.kruskal_sweep`."""
+    uf = np.arange(n)
+    has = side.copy()
+    order = np.argsort(key_edge)
+    out = np.zeros(n, np.bool_)
+    i = 0
+    while i < n and key_edge[order[i]] < 0:
+        i += 1
+    m = ea.size
+    e = 0
+    while e < m:
+        f = e + 1
+        while f < m and ekey[f] == ekey[e]:
+            f += 1
+        while i < n and key_edge[order[i]] < f:  # nodes dying at this event: their component before it
+            p = order[i]
+            out[p] = has[_root(uf, p)]
+            i += 1
+        for g in range(e, f):
+            ra = _root(uf, ea[g])
+            rb = _root(uf, eb[g])
+            if ra != rb:
+                uf[rb] = ra
+                has[ra] = has[ra] or has[rb]
+        e = f
+    return out
+
+
+def settled_peaks(s: ChunkSummary, min_prominence_m: float) -> dict[str, np.ndarray]:
+    """Candidate peaks of a summary that nothing outside its rectangle can change.
+
+    A maximum p whose component above its key saddle (edges before the key edge's saddle
+    cell in the total order) holds no side node of the rectangle is *settled*: a path from p
+    that leaves the rectangle crosses a side cell, so it goes below the key saddle first, and
+    terrain outside can neither raise the key saddle nor change its cell; its prominence and
+    ``prominence_exact`` are final (its parent is not). This is the criterion of the streaming
+    design in docs/scaling.md (not used by the engine yet).
+
+    Returns arrays over the settled maxima: ``node`` (index in ``s``), ``cell``, ``key_saddle_cell``,
+    ``key_saddle_z``, ``prominence``, ``touched`` (the border is reached above the key saddle:
+    prominence not exact when the outside is unknown), and ``kept`` (prominence reaches
+    ``min_prominence_m``: it is a peak of the final result).
+    """
+    n = s.n_nodes
+    fields = ("node", "cell", "key_saddle_cell", "key_saddle_z", "prominence", "touched", "kept")
+    if n == 0 or s.ea.size == 0:
+        return {f: np.empty(0) for f in fields}
+    order = np.lexsort((s.ekey, -s.ez))
+    ea, eb, ez, ekey = s.ea[order], s.eb[order], s.ez[order], s.ekey[order]
+    _, key_edge, _, touched = _k.kruskal_sweep(s.z, s.key, ea, eb, ez, ekey, s.bmax)
+    side = _side_mask(s.key, s.region, s.shape)
+    open_ = _side_above_key(n, ea, eb, ekey, side, key_edge)
+    node = np.flatnonzero(s.ismax & (key_edge >= 0) & ~open_)
+    ke = key_edge[node]
+    prom = s.z[node] - ez[ke]
+    return {"node": node, "cell": s.key[node], "key_saddle_cell": ekey[ke], "key_saddle_z": ez[ke],
+            "prominence": prom, "touched": touched[node],
+            "kept": (prom >= min_prominence_m) & (prom > 0)}
