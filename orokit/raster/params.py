@@ -33,7 +33,9 @@ class RenderParams:
         ``max(0.05, floor_relief_ratio x (ridge - river) / distance)`` instead of a gentle 0.05 ramp
         (:func:`orokit.raster.interpolate.sample_elevation`); 0 = off.
     min_prominence_m : eps of the orometry to keep; noise amplitude is ``noise_ratio * eps``.
-    noise_ratio : noise amplitude as a fraction of eps (< 0.5 so no new peak reaches eps).
+    noise_ratio : amplitude of the paper's multi-fractal value noise as a fraction of eps (< 0.5 so no new
+        peak reaches eps); 0 (off) since session 8: it changed no landform statistic (<= 6 % band power,
+        session 6) and its time pays for the sub-lambda detail (``detail_gain``), which replaces it.
     uplift_radius : R of the compensating uplift and noise mask around peaks and saddles.
     erosion_scales : grid spacings of the erosion passes.
     erosion_steps : erosion + uplift iterations per scale (one number or one per scale; fewer at the
@@ -126,7 +128,7 @@ class RenderParams:
     river_sink_relief_ratio: float | None = None
     floor_relief_ratio: float = 0.0
     min_prominence_m: float = 30.0
-    noise_ratio: float = 0.3
+    noise_ratio: float = 0.0
     uplift_radius: float = 1500.0
     erosion_scales: tuple[float, ...] = (100.0, 50.0, 30.0)
     erosion_steps: int | tuple[int, ...] = (4, 3, 2)
@@ -158,7 +160,7 @@ class RenderParams:
     texture_slope_power: float = 1.0
     texture_relief_ratio: float = 0.0
     smooth_m: float = 0.0
-    detail_gain: float = 0.0
+    detail_gain: float = 1.0
     detail_fit_m: tuple[float, float] = (1000.0, 5000.0)
     detail_largest_m: float = 200.0
     detail_slope_power: float = 1.0

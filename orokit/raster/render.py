@@ -197,8 +197,11 @@ def render_elevation(
     2. Barycentric rasterization of the TIN at cell centres; ridge pieces are burnt in
        (cells raised to the ridge elevation), then peak and saddle cells are set to
        their exact elevation so the raster's highest paths follow the ridges.
-    3. Multi-fractal noise of amplitude ``noise_ratio * eps``, masked by
-       ``1 - g(d / R)`` around peaks and saddles (g = (1 - r^2)^3).
+    3. Sub-lambda detail (``detail_gain``, on): the skeleton's wavelengths below lambda (facets) are
+       replaced by its own power law continued there, weighted by its slope, none on flat floors nor
+       near peaks and saddles; texture (twins); the paper's multi-fractal noise of amplitude
+       ``noise_ratio * eps`` (off by default), masked by ``1 - g(d / R)`` around peaks and saddles
+       (g = (1 - r^2)^3).
     4. Erosion (optional): fastscapelib stream power at 100, 50, 30 m with
        compensating uplift ``U = g(d / R)``.
     5. Peak and saddle cells are reset to their exact elevations; the raster's orometry
