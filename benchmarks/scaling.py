@@ -15,6 +15,7 @@ tables are compared for equality, and so are the threaded and the ``--workers``
 Run:  .venv/bin/python benchmarks/scaling.py [--sizes 6 12 49 98] [--chunks 2048]
           [--chunk-sweep 12 512 1024 2048] [--workdir /tmp/orokit-scaling]
           [--workers 2 --distributed-sizes 24]   # also on a 2-process LocalCluster: tables compared
+          [--settled]   # settled peaks of every merge input: what streaming them would remove
 """
 from __future__ import annotations
 
@@ -160,8 +161,30 @@ def _worker_peak_mb() -> float:
     return _PhaseRss.status_mb("VmHWM")
 
 
+def _settled_hook(merge, eps: float, table: dict):
+    """``merge_summaries`` that first counts the settled peaks of both inputs (tiling.summary.settled_peaks),
+    by the input's size in cells: what streaming settled peaks out of the merges would remove."""
+    import threading
+
+    from orokit.tiling.summary import _side_mask, settled_peaks
+
+    lock = threading.Lock()
+
+    def wrapper(a, b, min_prominence_m):
+        for s in (a, b):
+            got = settled_peaks(s, eps)
+            r0, r1, c0, c1 = s.region
+            row = [1, s.n_nodes, int(s.ismax.sum()), int(_side_mask(s.key, s.region, s.shape).sum()),
+                   int(got["cell"].size)]
+            with lock:
+                t = table.setdefault((r1 - r0) * (c1 - c0), [0] * len(row))
+                table[(r1 - r0) * (c1 - c0)] = [x + y for x, y in zip(t, row)]
+        return merge(a, b, min_prominence_m)
+    return wrapper
+
+
 def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: str | None = None,
-            workers: int = 0) -> dict:
+            workers: int = 0, settled: bool = False) -> dict:
     """One measurement (in a subprocess): analyse, report time, peak RSS (per phase) and task costs.
 
     With ``workers`` > 0 the chunk tasks, merges and isolation reads run on a
@@ -205,11 +228,15 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
         # the engine builds its graph from these module attributes: time every task
         tiling_engine.merge_summaries = timed(tiling_engine.merge_summaries, "merge")
         tiling_engine._tile_task = timed(tiling_engine._tile_task, "chunk")
+    settled_table: dict = {}
+    if settled:  # counted outside the timed merge: merge_s stays the merges' own cost
+        tiling_engine.merge_summaries = _settled_hook(tiling_engine.merge_summaries, eps, settled_table)
     # phases: the chunk pass (chunk tasks + merges), isolation across chunks, tables, writing
     tiling_engine.tiled_orometry = rss.wrap(tiling_engine.tiled_orometry, "chunk pass")
     tiling_isolation.tiled_isolation = rss.wrap(tiling_isolation.tiled_isolation, "isolation")
-    topo_engine.orometry = rss.wrap(topo_engine.orometry, "engine (in memory)")
-    metrics_isolation.isolation = rss.wrap(metrics_isolation.isolation, "isolation")
+    # in memory, analyze runs engine.saddle_graph then finalize_graph, and nearest_higher for isolation
+    topo_engine.saddle_graph = rss.wrap(topo_engine.saddle_graph, "engine (in memory)")
+    metrics_isolation.nearest_higher = rss.wrap(metrics_isolation.nearest_higher, "isolation")
     topo_engine.build_result = rss.wrap(topo_engine.build_result, "tables")
     import logging
 
@@ -263,13 +290,17 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
         "engine_log": keep.lines,
         "workers": workers,
         "worker_rss_mb": worker_mb,
+        # per merge-input size in cells: [inputs, nodes, maxima, side nodes, settled maxima]
+        **({"settled_by_region_cells": {str(k): v for k, v in sorted(settled_table.items())}} if settled else {}),
     }
 
 
 def measure(vrt: Path, chunks: int | None, eps: float, out: Path | None = None, rss_log: Path | None = None,
-            workers: int = 0) -> dict:
+            workers: int = 0, settled: bool = False) -> dict:
     """:func:`run_one` in a fresh subprocess."""
     cmd = [sys.executable, __file__, "--one", str(vrt), "--eps", str(eps), "--workers", str(workers)]
+    if settled:
+        cmd += ["--settled"]
     if rss_log:
         cmd += ["--rss-log", str(rss_log)]
     if chunks:
@@ -307,10 +338,13 @@ def main() -> None:
     ap.add_argument("--distributed-sizes", type=int, nargs="+", metavar="N",
                     help="with --workers: only these mosaics run on the cluster (default: all)")
     ap.add_argument("--rss-log", help="(with --one) append every resident-memory sample here: seconds phase MB")
+    ap.add_argument("--settled", action="store_true",
+                    help="count the settled peaks of every merge input (what streaming them out would remove; "
+                         "adds the count's cost to the run, not to the merge tasks' time)")
     args = ap.parse_args()
     if args.one:
         print(json.dumps(run_one(args.one, args.chunks if "--chunks" in sys.argv else None, args.eps, args.out,
-                                 args.rss_log, args.workers)))
+                                 args.rss_log, args.workers, args.settled)))
         return
 
     import pandas as pd
@@ -329,7 +363,8 @@ def main() -> None:
         for mode, ch in modes:
             out = args.workdir / f"analysis_{n}_{mode}"
             m = measure(vrt, ch, eps, out, rss_log=args.workdir / f"rss_{n}_{mode}.log",
-                        workers=args.workers if mode == "distributed" else 0)
+                        workers=args.workers if mode == "distributed" else 0,
+                        settled=args.settled and mode == "chunked")
             rows[n, mode] = m
             (args.workdir / f"run_{n}_{mode}.json").write_text(json.dumps(m))  # kept if a later size is stopped
             tc = m["task_costs"]
@@ -339,6 +374,12 @@ def main() -> None:
                   f"{m['cells'] / m['seconds'] / 1e6:>6.1f} {m['rss_mb']:>11.0f} {merge} {m['load_average_1min']:>5.1f}"
                   f"  ({m['cpu_s']:.0f} CPU s)")
             print("         peak RSS MB by phase: " + ", ".join(f"{k} {v:.0f}" for k, v in m["rss_mb_by_phase"].items()))
+            if "settled_by_region_cells" in m:
+                print("         merge inputs by size: M cells, inputs, nodes, maxima, side nodes, settled maxima "
+                      "(share of the nodes)")
+                for cells, (k, nodes, mx, side, st) in m["settled_by_region_cells"].items():
+                    print(f"         {int(cells) / 1e6:>9.1f} {k:>5} {nodes:>9} {mx:>9} {side:>8} {st:>9} "
+                          f"({st / max(nodes, 1):.1%})")
             if mode == "distributed":
                 same = _same_tables(args.workdir / f"analysis_{n}_chunked", out)
                 m["tables_identical_to_threaded"] = same
