@@ -263,17 +263,24 @@ def test_flank_envelope_with_more_neighbours_approaches_the_full_envelope():
     np.testing.assert_allclose(flank_envelope(p, q, z, s, k_neighbours=200), full)
 
 
+def _chain_of_ridges(peak_z: tuple[float, float], saddle_z: float):
+    """12 random peaks on a 20 km square joined in a chain by 11 ridges of one saddle height:
+    ``(ridges, nodes)`` for :func:`orokit.raster.rivers.river_network`."""
+    from orokit.raster.rivers import ridge_segments
+
+    rng = np.random.default_rng(3)
+    peaks = np.column_stack([rng.uniform(1000, 19000, (12, 2)), rng.uniform(*peak_z, 12)])
+    saddles = np.column_stack([(peaks[:-1, :2] + peaks[1:, :2]) / 2, np.full(11, saddle_z)])
+    edges = np.column_stack([np.arange(11), np.arange(1, 12), np.arange(11)])
+    return ridge_segments(peaks, saddles, edges), np.concatenate([peaks[:, :2], saddles[:, :2]])
+
+
 def test_river_max_sink_keeps_beds_near_their_bound():
     """Without a limit the downstream sweep pulls beds far below the bound the cap sets; with
     ``max_sink_m`` every bed stays within it, never lower than without, on the same network."""
-    from orokit.raster.rivers import ridge_segments, river_network
+    from orokit.raster.rivers import river_network
 
-    rng = np.random.default_rng(3)
-    peaks = np.column_stack([rng.uniform(1000, 19000, (12, 2)), rng.uniform(800, 1200, 12)])
-    saddles = np.column_stack([(peaks[:-1, :2] + peaks[1:, :2]) / 2, np.full(11, 700.0)])
-    edges = np.column_stack([np.arange(11), np.arange(1, 12), np.arange(11)])
-    ridges = ridge_segments(peaks, saddles, edges)
-    nodes = np.concatenate([peaks[:, :2], saddles[:, :2]])
+    ridges, nodes = _chain_of_ridges((800, 1200), 700.0)
 
     def cap(xy):
         return np.full(xy.shape[0], 650.0)
@@ -321,14 +328,9 @@ def test_river_relief_ratio_deepens_beds_below_steep_ridges_only():
     """``relief_ratio``: the minimum bed slope follows the gradient from the nearest ridge; beds
     are never higher than with the plain slope, 0 gives the same beds, beds still fall downstream,
     and under a flat-topped (gentle) ridge set nothing changes."""
-    from orokit.raster.rivers import ridge_segments, river_network
+    from orokit.raster.rivers import river_network
 
-    rng = np.random.default_rng(3)
-    peaks = np.column_stack([rng.uniform(1000, 19000, (12, 2)), rng.uniform(1800, 2200, 12)])
-    saddles = np.column_stack([(peaks[:-1, :2] + peaks[1:, :2]) / 2, np.full(11, 1500.0)])
-    edges = np.column_stack([np.arange(11), np.arange(1, 12), np.arange(11)])
-    ridges = ridge_segments(peaks, saddles, edges)
-    nodes = np.concatenate([peaks[:, :2], saddles[:, :2]])
+    ridges, nodes = _chain_of_ridges((1800, 2200), 1500.0)
     kw = dict(base_elevation=0.0, margin_m=5.0, slope=0.01)
     ext = (0, 0, 20000, 20000)
     plain = river_network(ridges, nodes, ext, **kw)
@@ -341,7 +343,7 @@ def test_river_relief_ratio_deepens_beds_below_steep_ridges_only():
     has = steep.receiver >= 0
     assert (steep.elevation[steep.receiver[has]] <= steep.elevation[has] + 1e-9).all()
     # level ridges (no gradient down to any bed's bound): nothing changes
-    low = ridge_segments(np.column_stack([peaks[:, :2], np.full(12, 1500.0)]), saddles, edges)
+    low, _ = _chain_of_ridges((1500.0, 1500.0), 1500.0)  # the same positions, level
     a = river_network(low, nodes, ext, **kw)
     b = river_network(low, nodes, ext, relief_ratio=0.5, **kw)
     np.testing.assert_allclose(a.elevation, b.elevation)
@@ -388,20 +390,15 @@ def test_river_sink_relief_ratio_keeps_beds_near_low_ridges():
     """``sink_relief_ratio``: a bed sinks below its bound at most that many times the height of its
     nearest ridge point above the bound; beds are never lower than after the plain sweep, a huge
     ratio changes nothing, and where the ridges are no higher than the bound the beds stay on it."""
-    from orokit.raster.rivers import ridge_segments, river_network
+    from orokit.raster.rivers import river_network
 
-    rng = np.random.default_rng(3)
-    peaks = np.column_stack([rng.uniform(1000, 19000, (12, 2)), rng.uniform(800, 1200, 12)])
-    saddles = np.column_stack([(peaks[:-1, :2] + peaks[1:, :2]) / 2, np.full(11, 700.0)])
-    edges = np.column_stack([np.arange(11), np.arange(1, 12), np.arange(11)])
-    nodes = np.concatenate([peaks[:, :2], saddles[:, :2]])
+    ridges, nodes = _chain_of_ridges((800, 1200), 700.0)
 
     def cap(xy):
         return np.full(xy.shape[0], 650.0)
 
     kw = dict(base_elevation=0.0, margin_m=5.0, slope=0.05, cap=cap)
     ext = (0, 0, 20000, 20000)
-    ridges = ridge_segments(peaks, saddles, edges)
     plain = river_network(ridges, nodes, ext, **kw)
     held = river_network(ridges, nodes, ext, sink_relief_ratio=0.1, **kw)
     loose = river_network(ridges, nodes, ext, sink_relief_ratio=1e6, **kw)
@@ -410,8 +407,7 @@ def test_river_sink_relief_ratio_keeps_beds_near_low_ridges():
     assert (held.elevation > plain.elevation + 1.0).any()
     np.testing.assert_allclose(loose.elevation, plain.elevation)
     # ridges at the cap's height: no relief above any bound, so every inner bed stays at cap - margin
-    level = ridge_segments(np.column_stack([peaks[:, :2], np.full(12, 650.0)]),
-                           np.column_stack([saddles[:, :2], np.full(11, 650.0)]), edges)
+    level, _ = _chain_of_ridges((650.0, 650.0), 650.0)  # the same positions
     flat = river_network(level, nodes, ext, sink_relief_ratio=0.5, **kw)
     inner = ~flat.outlet
     np.testing.assert_allclose(flat.elevation[inner], 645.0)
