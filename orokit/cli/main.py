@@ -14,6 +14,7 @@ import importlib
 import logging
 import sys
 import warnings
+from typing import NoReturn
 
 import click
 
@@ -73,7 +74,20 @@ SHORT_HELP: dict[str, str] = {
 
 
 class LazyGroup(click.Group):
-    """A click group that imports each sub-command only when it is used."""
+    """A click group that imports each sub-command only when it is used.
+
+    Called without arguments (the ``orokit`` console script, ``python -m orokit.cli.main``)
+    it leaves the process without tearing the interpreter down (:func:`_leave`).
+    """
+
+    def __call__(self, *args, **kwargs):  # noqa: D102 - see the class docstring
+        if args or kwargs:  # in-process use (tests, scripts): click's plain call
+            return super().__call__(*args, **kwargs)
+        try:
+            super().__call__()  # standalone: ends with SystemExit
+        except SystemExit as exc:
+            _leave(exc)
+        _leave(SystemExit(0))
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return list(COMMANDS)
@@ -133,6 +147,34 @@ class LazyGroup(click.Group):
             sys.exit(1)
         finally:
             _restore_signals(previous)
+
+
+def _leave(exc: SystemExit) -> NoReturn:
+    """End the process with ``exc``'s status, skipping the interpreter's teardown when that is safe.
+
+    Once numba has loaded a kernel, the teardown (module objects, LLVM) costs ~0.3 CPU s at
+    every exit (measured: 0.25-0.4 s after the last output of ``orokit analyze``). Every file
+    is complete and closed by then. The exit handlers (logging's flush, temporary folders)
+    still run and both streams are flushed; with a non-daemon thread still alive, the
+    normal exit (which waits for it) is taken instead.
+    """
+    import atexit
+    import os
+    import threading
+
+    if any(t.is_alive() and not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
+        raise exc
+    code = exc.code
+    if code is not None and not isinstance(code, int):  # sys.exit("message"): printed, status 1
+        print(code, file=sys.stderr)
+        code = 1
+    atexit._run_exitfuncs()  # what a normal exit runs first (logging.shutdown, tempfile cleanup...)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed or broken pipe: nothing more can be written
+            pass
+    os._exit(code or 0)
 
 
 class _Terminated(KeyboardInterrupt):
