@@ -118,8 +118,9 @@ def as_dataarray(z: np.ndarray, grid: Grid, crs: Any, attrs: dict[str, Any] | No
     return da
 
 
-def exemplar_slope(exemplar: xr.DataArray) -> float:
-    """Mean slope of a real DEM as a gradient (m/m): ``tan`` of its mean slope angle.
+def exemplar_slope(exemplar: xr.DataArray, *, quantile: float | None = None) -> float:
+    """Mean slope of a real DEM as a gradient (m/m): ``tan`` of its mean slope angle (or, with
+    ``quantile`` in [0, 1], of that quantile of its slope angles).
 
     Central differences with the grid's metric cell sizes (per row on lon/lat grids), NaN
     cells left out; the same slope as :func:`orokit.validate.landform.landform_statistics`.
@@ -139,7 +140,8 @@ def exemplar_slope(exemplar: xr.DataArray) -> float:
     g = g[np.isfinite(g)]
     if g.size == 0:
         raise InputError("the exemplar DEM has no valid slope (all nodata?); pass a DEM with valid cells")
-    return float(np.tan(np.mean(np.arctan(g))))
+    a = np.arctan(g)
+    return float(np.tan(np.mean(a) if quantile is None else np.quantile(a, quantile)))
 
 
 # ----------------------------------------------------------------------------- parameters

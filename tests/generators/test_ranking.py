@@ -84,6 +84,28 @@ def test_landform_targets_met_are_counted_per_region():
     assert "| a | Ne1 No1 S0 |" in md
 
 
+def test_landform_status_tells_met_fixable_and_method_bound(monkeypatch):
+    def run(seed, region, slope, flat):
+        r = _run("michel", seed, region=region)
+        r["backend"] = "michel"
+        r["landform"] = {"slope_deg": slope, "flat_share": flat}
+        r["landform_target"] = {"slope_deg": 4.0, "flat_share": 0.06}
+        return r
+
+    from orokit.reports import generators as rep
+
+    monkeypatch.setattr(rep, "METHOD_BOUND", {"michel": {"flat_share@sahara": "the plain is flat by design"}})
+    runs = [run(0, "norway", 3.0, 0.01), run(1, "norway", 5.0, 0.02), run(0, "sahara", 1.0, 0.2),
+            run(1, "sahara", 2.0, 0.3)]
+    table = rep.landform_status(runs, "michel")
+    assert table.loc["slope_deg", "sahara"] == "met 2/2"
+    assert table.loc["slope_deg", "norway"] == "fixable 1/2 (4 vs 4)"  # mean distance 4.0, one run over
+    assert table.loc["flat_share", "norway"] == "met 2/2"
+    assert table.loc["flat_share", "sahara"] == "method 0/2 (0.25 vs 0.06)"
+    md = rep.ranking_markdown(runs)
+    assert "### michel" in md and "- `flat_share@sahara` (method): the plain is flat by design" in md
+
+
 @pytest.fixture()
 def setup(tmp_path):
     """A tree file and a 'real' DEM of its domain (a smooth bump) at 100 m."""

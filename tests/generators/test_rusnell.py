@@ -190,7 +190,8 @@ def test_sea_level_puts_the_plain_at_the_exemplar_floor_or_s_reliefs_down():
     x, y = grid.centres()
     ex = as_dataarray(200 + 600 * np.exp(-((x[None, :] - 3000) ** 2 + (y[:, None] - 3000) ** 2) / 4e6), grid, None)
     floor = float(np.quantile(ex.values, 0.01))
-    auto = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=0, params={"profile": "none"})
+    auto = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=0,
+                          params={"profile": "none", "sea_level": "exemplar"})
     preset = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=0,
                             params={"profile": "none", "sea_level": "preset"})
     top = float(tree.peaks["elevation"].max())
@@ -200,6 +201,85 @@ def test_sea_level_puts_the_plain_at_the_exemplar_floor_or_s_reliefs_down():
     assert float(auto.values.max()) == pytest.approx(top, abs=1e-3)
     with pytest.raises(InputError, match="sea_level"):
         R.RusnellParams(sea_level="lake")
+    with pytest.raises(InputError, match="cap_quantile"):
+        R.RusnellParams(cap_quantile=1.5)
+
+
+def _octile_m(i, j, ri, rj, cell):
+    di, dj = np.abs(i[:, None] - ri[None, :]), np.abs(j[:, None] - rj[None, :])
+    return cell * (np.maximum(di, dj) + (math.sqrt(2.0) - 1.0) * np.minimum(di, dj))
+
+
+def test_river_plain_is_the_bed_plus_slope_times_the_grid_distance():
+    """`river_plain` = min over river cells (bed + slope x 8-connected distance), against brute force."""
+    from orokit.raster.rasterize import Grid
+    from orokit.raster.rivers import RiverNetwork
+
+    grid = Grid(x0=0.0, y0=3000.0, cell_size_m=100.0, ny=30, nx=25)
+    riv = RiverNetwork(xy=np.array([[50.0, 150.0], [1250.0, 1450.0], [2350.0, 2850.0]]),
+                       elevation=np.array([100.0, 160.0, 400.0]), receiver=np.array([-1, 0, 1]),
+                       length=np.array([0.0, 1767.8, 1802.8]), order=np.array([0, 1, 2]),
+                       outlet=np.array([True, False, False]))
+    got = R.river_plain(riv, grid, slope=0.3)
+    from orokit.generators.belhadj import _densify
+
+    e = riv.edges()
+    xy, h = _densify(riv.xy[e[:, 0]], riv.xy[e[:, 1]], riv.elevation[e[:, 0]], riv.elevation[e[:, 1]], 50.0)
+    row, col, _ = grid.cell_of(xy)
+    bed = {}
+    for r, c, z in zip(row, col, h):
+        bed[(r, c)] = min(bed.get((r, c), np.inf), z)
+    ri, rj = np.array([k[0] for k in bed]), np.array([k[1] for k in bed])
+    rz = np.array(list(bed.values()))
+    i, j = np.divmod(np.arange(grid.ny * grid.nx), grid.nx)
+    want = (rz[None, :] + 0.3 * _octile_m(i, j, ri, rj, 100.0)).min(axis=1).reshape(grid.ny, grid.nx)
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+    cap = R.generator_cap(np.array([3, 20]), np.array([4, 10]), np.array([0.0, 300.0]), 1000.0, grid, slope=0.5)
+    wantc = (np.array([1000.0, 700.0])[None, :] - 0.5 * _octile_m(i, j, np.array([3, 20]), np.array([4, 10]),
+                                                                  100.0)).max(axis=1).reshape(grid.ny, grid.nx)
+    np.testing.assert_allclose(cap, wantc, rtol=1e-9)
+
+
+def test_sea_level_rivers_lifts_the_plain_and_keeps_the_generators():
+    """`sea_level=rivers` (the default with an exemplar and rivers): the plain rises from the rivers,
+    nothing is lowered, the generator cells keep their elevation, and fewer cells are flat."""
+    from orokit.generators.base import as_dataarray
+
+    tree = small_tree()
+    grid = make_grid((0.0, 0.0, 16000.0, 16000.0), 100.0)
+    x, y = grid.centres()
+    hills = 150 * np.sin(x[None, :] / 400.0) * np.sin(y[:, None] / 400.0)  # slopes of ~15 deg
+    ex = as_dataarray(500 + 600 * np.exp(-((x[None, :] - 3000) ** 2 + (y[:, None] - 3000) ** 2) / 4e6) + hills,
+                      grid, None)
+    flat = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=0, params={"sea_level": "exemplar"})
+    auto = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=0)
+    rivers = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=0, params={"sea_level": "rivers"})
+    assert auto.values.tobytes() == rivers.values.tobytes()
+    a, b = flat.values.astype(float), rivers.values.astype(float)
+    assert (b >= a - 1e-3).all() and (b[80:, :80] > a[80:, :80] + 1.0).mean() > 0.3
+    for fi, fj, fz in R.features(tree, grid):
+        np.testing.assert_allclose(b[fi, fj], a[fi, fj], atol=1e-3)
+    assert b.max() == pytest.approx(a.max(), abs=1e-3)
+    # the saddle cap: a peak above its 8 neighbours on the flat plain stays so (the plain buries none)
+    row, col, _ = grid.cell_of(tree.peaks[["x", "y"]].to_numpy())
+    n_top = 0
+    for r, c in zip(row, col):
+        if a[r, c] >= a[r - 1:r + 2, c - 1:c + 2].max() - 1e-3:
+            n_top += 1
+            assert b[r, c] >= b[r - 1:r + 2, c - 1:c + 2].max() - 1e-3
+    assert n_top >= 3
+    lifted = render_terrain(tree, generator="rusnell", grid=grid, exemplar=ex, seed=0,
+                            params={"sea_level": "rivers", "saddle_cap": False})
+    assert (lifted.values >= b - 1e-3).all()  # the cap only lowers the plain
+
+    def flat_share(z):
+        gy, gx = np.gradient(z, 100.0)
+        return float((np.degrees(np.arctan(np.hypot(gx, gy))) < 2.0).mean())
+
+    inside = np.s_[80:, :80]  # the tree's 8 x 8 km (rows from the north)
+    assert flat_share(b[inside]) < 0.5 * flat_share(a[inside])
+    with pytest.raises(InputError, match="exemplar"):
+        render_terrain(tree, generator="rusnell", grid=grid, seed=0, params={"sea_level": "rivers", "profile": "none"})
 
 
 def test_water_halts_the_search():
