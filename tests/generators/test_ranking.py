@@ -94,16 +94,21 @@ def test_landform_status_tells_met_fixable_and_method_bound(monkeypatch):
 
     from orokit.reports import generators as rep
 
-    monkeypatch.setattr(rep, "METHOD_BOUND", {"michel": {"flat_share@sahara": "the plain is flat by design"}})
+    monkeypatch.setattr(rep, "METHOD_BOUND", {"michel": {"flat_share@sahara": "the plain is flat by design"},
+                                              "*": {"slope_deg@norway": "target: too tight"}})
     runs = [run(0, "norway", 3.0, 0.01), run(1, "norway", 5.0, 0.02), run(0, "sahara", 1.0, 0.2),
             run(1, "sahara", 2.0, 0.3)]
     table = rep.landform_status(runs, "michel")
     assert table.loc["slope_deg", "sahara"] == "met 2/2"
-    assert table.loc["slope_deg", "norway"] == "fixable 1/2 (4 vs 4)"  # mean distance 4.0, one run over
+    assert table.loc["slope_deg", "norway"] == "target 1/2 (4 vs 4)"  # mean distance 4.0, one run over
     assert table.loc["flat_share", "norway"] == "met 2/2"
     assert table.loc["flat_share", "sahara"] == "method 0/2 (0.25 vs 0.06)"
     md = rep.ranking_markdown(runs)
-    assert "### michel" in md and "- `flat_share@sahara` (method): the plain is flat by design" in md
+    assert "### michel" in md and "- `flat_share`: the plain is flat by design" in md and "- `slope_deg`: too tight" in md
+    runs[2]["landform"]["flat_share"] = 0.01  # the other region: not listed, so fixable
+    runs[0]["landform"]["flat_share"] = 0.5
+    table = rep.landform_status(runs, "michel")
+    assert table.loc["flat_share", "norway"] == "fixable 1/2 (0.26 vs 0.06)"
 
 
 @pytest.fixture()
