@@ -87,6 +87,12 @@ def _is_virtual(path: str) -> bool:
 @contextlib.contextmanager
 def _open(path: str, *, what: str = "") -> Iterator[rasterio.io.DatasetReader]:
     """Open ``path`` with rasterio, mapping GDAL failures to :class:`InputError`."""
+    with _open_dataset(path, what=what) as src:
+        yield src
+
+
+def _open_dataset(path: str, *, what: str = "") -> rasterio.io.DatasetReader:
+    """``rasterio.open(path)``, mapping GDAL failures to :class:`InputError`; the caller closes it."""
     try:
         with _OPEN_LOCK, warnings.catch_warnings():
             warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
@@ -103,8 +109,44 @@ def _open(path: str, *, what: str = "") -> Iterator[rasterio.io.DatasetReader]:
             f"cannot read raster {path}{what}: {str(exc).rstrip('.')}. Check that the file is complete and in a format GDAL "
             "reads (GeoTIFF/COG, SRTM .hgt, ESRI ASCII .asc, VRT, PNG)."
         ) from exc
-    with src:
-        yield src
+    return src
+
+
+class _WindowHandles(threading.local):
+    """Per thread: the dataset a windowed read opened last, kept open for the next window.
+
+    Opening parses the whole file header; for a VRT mosaic that is every source (0.04 s at
+    49 x 49 tiles, 0.1 s at 98 x 98), and a chunk read with its halo takes nine windows, so
+    reopening cost more than the reading. The handle is reused only while the file's
+    size, time and inode are unchanged; one per thread (GDAL handles are not thread-safe).
+    """
+
+    def __init__(self) -> None:
+        self.path: str | None = None
+        self.stamp: tuple[int, int, int] | None = None
+        self.src: rasterio.io.DatasetReader | None = None
+
+    def get(self, path: str, what: str) -> rasterio.io.DatasetReader:
+        try:
+            st = os.stat(path)
+            stamp: tuple[int, int, int] | None = (st.st_size, st.st_mtime_ns, st.st_ino)
+        except OSError:  # /vsi paths, URLs: no reuse
+            stamp = None
+        if self.src is not None and stamp is not None and self.path == path and self.stamp == stamp:
+            return self.src
+        self.close()
+        src = _open_dataset(path, what=what)
+        if stamp is not None:  # kept open for the next window
+            self.path, self.stamp, self.src = path, stamp, src
+        return src
+
+    def close(self) -> None:
+        if self.src is not None:
+            self.src.close()
+        self.path = self.stamp = self.src = None
+
+
+_WINDOW_HANDLES = _WindowHandles()
 
 
 @dataclass(frozen=True)
@@ -207,14 +249,23 @@ class _BandReader:
         if window is None and out_shape is None:
             return self._read_all()
         where = "" if window is None else f" (rows {window.row_off}:{window.row_off + window.height}, cols {window.col_off}:{window.col_off + window.width})"
-        with _open(self.path, what=where) as src:
-            try:
-                if out_shape is not None:
+        if out_shape is not None:
+            with _open(self.path, what=where) as src:
+                try:
                     raw = src.read(self.band, out_shape=out_shape, resampling=Resampling.nearest)
-                else:
-                    raw = src.read(self.band, window=window)
-            except rasterio.errors.RasterioError as exc:
-                raise self._read_error(exc, where) from exc
+                except rasterio.errors.RasterioError as exc:
+                    raise self._read_error(exc, where) from exc
+            return self._convert(raw, where)
+        # a window (a dask chunk): the thread's handle of this file stays open for the next one
+        src = _WINDOW_HANDLES.get(self.path, where)
+        try:
+            raw = src.read(self.band, window=window)
+        except rasterio.errors.RasterioError as exc:
+            _WINDOW_HANDLES.close()
+            raise self._read_error(exc, where) from exc
+        finally:
+            if _WINDOW_HANDLES.src is not src:
+                src.close()
         return self._convert(raw, where)
 
     def _read_error(self, exc: Exception, where: str) -> InputError:

@@ -292,6 +292,54 @@ def test_chunked_reads_only_windows(tmp_path, monkeypatch):
     assert block[3, 4] == 64 and len(calls) == 1 and calls[0][0].width == 10
 
 
+def test_chunked_windows_reuse_one_handle_and_see_a_rewritten_file(tmp_path, monkeypatch):
+    """Windows of one file open it once per thread (a VRT mosaic's header is parsed at every
+    open); a file replaced at the same path (new inode) or rewritten in place is read anew."""
+    import os
+    import threading
+
+    from orokit.io import dem as dem_mod
+
+    opened = []
+    orig = dem_mod._open_dataset
+
+    def spy(path, *, what=""):
+        opened.append(path)
+        return orig(path, what=what)
+
+    monkeypatch.setattr(dem_mod, "_open_dataset", spy)
+    dem_mod._WINDOW_HANDLES.close()
+    a = np.arange(900, dtype=np.float32).reshape(30, 30)
+    p = write_tif(tmp_path / "h.tif", a)
+    lazy = read_dem(p, chunks=7)
+    opened.clear()
+    np.testing.assert_array_equal(lazy.data.compute(scheduler="sync"), a)
+    assert len(opened) == 1  # 25 windows, one open
+    # replaced (atomic rename: new inode)
+    tmp = write_tif(tmp_path / "h2.tif", a + 1)
+    os.replace(tmp, p)
+    np.testing.assert_array_equal(read_dem(p, chunks=7).data.compute(scheduler="sync"), a + 1)
+    # rewritten in place at a later time
+    write_tif(p, a + 2)
+    st = os.stat(p)
+    os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    np.testing.assert_array_equal(read_dem(p, chunks=7).data.compute(scheduler="sync"), a + 2)
+    # threads: each reads with its own handle, same pixels
+    out = {}
+
+    def work(k):
+        out[k] = read_dem(p, chunks=5).data.compute(scheduler="sync")
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for k in range(3):
+        np.testing.assert_array_equal(out[k], a + 2)
+    dem_mod._WINDOW_HANDLES.close()
+
+
 # --------------------------------------------------------------------------- errors
 def test_missing_empty_corrupt_files(tmp_path):
     with pytest.raises(InputError, match="not found"):
