@@ -170,7 +170,7 @@ def _settled_hook(merge, eps: float, table: dict):
 
     lock = threading.Lock()
 
-    def wrapper(a, b, min_prominence_m):
+    def wrapper(a, b, min_prominence_m, **kw):
         for s in (a, b):
             got = settled_peaks(s, eps)
             r0, r1, c0, c1 = s.region
@@ -179,7 +179,7 @@ def _settled_hook(merge, eps: float, table: dict):
             with lock:
                 t = table.setdefault((r1 - r0) * (c1 - c0), [0] * len(row))
                 table[(r1 - r0) * (c1 - c0)] = [x + y for x, y in zip(t, row)]
-        return merge(a, b, min_prominence_m)
+        return merge(a, b, min_prominence_m, **kw)
     return wrapper
 
 
@@ -233,6 +233,8 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
         tiling_engine.merge_summaries = _settled_hook(tiling_engine.merge_summaries, eps, settled_table)
     # phases: the chunk pass (chunk tasks + merges), isolation across chunks, tables, writing
     tiling_engine.tiled_orometry = rss.wrap(tiling_engine.tiled_orometry, "chunk pass")
+    # inside the chunk pass, after the last merge: the root summary to peaks and Divide Tree
+    tiling_engine.finalize_summary = rss.wrap(tiling_engine.finalize_summary, "finalize")
     tiling_isolation.tiled_isolation = rss.wrap(tiling_isolation.tiled_isolation, "isolation")
     # in memory, analyze runs engine.saddle_graph then finalize_graph, and nearest_higher for isolation
     topo_engine.saddle_graph = rss.wrap(topo_engine.saddle_graph, "engine (in memory)")

@@ -177,7 +177,8 @@ def analyze(
                 if isolation and core.n_kept:
                     iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform,
                                           crs=crs, compute=get_compute(scheduler),
-                                          chunk_stats=tiled_core.chunk_stats, known=tiled_core.chunk_isolation)
+                                          chunk_stats=tiled_core.chunk_stats, known=tiled_core.chunk_isolation,
+                                          release_known=True)
                 del tiled_core  # the settled isolation (~90 bytes per candidate peak) is in iso now
                 t_iso = time.perf_counter()
         finally:

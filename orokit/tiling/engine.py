@@ -144,7 +144,8 @@ def _tile_task(window: _Window, ij: tuple[int, int], row0: int, col0: int, shape
 
 
 def _merge_iso(parts: list, keep: np.ndarray | None = None) -> dict | None:
-    """Settled isolation of several parts in one, only for the peaks in ``keep`` (global cells)."""
+    """Settled isolation of several parts in one, only for the peaks in ``keep`` (global cells).
+    The parts' dicts are emptied (their owner, a merge, passes them on)."""
     parts = [p for p in parts if p is not None]
     if not parts:
         return None
@@ -152,6 +153,8 @@ def _merge_iso(parts: list, keep: np.ndarray | None = None) -> dict | None:
     out = {f: np.concatenate([p[f] for p in parts]) for f in ("key", "best", "nan")}
     out["cand"] = np.concatenate([np.pad(p["cand"], ((0, 0), (0, width - p["cand"].shape[1])), constant_values=-1)
                                   for p in parts])
+    for p in parts:
+        p.clear()
     if keep is not None:
         sel = np.isin(out["key"], keep)
         out = {f: v[sel] for f, v in out.items()}
@@ -159,8 +162,12 @@ def _merge_iso(parts: list, keep: np.ndarray | None = None) -> dict | None:
 
 
 def _merge_task(a: _Part, b: _Part, min_prominence_m: float) -> _Part:
-    """Merged summary of two parts; settled isolation kept only for peaks still in it."""
-    s = merge_summaries(a[0], b[0], min_prominence_m)
+    """Merged summary of two parts; settled isolation kept only for peaks still in it.
+
+    The inputs are consumed (their arrays freed once merged): the scheduler holds them
+    until this task ends, and each part has this merge as its only consumer.
+    """
+    s = merge_summaries(a[0], b[0], min_prominence_m, consume=True)
     iso = _merge_iso([a[1], b[1]], keep=s.key[s.ismax])
     release_free_heap()
     return s, iso, {**a[2], **b[2]}

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 import orokit
 from orokit.analysis import write_analysis
+from orokit.errors import TilingError
 from orokit.tiling.summary import chunk_summary, finalize_summary, merge_summaries
 from orokit.topology.engine import orometry
 
@@ -46,9 +47,10 @@ def grids(draw):
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(grids(), st.sampled_from([0.0, 0.0, 1.0, 2.0]), st.sampled_from(["unknown", "sea"]))
-def test_chunk_summaries_merge_exactly(case, eps, outside):
-    """Summaries over any chunking (1-row chunks, chunks cutting plateaus) merge to the exact result."""
+@given(grids(), st.sampled_from([0.0, 0.0, 1.0, 2.0]), st.sampled_from(["unknown", "sea"]), st.booleans())
+def test_chunk_summaries_merge_exactly(case, eps, outside, consume):
+    """Summaries over any chunking (1-row chunks, chunks cutting plateaus) merge to the exact result,
+    also when each merge frees its inputs (``consume``, as the engine's merge tasks do)."""
     z, ch, cw = case
     assume(not np.isnan(z).all())
     H, W = z.shape
@@ -63,11 +65,15 @@ def test_chunk_summaries_merge_exactly(case, eps, outside):
     for i in range(len(rb) - 1):
         s = tiles[i, 0]
         for j in range(1, len(cb) - 1):
-            s = merge_summaries(s, tiles[i, j], eps)
+            s = merge_summaries(s, tiles[i, j], eps, consume=consume)
         rows.append(s)
     s = rows[0]
     for r in rows[1:]:
-        s = merge_summaries(s, r, eps)
+        s = merge_summaries(s, r, eps, consume=consume)
+    if consume and len(rows) > 1:
+        assert rows[0].consumed and rows[0].n_nodes == 0 and rows[-1].ea.size == 0
+        with pytest.raises(TilingError, match="already merged"):
+            merge_summaries(rows[0], s, eps)
     a = orometry(z, min_prominence_m=eps, outside=outside)
     b = finalize_summary(s, min_prominence_m=eps, outside=outside)
     for f in FIELDS:
