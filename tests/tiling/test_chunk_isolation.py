@@ -124,3 +124,40 @@ def test_float32_chunks_are_searched_in_float32_without_copies(grid):
                                transform=transform, crs=crs, known=known,
                                compute=lambda objs: [np.asarray(o.compute(scheduler="sync")) for o in objs])
     assert got.equals(want)
+
+
+@pytest.mark.parametrize("grid", GRIDS)
+def test_tiled_isolation_with_settled_peaks_finished_in_small_blocks_equals_in_memory(grid, monkeypatch):
+    """Peaks settled in their chunks (``known``, released once read) and the others searched across
+    chunks, the nearest candidate chosen in blocks of 7 peaks: the in-memory table."""
+    import dask.array as da
+
+    from orokit.tiling import isolation as tiso
+    from orokit.tiling.engine import _merge_iso
+
+    transform, crs = GRIDS[grid]
+    rng = np.random.default_rng(8)
+    z = np.round(rng.normal(size=(70, 80)).cumsum(axis=1) + 2 * rng.normal(size=(70, 80)), 1)
+    z[30:33, 50:70] = np.nan
+    H, W = z.shape
+    peaks = np.flatnonzero(np.isfinite(z.ravel()))[::5]
+    rows, cols = peaks // W, peaks % W
+    want = isolation(z, rows, cols, transform=transform, crs=crs)
+    metric = KernelMetric.from_grid(transform, crs)
+    ch, cw = 25, 30
+    parts = []
+    for r0 in range(0, H, ch):
+        for c0 in range(0, W, cw):
+            core = np.ascontiguousarray(z[r0:r0 + ch, c0:c0 + cw])
+            mine = peaks[(rows >= r0) & (rows < r0 + ch) & (cols >= c0) & (cols < c0 + cw)]
+            parts.append(chunk_isolation(core, r0, c0, (H, W), mine, metric))
+    known = _merge_iso(parts)
+    n_known = known["key"].size
+    assert 0 < n_known < peaks.size  # some settled in their chunk, some searched across chunks
+    monkeypatch.setattr(tiso, "_FINISH_ROWS", 7)
+    got = tiso.tiled_isolation(da.from_array(z, chunks=(ch, cw)), rows, cols, z.ravel()[peaks],
+                               transform=transform, crs=crs, known=known, release_known=True,
+                               compute=lambda objs: [np.asarray(o.compute(scheduler="sync")) for o in objs])
+    assert known == {}
+    assert got.equals(want)
+    assert all(not p for p in parts)  # merged parts are emptied: the merge owns them
