@@ -282,7 +282,7 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     n = core.n_kept
     rows, cols = core.peak_row, core.peak_col
     x, y = xy(rows, cols)
-    elev = core.peak_z.astype(np.float64)
+    elev = core.peak_z.astype(np.float64, copy=False)
     has_saddle = core.key_saddle_cell >= 0
 
     def cell_of(ids):
@@ -303,9 +303,10 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     del sc_sorted, first, kp
     # the tree first (its parents are peak columns); its frames are the only copies of these columns
     edges = pd.DataFrame({"peak_a": core.ridge_a, "peak_b": core.ridge_b, "saddle": ridge_sid})
+    # copy=False: the tree's frames and the tables share these columns (pandas copies on write)
     tree = DivideTree(
-        pd.DataFrame({"row": rows, "col": cols, "x": x, "y": y, "elevation": elev}),
-        pd.DataFrame({"row": s_r, "col": s_c, "x": s_x, "y": s_y, "elevation": sad_z}),
+        pd.DataFrame({"row": rows, "col": cols, "x": x, "y": y, "elevation": elev}, copy=False),
+        pd.DataFrame({"row": s_r, "col": s_c, "x": s_x, "y": s_y, "elevation": sad_z}, copy=False),
         edges,
         crs,
         {"units": "m"},
@@ -330,14 +331,16 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     iso_d, iso_r, iso_c, iso_x, iso_y = nan(), none_id(), none_id(), nan(), nan()
     iso_exact = np.zeros(n, bool)
     if isolation is not None and n:
-        iso_d = np.array(isolation["isolation"], np.float64)  # copies: the table shares no memory with it
-        iso_r = np.array(isolation["isolation_row"], np.int64)
-        iso_c = np.array(isolation["isolation_col"], np.int64)
+        # the isolation table's own columns, no copies (the caller drops it; pandas copies on write)
+        iso_d = isolation["isolation"].to_numpy(np.float64)
+        iso_r = isolation["isolation_row"].to_numpy(np.int64)
+        iso_c = isolation["isolation_col"].to_numpy(np.int64)
         ix, iy = xy(iso_r, iso_c)
         found = iso_r >= 0
         iso_x, iso_y = np.where(found, ix, np.nan), np.where(found, iy, np.nan)
-        iso_exact = np.array(isolation["isolation_exact"], bool)
+        iso_exact = isolation["isolation_exact"].to_numpy(bool)
         del ix, iy, found
+    island_rc, line_rc, prom_rc = cell_of(core.parent), cell_of(line), cell_of(prom_parent)
     lon, lat = nan(), nan()
     if crs is not None and n:
         from pyproj import Transformer
@@ -351,32 +354,32 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
         "lon": lon,
         "lat": lat,
         "elevation": elev,
-        "prominence": core.prominence.astype(np.float64),
+        "prominence": core.prominence.astype(np.float64, copy=False),
         "saddle_row": k_rows,
         "saddle_col": k_cols,
         "saddle_x": np.where(has_saddle, kx, np.nan),
         "saddle_y": np.where(has_saddle, ky, np.nan),
-        "saddle_elevation": core.key_saddle_z.astype(np.float64),
-        "island_parent": core.parent.astype(np.int64),
-        "island_parent_row": cell_of(core.parent)[0],
-        "island_parent_col": cell_of(core.parent)[1],
+        "saddle_elevation": core.key_saddle_z.astype(np.float64, copy=False),
+        "island_parent": core.parent.astype(np.int64, copy=False),
+        "island_parent_row": island_rc[0],
+        "island_parent_col": island_rc[1],
         "line_parent": line,
-        "line_parent_row": cell_of(line)[0],
-        "line_parent_col": cell_of(line)[1],
+        "line_parent_row": line_rc[0],
+        "line_parent_col": line_rc[1],
         "prominence_parent": prom_parent,
-        "prominence_parent_row": cell_of(prom_parent)[0],
-        "prominence_parent_col": cell_of(prom_parent)[1],
+        "prominence_parent_row": prom_rc[0],
+        "prominence_parent_col": prom_rc[1],
         "dominance": np.where(elev > 0, core.prominence / np.where(elev > 0, elev, 1.0), np.nan),
         "isolation": iso_d,
         "isolation_row": iso_r,
         "isolation_col": iso_c,
         "isolation_x": iso_x,
         "isolation_y": iso_y,
-        "prominence_exact": core.prominence_exact.astype(bool),
+        "prominence_exact": core.prominence_exact.astype(bool, copy=False),
         "isolation_exact": iso_exact,
     }
     assert list(columns) == PEAK_COLUMNS
-    del kx, ky, k_rows, k_cols, iso_d, iso_r, iso_c, iso_x, iso_y, lon, lat
+    del kx, ky, k_rows, k_cols, iso_d, iso_r, iso_c, iso_x, iso_y, lon, lat, island_rc, line_rc, prom_rc
     # copy=False: one block per column, no consolidated copy of the whole table
     peaks = pd.DataFrame(columns, copy=False)
     del columns
