@@ -24,7 +24,7 @@ from orokit.io.checkpoint_io import chunk_path, discard_chunk, open_checkpoint, 
 from orokit.tiling.isolation import block_stats, chunk_isolation
 from orokit.tiling.memory import release_free_heap
 from orokit.tiling.summary import ChunkSummary, chunk_summary, finalize_summary, merge_summaries
-from orokit.topology.engine import Orometry
+from orokit.topology.engine import Orometry, saddle_order
 
 logger = logging.getLogger(__name__)
 
@@ -179,7 +179,16 @@ def _finalize_task(root: _Part, min_prominence_m: float, outside: str, nby: int,
                 s.n_nodes, int(s.ismax.sum()), s.ea.size, s.nbytes() / 2**20,
                 0 if iso is None else iso["key"].size, 0 if iso is None else sum(v.nbytes for v in iso.values()) / 2**20)
     stats = np.array([[root[2][i, j] for j in range(nbx)] for i in range(nby)], dtype=float)
-    return finalize_summary(root[0], min_prominence_m=min_prominence_m, outside=outside), root[1], stats
+    # the root's edges in the finalize's order, one array at a time (each unsorted one freed as
+    # its sorted copy replaces it), so finalize_graph needs no second copy of them
+    order = saddle_order(s.ea, s.eb, s.ez, s.ekey)
+    s.ea = s.ea[order]
+    s.eb = s.eb[order]
+    s.ez = s.ez[order]
+    s.ekey = s.ekey[order]
+    s.nexit = s.nexit[:0]  # not used by the finalize
+    del order
+    return finalize_summary(s, min_prominence_m=min_prominence_m, outside=outside), root[1], stats
 
 
 def _checkpoint_dir(checkpoint, data, min_prominence_m: float) -> Path | None:

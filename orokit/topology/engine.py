@@ -183,7 +183,9 @@ def finalize_graph(
     # canonical order: saddle from high to low, then the basin pair (monkey saddles list
     # several pairs at one cell; their order must not depend on how they were found)
     order = saddle_order(ea, eb, ez, ekey)
-    ea, eb, ez, ekey = ea[order], eb[order], ez[order], ekey[order]
+    if order.size > 1 and not (np.diff(order) == 1).all():  # the tiled engine passes them sorted: no copies
+        ea, eb, ez, ekey = ea[order], eb[order], ez[order], ekey[order]
+    del order
     bmax = np.full(n, -np.inf) if outside == "sea" else node_bmax
     in_tree, key_edge, parent, touched = _kernels.kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, bmax)
     is_root = key_edge < 0
@@ -192,6 +194,7 @@ def finalize_graph(
     # a domain whose cells all have the root's elevation is flat: no peak
     ta, tb = ea[in_tree], eb[in_tree]
     dom = _kernels.forest_components(n, ta, tb)
+    del ta, tb, in_tree  # the finalize of a 4 G-cell mosaic's root holds ~6.5 M nodes: free what is done
     dmin = np.full(n, np.inf)
     np.minimum.at(dmin, dom, node_nmin)
     flat_root = is_root & (dmin[dom] >= node_z)
@@ -204,6 +207,7 @@ def finalize_graph(
     dom_has = np.zeros(dmin.size, bool)
     dom_has[dom[keep & ~is_root]] = True
     keep |= is_root & node_ismax & dom_has[dom]
+    del dom, dmin, dom_has, flat_root
     # every edge: of several edges at one saddle, the prune picks the same one in both engines
     oa, ob, oe, _, _, _ = _kernels.prune_edges(n, ea, eb, ez, ekey, keep, bmax, node_nmin, node_z, node_key, False)
     tkey, tz = ekey, ez
