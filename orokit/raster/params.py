@@ -24,6 +24,10 @@ class RenderParams:
     river_sink_relief_ratio : a bed sinks at most this times the height of its nearest ridge point above
         its bound below that bound (plateaus and basins keep shallow valleys, high ridges deep ones;
         :func:`orokit.raster.rivers.river_network`); None = off.
+    saddle_floor_ratio, saddle_floor_k : river beds and samples lie no lower than the tree's own floor
+        ``s - saddle_floor_ratio * (p - s)``, ``s`` the lowest of the ``saddle_floor_k`` nearest saddles and ``p``
+        the highest of as many peaks (:func:`orokit.raster.rivers.saddle_floor`): dune fields and plateaus keep
+        their beds near the level of their saddles, high ranges keep deep valleys; None = off.
     valley_slope_exponent : the valley floor narrows on steep river beds,
         ``w * min(1, (S / river_slope)^-valley_slope_exponent)`` (S the bed slope;
         :func:`orokit.raster.interpolate.valley_width`); 0 = off.
@@ -126,6 +130,8 @@ class RenderParams:
     valley_slope_ref: float | None = None
     river_relief_ratio: float = 0.0
     river_sink_relief_ratio: float | None = None
+    saddle_floor_ratio: float | None = None
+    saddle_floor_k: int = 16
     floor_relief_ratio: float = 0.0
     min_prominence_m: float = 30.0
     noise_ratio: float = 0.0

@@ -18,7 +18,7 @@ from orokit.raster import _kernels
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["RidgeSegments", "RiverNetwork", "ridge_segments", "river_network"]
+__all__ = ["RidgeSegments", "RiverNetwork", "ridge_segments", "river_network", "saddle_floor"]
 
 
 @dataclass(frozen=True)
@@ -81,6 +81,33 @@ def ridge_segments(peak_xyz: np.ndarray, saddle_xyz: np.ndarray, edges: np.ndarr
     )
 
 
+def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *, ratio: float,
+                 k: int = 16) -> np.ndarray:
+    """Lowest ground the Divide Tree allows at ``xy``: ``s - ratio * (p - s)``, with ``s`` the lowest of the
+    ``k`` nearest saddles and ``p`` the highest of the ``k`` nearest peaks.
+
+    The tree's own local relief: in a dune field or on a plateau the saddles lie at the level of the
+    flats between the hills and the peaks just above them, so the floor is close under the saddles;
+    among high peaks over low saddles it lies deep. (On the 13 shared DEMs, k 16: at ``ratio`` 0.5 at most
+    6 % of a real DEM's cells lie below it, none in the dune fields and plateaus but gobi's 2.6 %.)
+
+    >>> peaks = np.array([[0.0, 0.0, 150.0], [2000.0, 0.0, 120.0]])
+    >>> saddles = np.array([[1000.0, 0.0, 100.0]])
+    >>> saddle_floor(np.array([[1000.0, 500.0]]), peaks, saddles, ratio=0.5, k=4).tolist()
+    [75.0]
+    """
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    if saddle_xyz.shape[0] == 0 or peak_xyz.shape[0] == 0 or xy.shape[0] == 0:
+        return np.full(xy.shape[0], -np.inf)
+    from scipy.spatial import cKDTree
+
+    _, js = cKDTree(saddle_xyz[:, :2]).query(xy, k=min(int(k), saddle_xyz.shape[0]), workers=-1)
+    _, jp = cKDTree(peak_xyz[:, :2]).query(xy, k=min(int(k), peak_xyz.shape[0]), workers=-1)
+    s = saddle_xyz[js.reshape(xy.shape[0], -1), 2].min(axis=1)
+    p = peak_xyz[jp.reshape(xy.shape[0], -1), 2].max(axis=1)
+    return s - float(ratio) * np.maximum(p - s, 0.0)
+
+
 def _segment_params(p0, p1, q0, q1):
     """Parameter along q of the intersection of segments p and q (rows paired)."""
     r = p1 - p0
@@ -137,6 +164,7 @@ def river_network(
     max_sink_m: float | None = None,
     relief_ratio: float = 0.0,
     sink_relief_ratio: float | None = None,
+    floor=None,
 ) -> RiverNetwork:
     """Rivers of a Divide Tree: dual Voronoi edges not crossing a ridge, oriented to outlets.
 
@@ -155,6 +183,11 @@ def river_network(
         the lowest bed upstream minus ``slope`` x the distance; over long winding rivers that pins
         them to ``base_elevation`` (gobi: 22 % of the river nodes); with a limit a bed may lie
         above an upstream one (a closed depression, as in endorheic basins).
+    floor : optional callable ``(k, 2) xy -> (k,)`` lowest bed (e.g. :func:`saddle_floor`): after the
+        sweep every bed, outlets included, is raised to it (above ``cap``: a floor below the nearby saddles
+        makes no higher pass), never above the ridges it crosses minus ``margin_m`` (closed depressions may
+        form, as with ``max_sink_m``); a bed that crosses no ridge is raised to the floor itself, which
+        should lie below the saddles around it.
 
     Returns
     -------
@@ -277,5 +310,8 @@ def river_network(
         h = np.maximum(h, h0 - float(max_sink_m))
     if sink_relief_ratio is not None and relief is not None:
         h = np.maximum(h, np.where(outlet, h, h0 - float(sink_relief_ratio) * relief))
+    if floor is not None and xy.shape[0]:
+        # the floor lies below the saddles, so above the cap it makes no higher pass; ridge crossings still bound it
+        h = np.maximum(h, np.minimum(np.asarray(floor(xy), float), np.where(np.isfinite(bnd), bnd - margin_m, np.inf)))
     logger.info("rivers: %d nodes, %d outlets", h.size, int(outlet.sum()))
     return RiverNetwork(xy=xy, elevation=h, receiver=receiver, length=length, order=order_arr, outlet=outlet)

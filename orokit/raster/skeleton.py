@@ -15,7 +15,7 @@ from orokit.raster.interpolate import flank_envelope, poisson_samples, sample_el
 from orokit.raster.params import RenderParams
 from orokit.raster.profiles import hillslope_profile, ridge_profile, threshold_profile
 from orokit.raster.refine import Polylines, densify, refine_segments
-from orokit.raster.rivers import RidgeSegments, RiverNetwork, ridge_segments, river_network
+from orokit.raster.rivers import RidgeSegments, RiverNetwork, ridge_segments, river_network, saddle_floor
 from orokit.raster.tin import TIN, constrained_tin
 
 logger = logging.getLogger(__name__)
@@ -218,10 +218,13 @@ def build_skeleton(
     def envelope(xy: np.ndarray) -> np.ndarray:
         return flank_envelope(xy, rxy, rz, rs, ridge_floor=rfloor, tree=rtree, k_neighbours=params.flank_neighbours)
 
+    floor = None if params.saddle_floor_ratio is None else (
+        lambda xy: saddle_floor(xy, p, s, ratio=float(params.saddle_floor_ratio), k=params.saddle_floor_k))
     rivers = river_network(fine_ridges, ridge_lines.xy, extent, base_elevation=base,
                            margin_m=params.river_margin, slope=params.river_slope, cap=envelope,
                            max_sink_m=params.river_max_sink_m, relief_ratio=params.river_relief_ratio,
-                           sink_relief_ratio=params.river_sink_relief_ratio)
+                           sink_relief_ratio=params.river_sink_relief_ratio,
+                           floor=floor)
     t["rivers"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -259,6 +262,8 @@ def build_skeleton(
                                  ridge_floor=rfloor, profile=_hillslope(params),
                                  k_neighbours=params.flank_neighbours,
                                  floor_relief_ratio=params.floor_relief_ratio)
+    if floor is not None:
+        h = np.maximum(h, floor(pts))  # no ground below the tree's own floor (below every nearby saddle)
     far = (np.minimum(dT, dR) >= 0.5 * lam)
     far[samples.shape[0]:] = True  # keep the ring
     pts, h = pts[far], h[far]

@@ -1,0 +1,98 @@
+"""The tree's own floor under river beds and samples (``RenderParams.saddle_floor_ratio``)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import orokit
+from orokit.raster.params import RenderParams
+from orokit.raster.render import render_elevation
+from orokit.raster.rivers import ridge_segments, river_network, saddle_floor
+from orokit.validate.roundtrip import compare_peaks
+
+from helpers.trees import small_tree
+
+
+def _random_nodes(seed: int, n_peaks: int = 40, n_saddles: int = 30):
+    rng = np.random.default_rng(seed)
+    peaks = np.column_stack([rng.uniform(0, 10_000, (n_peaks, 2)), rng.uniform(500, 900, n_peaks)])
+    saddles = np.column_stack([rng.uniform(0, 10_000, (n_saddles, 2)), rng.uniform(300, 500, n_saddles)])
+    return peaks, saddles, rng.uniform(0, 10_000, (200, 2))
+
+
+@pytest.mark.parametrize("k", [1, 5, 16])
+def test_saddle_floor_against_brute_force(k):
+    """The k nearest saddles and peaks by a full distance matrix give the same floor."""
+    peaks, saddles, q = _random_nodes(1)
+    ds = np.hypot(*(q[:, None, :] - saddles[None, :, :2]).transpose(2, 0, 1))
+    dp = np.hypot(*(q[:, None, :] - peaks[None, :, :2]).transpose(2, 0, 1))
+    s = np.take_along_axis(np.broadcast_to(saddles[:, 2], ds.shape), np.argsort(ds, axis=1)[:, :k], 1).min(1)
+    p = np.take_along_axis(np.broadcast_to(peaks[:, 2], dp.shape), np.argsort(dp, axis=1)[:, :k], 1).max(1)
+    for ratio in (0.0, 0.3, 1.0):
+        np.testing.assert_allclose(saddle_floor(q, peaks, saddles, ratio=ratio, k=k), s - ratio * (p - s))
+
+
+def test_saddle_floor_lies_below_the_nearby_saddles_and_falls_with_the_ratio():
+    peaks, saddles, q = _random_nodes(2)
+    f0 = saddle_floor(q, peaks, saddles, ratio=0.0, k=8)
+    f1 = saddle_floor(q, peaks, saddles, ratio=0.5, k=8)
+    assert (f1 < f0).all()  # every peak is above every saddle here
+    near = np.argmin(np.hypot(*(q[:, None, :] - saddles[None, :, :2]).transpose(2, 0, 1)), axis=1)
+    assert (f0 <= saddles[near, 2]).all()
+    # k covering every node: one floor everywhere
+    every = saddle_floor(q, peaks, saddles, ratio=0.5, k=1000)
+    np.testing.assert_allclose(every, saddles[:, 2].min() - 0.5 * (peaks[:, 2].max() - saddles[:, 2].min()))
+    # a tree without saddles sets no floor
+    assert np.isneginf(saddle_floor(q, peaks, saddles[:0], ratio=0.5)).all()
+
+
+def _chain(saddle_z: float = 700.0):
+    rng = np.random.default_rng(3)
+    peaks = np.column_stack([rng.uniform(1000, 19000, (12, 2)), rng.uniform(800, 1200, 12)])
+    saddles = np.column_stack([(peaks[:-1, :2] + peaks[1:, :2]) / 2, np.full(11, saddle_z)])
+    edges = np.column_stack([np.arange(11), np.arange(1, 12), np.arange(11)])
+    return ridge_segments(peaks, saddles, edges), np.concatenate([peaks[:, :2], saddles[:, :2]])
+
+
+def test_river_floor_raises_beds_to_it_and_nothing_else():
+    """A floor under the saddles: every bed (outlets too) lies on or above it, above the cap if need be,
+    never lower than without it, on the same network; no floor gives the same beds as before."""
+    ridges, nodes = _chain()
+    ext = (0, 0, 20000, 20000)
+    kw = dict(base_elevation=0.0, margin_m=5.0, slope=0.05, cap=lambda xy: np.full(xy.shape[0], 650.0))
+    free = river_network(ridges, nodes, ext, **kw)
+    none = river_network(ridges, nodes, ext, floor=None, **kw)
+    held = river_network(ridges, nodes, ext, floor=lambda xy: np.full(xy.shape[0], 660.0), **kw)
+    assert np.array_equal(free.elevation, none.elevation)
+    assert np.array_equal(free.receiver, held.receiver)
+    assert (free.elevation < 600.0).any()  # the sweep pinned beds far below the saddles
+    assert (held.elevation >= free.elevation - 1e-9).all()
+    assert (held.elevation >= 660.0 - 1e-9).all()  # above the cap (650): a floor below the saddles
+    # a floor above the saddles: beds facing a ridge stay margin_m below where they cross it (>= 700 m)
+    high = river_network(ridges, nodes, ext, floor=lambda xy: np.full(xy.shape[0], 2000.0), **kw)
+    assert (high.elevation < 1200.0).any() and (high.elevation >= held.elevation - 1e-9).all()
+
+
+def test_render_with_the_floor_keeps_the_orometry_and_lifts_the_valleys():
+    """The small tree rendered with a tight floor: every peak recovered, none extra, peaks and saddles
+    exact; the skeleton's beds sit on or above the floor; the default is off."""
+    assert RenderParams().saddle_floor_ratio is None
+    tree = small_tree()
+    params = RenderParams(lam=200.0, saddle_floor_ratio=0.0)
+    dem, skel = render_elevation(tree, cell_size_m=50.0, erosion=False, params=params, return_skeleton=True, rng=7)
+    plain = render_elevation(tree, cell_size_m=50.0, erosion=False, params=RenderParams(lam=200.0), rng=7)
+    peaks = tree.peaks[["x", "y", "elevation"]].to_numpy(float)
+    saddles = tree.saddles[["x", "y", "elevation"]].to_numpy(float)
+    rv = skel.river_network
+    f = saddle_floor(rv.xy, peaks, saddles, ratio=0.0)  # 900 m: the lowest saddle
+    assert (rv.elevation >= np.minimum(f, 900.0 - 5.0) - 1e-6).all()  # crossings bound beds at >= 900 - margin
+    # the plain render's beds sink to the outlets' 870 m; floored, the lowest ground is near 900 m
+    assert np.quantile(dem.values, 0.05) > np.quantile(plain.values, 0.05) + 10.0
+    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+    z = dem.values
+    for frame in (tree.peaks, tree.saddles):
+        col = np.floor(frame["x"].to_numpy() / 50.0).astype(int)
+        row = np.floor((8000.0 - frame["y"].to_numpy()) / 50.0).astype(int)
+        np.testing.assert_allclose(z[row, col], frame["elevation"].to_numpy(), atol=0.01)
