@@ -218,8 +218,9 @@ def build_skeleton(
     def envelope(xy: np.ndarray) -> np.ndarray:
         return flank_envelope(xy, rxy, rz, rs, ridge_floor=rfloor, tree=rtree, k_neighbours=params.flank_neighbours)
 
-    floor = None if params.saddle_floor_ratio is None else (
-        lambda xy: saddle_floor(xy, p, s, ratio=float(params.saddle_floor_ratio), k=params.saddle_floor_k))
+    floor_ratio = params.saddle_floor_ratio
+    floor = None if floor_ratio is None else (
+        lambda xy: saddle_floor(xy, p, s, ratio=float(floor_ratio), k=params.saddle_floor_k))
     rivers = river_network(fine_ridges, ridge_lines.xy, extent, base_elevation=base,
                            margin_m=params.river_margin, slope=params.river_slope, cap=envelope,
                            max_sink_m=params.river_max_sink_m, relief_ratio=params.river_relief_ratio,
