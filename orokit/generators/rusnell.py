@@ -559,6 +559,7 @@ def render(tree, rivers, grid: Grid, rng: np.random.Generator, params: RusnellPa
     timings["features"] = time.perf_counter() - t0
     z = (top - cs + hf) if top is not None else hf
     if sea == "rivers":
+        assert exemplar is not None and top is not None  # "rivers" needs both (checked above)
         t0 = time.perf_counter()
         fi = np.concatenate([f[0] for f in feats])
         fj = np.concatenate([f[1] for f in feats])

@@ -258,6 +258,7 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
     width = int(ncand.max(initial=0))
     known_slot = None
     if hit is not None:
+        assert known_cand is not None  # set with hit
         width = max(width, int((known_cand[src] >= 0).sum(axis=1).max(initial=0)))
         known_slot = np.full(n, -1, np.int64)
         known_slot[np.flatnonzero(hit)] = src
@@ -271,6 +272,7 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
         mine = sl >= 0
         block[mine] = cand[sl[mine], :width]
         if known_slot is not None:
+            assert known_cand is not None  # set with known_slot
             ks = known_slot[s0:s1]
             have = ks >= 0
             m = min(width, known_cand.shape[1])
