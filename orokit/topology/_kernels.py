@@ -227,7 +227,7 @@ def basin_graph(z, lab, npk, r0, r1):
     while size < 8 * npk * (r1 - r0) // max(H, 1) + 1024:
         size *= 2
     keys = np.full(size, -1, np.int64)
-    vals = np.empty(size, np.int64)
+    vals = np.empty(size, lab.dtype)  # pass cells: int32 when the labels are (fewer than 2**31 cells)
     count = 0
     for r in range(r0, r1):
         for c in range(W):
@@ -309,7 +309,7 @@ def _insert(keys, vals, key, cell, zf):
 def _grow_pass_table(keys, vals, zf):
     """The open-addressing pass table at twice its size, entries re-inserted."""
     new_k = np.full(keys.size * 2, -1, np.int64)
-    new_v = np.empty(keys.size * 2, np.int64)
+    new_v = np.empty(keys.size * 2, vals.dtype)
     for s in range(keys.size):
         if keys[s] != -1:
             _insert(new_k, new_v, keys[s], vals[s], zf)

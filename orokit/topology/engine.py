@@ -95,8 +95,10 @@ def basin_graph(z: np.ndarray, label: np.ndarray, n_max: int) -> tuple[np.ndarra
         parts = list(pool.map(lambda b: _kernels.basin_graph(z, label, n_max, b[0], b[1]), bounds))
     bmax = np.maximum.reduce([p[0] for p in parts])
     nmin = np.minimum.reduce([p[1] for p in parts])
-    ea, eb, ec = (np.concatenate([p[i] for p in parts]) for i in (2, 3, 4))
+    edges = [list(p[2:]) for p in parts]
     del parts
+    # one column at a time, each stripe's piece freed once copied (lower peak memory: the labels are alive)
+    ea, eb, ec = (_concatenate_freeing(edges, i) for i in range(3))
     # A pair seen in several stripes keeps its highest pass (elevation, then raster order).
     # Basins are 8-connected, so a pair found in two stripes has both basins on the first
     # row of a later stripe: only the pairs of such seam basins are compared.
@@ -111,8 +113,20 @@ def basin_graph(z: np.ndarray, label: np.ndarray, n_max: int) -> tuple[np.ndarra
     key = key[order]
     dup = np.zeros(ea.size, bool)
     dup[cand[order[1:][key[1:] == key[:-1]]]] = True
-    keep = ~dup
-    return bmax, nmin, ea[keep], eb[keep], ec[keep]
+    if dup.any():  # one column at a time: each old column is freed as its copy is made
+        keep = ~dup
+        ea = ea[keep]
+        eb = eb[keep]
+        ec = ec[keep]
+    return bmax, nmin, ea, eb, ec
+
+
+def _concatenate_freeing(pieces: list[list[np.ndarray | None]], i: int) -> np.ndarray:
+    """``np.concatenate`` of column ``i`` of every stripe's pieces; the pieces are dropped as soon as copied."""
+    out = np.concatenate([p[i] for p in pieces])
+    for p in pieces:
+        p[i] = None
+    return out
 
 
 def orometry(z: np.ndarray, *, min_prominence_m: float, outside: str = "unknown") -> Orometry:
