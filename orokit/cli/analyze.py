@@ -123,6 +123,9 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
 
     shape = da.shape
     del da  # the raster is not needed to write the tables: lower peak memory
+    from orokit.tiling.memory import release_free_heap
+
+    release_free_heap()  # what the engine and isolation freed inside the heap, before the writers' libraries
     write_analysis(result, outdir, overwrite=True)
     n = len(result.peaks)
     if (ctx.find_root().obj or {}).get("quiet"):
