@@ -67,3 +67,26 @@ def test_orometry_does_not_depend_on_threads():
     for k in one:
         np.testing.assert_array_equal(np.asarray(one[k]), np.asarray(many[k]), err_msg=k)
     assert one["peak_cell"].size > 50
+
+
+@pytest.mark.parametrize("cell_dtype", [np.int32, np.int64])
+def test_pass_table_growth_keeps_every_pair_and_its_highest_pass(cell_dtype):
+    """The open-addressing pass table (int32 pass cells beside int32 labels) keeps, through its
+    growth, each basin pair's highest cell in the total order (elevation, then raster order)."""
+    rng = np.random.default_rng(3)
+    zf = rng.integers(0, 5, 500).astype(np.float32)
+    keys = np.full(8, -1, np.int64)
+    vals = np.empty(8, cell_dtype)
+    best: dict[int, int] = {}
+    count = 0
+    for cell in rng.permutation(500):
+        key = int(rng.integers(0, 40)) * 1000 + 7
+        count += _kernels._insert(keys, vals, key, cell, zf)
+        if key not in best or (zf[cell], -cell) > (zf[best[key]], -best[key]):
+            best[key] = int(cell)
+        if 2 * count > keys.size:
+            keys, vals = _kernels._grow_pass_table(keys, vals, zf)
+            assert vals.dtype == cell_dtype
+    assert keys.size >= 64  # it grew
+    got = {int(k): int(v) for k, v in zip(keys, vals) if k != -1}
+    assert got == best and count == len(best)
