@@ -109,27 +109,29 @@ def _write_parquet(frame, path: Path, crs: Any = None, batch_rows: int | None = 
     head = frame.iloc[:1]
     if has_geometry:
         crs = frame.crs
-        wkb = _geometry_wkb(frame.geometry.values)
         geometry_name = frame.geometry.name
     else:
         head = gpd.GeoDataFrame(head, geometry=gpd.points_from_xy(head["x"], head["y"]), crs=crs)
-        wkb = point_wkb(frame["x"].to_numpy(np.float64), frame["y"].to_numpy(np.float64))
+        x, y = frame["x"].to_numpy(np.float64), frame["y"].to_numpy(np.float64)
         geometry_name = "geometry"
     schema = _geopandas_to_arrow(head).schema
     schema = schema.with_metadata(_whole_table_metadata(schema.metadata, frame, n))
-    arrays = []
-    for field in schema:
-        if field.name == geometry_name:
-            arrays.append(wkb)
-        elif field.name in frame.columns:
-            arrays.append(pa.Array.from_pandas(frame[field.name], type=field.type))
-        else:  # an index stored as a column (not a RangeIndex)
-            arrays.append(pa.Array.from_pandas(frame.index.get_level_values(field.name), type=field.type))
-    table = pa.Table.from_arrays(arrays, schema=schema)
-    del arrays, wkb
     with atomic_path(path) as tmp, pq.ParquetWriter(str(tmp), schema, compression="snappy") as writer:
+        # one row group at a time, its points made for it: no WKB of the whole table (~25 bytes per row)
         for start in range(0, max(n, 1), step):
-            writer.write_table(table.slice(start, step))
+            stop = min(n, start + step)
+            arrays = []
+            for field in schema:
+                if field.name == geometry_name:
+                    arrays.append(_geometry_wkb(frame.geometry.values[start:stop]) if has_geometry
+                                  else point_wkb(x[start:stop], y[start:stop]))
+                elif field.name in frame.columns:
+                    arrays.append(pa.Array.from_pandas(frame[field.name].iloc[start:stop], type=field.type))
+                else:  # an index stored as a column (not a RangeIndex)
+                    arrays.append(pa.Array.from_pandas(frame.index.get_level_values(field.name)[start:stop],
+                                                       type=field.type))
+            writer.write_table(pa.Table.from_arrays(arrays, schema=schema))
+            del arrays
 
 
 def _geometry_wkb(geometry):

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import logging
 import warnings
@@ -115,19 +116,38 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
 
     crs = _gdal_crs(tree.crs)
 
-    def write(columns: dict[str, Any], wkb, layer: str, geometry_type: str) -> None:
-        """One layer from whole columns (no copies) and its WKB geometries, in one write."""
+    def write(columns: dict[str, Any], wkb, n: int, layer: str, geometry_type: str) -> None:
+        """One layer from whole columns (no copies), in one write streamed by batches of
+        ``WRITE_BATCH_ROWS`` rows; ``wkb(start, stop)`` makes the geometries of a batch, so no
+        geometry column of the whole layer is ever held (the ridges': ~90 bytes per ridge)."""
         names = [*columns, "geometry"]
-        arrays = [pa.Array.from_pandas(v) for v in columns.values()] + [wkb]
-        pyogrio.write_arrow(pa.Table.from_arrays(arrays, names=names), tmp, layer=layer, geometry_name="geometry",
-                            geometry_type=geometry_type, crs=crs, **_GPKG)
+
+        def rows(v, start: int, stop: int):
+            return v.iloc[start:stop] if isinstance(v, pd.Series) else v[start:stop]
+
+        def batches():
+            types = None  # the first batch's column types, kept by the others
+            for start in range(0, max(n, 1), WRITE_BATCH_ROWS):
+                stop = min(n, start + WRITE_BATCH_ROWS)
+                arrays = [pa.Array.from_pandas(rows(v, start, stop), type=None if types is None else types[i])
+                          for i, v in enumerate(columns.values())]
+                types = [a.type for a in arrays]
+                yield pa.RecordBatch.from_arrays([*arrays, wkb(start, stop)], names=names)
+
+        stream = batches()
+        first = next(stream)
+        reader = pa.RecordBatchReader.from_batches(first.schema, itertools.chain([first], stream))
+        del first
+        pyogrio.write_arrow(reader, tmp, layer=layer, geometry_name="geometry", geometry_type=geometry_type, crs=crs,
+                            **_GPKG)
 
     def points(frame: pd.DataFrame, id_name: str, layer: str, extra: pd.DataFrame | None = None) -> None:
         columns: dict[str, Any] = {id_name: np.arange(len(frame), dtype=np.int64)}
         columns.update((c, frame[c]) for c in frame.columns)
         if extra is not None:
             columns.update((c, extra[c]) for c in added)
-        write(columns, point_wkb(frame["x"].to_numpy(np.float64), frame["y"].to_numpy(np.float64)), layer, "Point")
+        x, y = frame["x"].to_numpy(np.float64), frame["y"].to_numpy(np.float64)
+        write(columns, lambda i, j: point_wkb(x[i:j], y[i:j]), len(frame), layer, "Point")
 
     with atomic_path(path) as tmp, _sqlite_without_sync(), warnings.catch_warnings():
         # a tree on a local grid has no CRS: that is recorded in attrs, not a problem
@@ -139,9 +159,13 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
         sx, sy = tree.saddles["x"].to_numpy(np.float64), tree.saddles["y"].to_numpy(np.float64)
         ridges: dict[str, Any] = {c: tree.edges[c] for c in tree.edges.columns}
         ridges["saddle_elevation"] = tree.saddles["elevation"].to_numpy(np.float64)[s]
-        line = polyline_wkb(np.stack([px[a], sx[s], px[b]], axis=1), np.stack([py[a], sy[s], py[b]], axis=1))
-        write(ridges, line, "ridges", "LineString")
-        del a, b, s, ridges, line
+
+        def lines(i: int, j: int):
+            ai, bi, si = a[i:j], b[i:j], s[i:j]
+            return polyline_wkb(np.stack([px[ai], sx[si], px[bi]], axis=1), np.stack([py[ai], sy[si], py[bi]], axis=1))
+
+        write(ridges, lines, len(a), "ridges", "LineString")
+        del a, b, s, ridges
         for key in ("runoffs", "basin_saddles"):
             extra = tree.attrs.get(key)
             if isinstance(extra, pd.DataFrame):
