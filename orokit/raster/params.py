@@ -53,7 +53,11 @@ class RenderParams:
         :func:`orokit.raster.profiles.threshold_profile` of this convexity (steeper at the river,
         rounded at the crest) instead of a straight line; 0 = the paper's line.
     flank_slope, flank_ratio : flanks fall at least ``max(flank_slope, flank_ratio * ridge slope)``
-        from every ridge point (keeps saddles the highest passes).
+        from every ridge point (keeps saddles the highest passes). The cones bound the river beds, so
+        they set how deep valleys are cut below the ridges: ``flank_slope`` 0.5 (27 deg, near the
+        critical angle of threshold hillslopes) since session 9, with ``flank_depth`` 1 (the 0.05 of
+        sessions 1-8 left steep ranges' beds high: gentle uplands above cliffs, a slope distribution
+        wide and too gentle).
     texture_rms_m, texture_beta, texture_largest_m : short-wavelength texture of the real terrain
         (a terrain type's ``texture``, :func:`orokit.raster.noise.texture_spectrum`): RMS (metres)
         and spectral slope of its wavelengths below ``texture_largest_m``; 0 = none.
@@ -94,7 +98,8 @@ class RenderParams:
         many metres (Gaussian sigma; they jump on the inner side of bends).
     field_weight : the ``"field"`` surface is ``field_weight`` x the field + the rest x the TIN.
     flank_depth : the cones of a ridge piece reach at most ``flank_depth * (peak - saddle)``
-        below its saddle (None: no limit; far from ridges steep cones dug canyons).
+        below its saddle (None: no limit; far from ridges steep cones dug canyons): valleys as deep as
+        the tree's own relief allows, so low-relief trees (dune fields, plateaus) keep shallow ones.
     smooth_m : Gaussian sigma (metres) that rounds the skeleton raster's planar facets and creases
         (the TIN carries no information below its meshing distance ``lam``), faded to 0 within
         ``texture_clearance_m`` of peaks and saddles; 0 = off.
@@ -140,7 +145,7 @@ class RenderParams:
     erosion_steps: int | tuple[int, ...] = (4, 3, 2)
     erosion_k_dt: float = 0.02
     erosion_max_nodes: int = 4_000_000
-    flank_slope: float = 0.05
+    flank_slope: float = 0.5
     flank_relief_ratio: float = 0.0
     flank_relief_k: int = 8
     flank_ratio: float = 1.5
@@ -150,7 +155,7 @@ class RenderParams:
     surface: str = "tin"
     field_smooth_m: float = 200.0
     field_weight: float = 1.0
-    flank_depth: float | None = None
+    flank_depth: float | None = 1.0
     keep_hill_ratio: float = 0.0
     cut_slope: float = 0.0
     cut_depth_ratio: float = 1.0

@@ -320,6 +320,9 @@ def render_elevation(
         rough = (z - zmin) / max(zmax - zmin, 1e-6)
         z += fractal_noise(z.shape, grid.cell_size_m, amplitude=noise_amp, roughness=rough, rng=rng) * (1.0 - uplift)
         del rough
+    # the detail, texture and noise never cut the tree's ridges below their profile (a cut ridge
+    # lowers its saddle's pass: the peak behind it gains prominence)
+    burn_max(z, grid, rxy, rz)
     timings["noise"] = time.perf_counter() - t0
 
     if erosion:
