@@ -105,7 +105,9 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
                    "disk_drift": disk_drift(dem, result, twin, twin_analysis)}
     # steepness of the trees themselves, before rendering (the real tree vs the twin's)
     out["ridges"] = {"real": ridge_statistics(tree), "twin": ridge_statistics(ttree),
-                     "contrast": {"real": ttype.ridge_contrast, "twin": ttree.attrs.get("ridge_contrast")}}
+                     "contrast": {"real": ttype.ridge_contrast, "twin": ttree.attrs.get("ridge_contrast")},
+                     "neighbour_gradient_fit": ttree.attrs.get("neighbour_gradient"),
+                     "max_ridge_slope": ttree.attrs.get("max_ridge_slope")}
     if figures is not None:
         panels = {"real DEM": dem, "render of its real tree": ren, "free twin": twin}
         _figure(figures / f"{name}.png", name, {k: v for k, v in panels.items() if v is not None})

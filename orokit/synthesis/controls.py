@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 import warnings
 from dataclasses import dataclass
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -18,7 +18,8 @@ from orokit.errors import CRSError, InputError, OrokitWarning
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Domain", "make_domain", "ControlMaps", "load_control", "build_controls", "random_elevation_field"]
+__all__ = ["Domain", "make_domain", "ControlMaps", "load_control", "build_controls", "random_elevation_field",
+           "random_elevation_fields"]
 
 
 @dataclass(frozen=True)
@@ -272,7 +273,8 @@ def build_controls(
 
 
 def random_elevation_field(domain: Domain, elevation_hist: Any, *, correlation_m: float, rng: Any,
-                           border_rank: Sequence[float] | None = None) -> np.ndarray:
+                           border_rank: Sequence[float] | None = None, fine_m: float = 1000.0,
+                           fine_weight: float = 0.0) -> np.ndarray:
     """A smooth random C_H whose values follow ``elevation_hist`` (orokit default).
 
     Without a user C_H, peak elevations would be spatially uncorrelated, so high peaks
@@ -284,6 +286,22 @@ def random_elevation_field(domain: Domain, elevation_hist: Any, *, correlation_m
     in the distance to the domain border is added to the noise before the ranking, fitted so
     the mean rank of the field in each border band matches it (a twin of a DEM cropped around
     its relief then holds its high ground inside, issue 11). None: no trend (stationary field).
+
+    ``fine_weight`` > 0 adds a second noise filtered at ``fine_m`` with that weight (both
+    normalised to unit standard deviation) before the ranking: neighbouring peaks then differ
+    more in elevation (see :func:`random_elevation_fields`).
+    """
+    return next(random_elevation_fields(domain, elevation_hist, correlation_m=correlation_m, rng=rng,
+                                        border_rank=border_rank, fine_m=fine_m, fine_weights=(fine_weight,)))
+
+
+def random_elevation_fields(domain: Domain, elevation_hist: Any, *, correlation_m: float, rng: Any,
+                            border_rank: Sequence[float] | None = None, fine_m: float = 1000.0,
+                            fine_weights: Sequence[float] = (0.0,)) -> Iterator[np.ndarray]:
+    """:func:`random_elevation_field` for each of ``fine_weights`` in turn, from the same two noises
+    (lazily: a caller fitting the weight stops when it has what it needs).
+
+    With weights all 0 the random draws are those of one field without the fine component.
     """
     from scipy.ndimage import gaussian_filter
 
@@ -293,16 +311,24 @@ def random_elevation_field(domain: Domain, elevation_hist: Any, *, correlation_m
     # (an uncapped width on a tiny domain made the filter run for minutes)
     ny, nx = domain.shape
     sigma = (min(correlation_m / cy, float(ny)), min(correlation_m / cx, float(nx)))
-    noise = gaussian_filter(rng.standard_normal(domain.shape), sigma=sigma, mode="wrap")
-    if border_rank is not None:
-        noise = _with_border_trend(noise, domain, np.asarray(border_rank, float))
-    ranks = np.argsort(np.argsort(noise.ravel(), kind="stable"), kind="stable")
-    q = (ranks + 0.5) / ranks.size
-    p = elevation_hist.probabilities()
-    cdf = np.concatenate([[0.0], np.cumsum(p)])
-    e = np.asarray(elevation_hist.edges, float)
-    vals = np.interp(q, cdf, e)
-    return vals.reshape(domain.shape)
+    base = gaussian_filter(rng.standard_normal(domain.shape), sigma=sigma, mode="wrap")
+    fine = None
+    for w in fine_weights:
+        noise = base
+        if w > 0:
+            if fine is None:
+                fine = gaussian_filter(rng.standard_normal(domain.shape),
+                                       sigma=(min(fine_m / cy, float(ny)), min(fine_m / cx, float(nx))), mode="wrap")
+                fine = fine / max(float(fine.std()), 1e-12)
+            noise = base / max(float(base.std()), 1e-12) + float(w) * fine
+        if border_rank is not None:
+            noise = _with_border_trend(noise, domain, np.asarray(border_rank, float))
+        ranks = np.argsort(np.argsort(noise.ravel(), kind="stable"), kind="stable")
+        q = (ranks + 0.5) / ranks.size
+        p = elevation_hist.probabilities()
+        cdf = np.concatenate([[0.0], np.cumsum(p)])
+        e = np.asarray(elevation_hist.edges, float)
+        yield np.interp(q, cdf, e).reshape(domain.shape)
 
 
 def _with_border_trend(noise: np.ndarray, domain: Domain, target: np.ndarray, iterations: int = 30) -> np.ndarray:

@@ -18,7 +18,24 @@ from orokit.topology.divide_tree import DivideTree
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["tree_orometry", "nearest_higher_peak", "direction_deg", "planar_xy"]
+__all__ = ["tree_orometry", "nearest_higher_peak", "neighbour_gradients", "direction_deg", "planar_xy"]
+
+
+def neighbour_gradients(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``|h_p - h_q| / d(p, q)`` from every peak p to its nearest peak q (planar metres; m/m).
+
+    Peaks sharing a position with another are left out (no direction to divide by).
+
+    >>> neighbour_gradients(np.array([0.0, 100, 400]), np.zeros(3), np.array([10.0, 30, 0]))
+    array([0.2, 0.2, 0.1])
+    """
+    x, y, z = (np.asarray(v, float) for v in (x, y, z))
+    if x.size < 2:
+        return np.empty(0)
+    pts = np.column_stack([x, y])
+    d, j = cKDTree(pts).query(pts, k=2)
+    ok = d[:, 1] > 0
+    return np.abs(z - z[j[:, 1]])[ok] / d[ok, 1]
 
 
 def planar_xy(x: np.ndarray, y: np.ndarray, crs: Any = None) -> tuple[np.ndarray, np.ndarray]:

@@ -87,7 +87,8 @@ def _blocked_targets(want: np.ndarray, cost_fn, block_size: int, rng: np.random.
     return out
 
 
-def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTargets, rng, block_size, keep_keys=0):
+def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTargets, rng, block_size, keep_keys=0,
+             floor=None):
     """One OT assignment (dominance or prominence); returns new saddle elevations.
 
     Large problems are split into random row blocks, each receiving a stratified
@@ -98,6 +99,7 @@ def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTarget
     key = key_saddles(pz, a, b, sz)
     sz0 = sz
     sz = sz.copy()
+    floor = np.zeros_like(hmax) if floor is None else floor
     prom = np.where(key >= 0, pz - sz[np.maximum(key, 0)], pz)
     for g in range(len(targets.dominance)):
         rows_all = np.flatnonzero((targets.group == g) & (key >= 0))
@@ -116,7 +118,7 @@ def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTarget
             e = e_all[blk]
             new_h = sz[e][:, None] - delta
             cost = delta**2 / ridge_len[e][:, None]
-            bad = (new_h < 0) | (new_h > hmax[e][:, None])
+            bad = (new_h < floor[e][:, None]) | (new_h > hmax[e][:, None])
             if bad.all():
                 return np.zeros_like(cost)
             big = float(cost[~bad].max(initial=1.0)) * 10.0 + 1.0
@@ -124,7 +126,7 @@ def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTarget
 
         got = _blocked_targets(want_all, cost_fn, block_size, rng)
         new_prom = got * h_all if kind == "dominance" else got
-        sz[e_all] = np.clip(sz[e_all] - (new_prom - prom[rows_all]), 0.0, hmax[e_all])
+        sz[e_all] = np.clip(sz[e_all] - (new_prom - prom[rows_all]), floor[e_all], hmax[e_all])
     if keep_keys:
         # moves that change which saddle is a peak's key saddle scramble the matched
         # values (the paper's Fig. 11): undo them, a few times as undoing can cascade
@@ -178,6 +180,7 @@ def assign_saddle_elevations(
     keep_keys: int = 3,
     restarts: int = 3,
     block_size: int = 300,
+    max_ridge_slope: float | None = None,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, dict]:
     """Alternate dominance and prominence OT assignments until the errors are stable.
@@ -196,6 +199,10 @@ def assign_saddle_elevations(
         fresh random blocks and targets; the best of them is refined further.
     keep_keys : after the restarts, undo (up to this many times) the saddle
         moves that changed a peak's key saddle (0: the paper's plain alternation).
+    max_ridge_slope : None, or a bound (m/m) on each ridge's ``(h_a + h_b - 2 s) / |AB|``
+        (both ends' drops to the saddle over the ridge's length): a saddle is never
+        lowered below ``(h_a + h_b - max_ridge_slope |AB|) / 2`` (nor below 0), so a
+        deep saddle needs a long ridge (the OT treats targets beyond it as infeasible).
 
     Returns
     -------
@@ -206,6 +213,9 @@ def assign_saddle_elevations(
     hmax = np.minimum(pz[a], pz[b])
     ridge_len = np.maximum(np.hypot(px[a] - px[b], py[a] - py[b]), 1e-6)
     movable = np.ones(a.size, bool) if movable is None else np.asarray(movable, bool)
+    floor = np.zeros(a.size)
+    if max_ridge_slope is not None:
+        floor = np.clip(0.5 * (pz[a] + pz[b] - float(max_ridge_slope) * ridge_len), 0.0, hmax)
     best = sz.copy()
     best_err = max(max_bin_errors(pz, a, b, sz, targets))
     history = []
@@ -216,9 +226,9 @@ def assign_saddle_elevations(
         if it <= restarts:
             sz = start  # the first rounds all start from the initial saddles (restarts)
         sz = _ot_step("dominance", pz, a, b, sz, hmax, ridge_len, movable, targets, rng, block_size,
-                      keep_keys if it > restarts else 0)
+                      keep_keys if it > restarts else 0, floor)
         sz = _ot_step("prominence", pz, a, b, sz, hmax, ridge_len, movable, targets, rng, block_size,
-                      keep_keys if it > restarts else 0)
+                      keep_keys if it > restarts else 0, floor)
         errs = max_bin_errors(pz, a, b, sz, targets)
         history.append([round(errs[0], 5), round(errs[1], 5)])
         logger.debug("saddle OT round %d: max bin error dominance %.4f, prominence %.4f", it, *errs)

@@ -219,6 +219,16 @@ class TerrainType:
         (None: no tree was seen). Synthesis builds its ridges to the same value (issue 11: the
         paper's MST joined neighbours of similar height, so twin ridges were too gentle). A ratio,
         so edits keep it.
+    neighbour_gradient : median ``|h_p - h_q| / d(p, q)`` from every peak p to its nearest peak q
+        (m/m; None: not recorded). Synthesis gives its default C_H a ~1 km component whose
+        weight brings the tree's median to this value (issue 11: the twins' neighbouring peaks
+        were too alike, e.g. rockies 0.05 against 0.10). Edits of the elevation (other than a
+        shift) or isolation-distance histograms, or of the density, drop it.
+    max_ridge_slope : 99th percentile over the source tree's ridges of ``(h_a + h_b - 2 s) / |AB|``
+        (both ends' drops to the saddle over the ridge's length, m/m; None: not recorded).
+        Synthesis never lowers a saddle below it (issue 11: the twins had short ridges with deep
+        saddles, twice the real trees' 99th percentile in steep regions, the renders' curvature
+        tails). Edits of any histogram but the directions, or of the density, drop it.
     """
 
     name: str
@@ -235,6 +245,8 @@ class TerrainType:
     disks: Mapping[str, Any] | None = None
     gradient: FeatureHistogram | None = None
     ridge_contrast: float | None = None
+    neighbour_gradient: float | None = None
+    max_ridge_slope: float | None = None
 
     def __post_init__(self) -> None:
         missing = set(FEATURES) - set(self.histograms)
@@ -271,6 +283,16 @@ class TerrainType:
             if not (np.isfinite(c) and c >= 0):
                 raise SchemaError(f"ridge_contrast must be a finite number >= 0 or None, got {self.ridge_contrast!r}")
             object.__setattr__(self, "ridge_contrast", c)
+        for name in ("neighbour_gradient", "max_ridge_slope"):
+            v = getattr(self, name)
+            if v is not None:
+                try:
+                    c = float(v)
+                except (TypeError, ValueError):
+                    c = float("nan")
+                if not (np.isfinite(c) and c >= 0):
+                    raise SchemaError(f"{name} must be a finite number >= 0 (m/m) or None, got {v!r}")
+                object.__setattr__(self, name, c)
         if self.disks is not None:
             from orokit.synthesis.disks import check_disk_quantiles
 
@@ -392,6 +414,7 @@ class TerrainType:
         if rho is None:
             rho = estimate_rho(tree, min_prominence_m) if tree is not None else 1.0
         contrast = tree_ridge_contrast(tree, min_prominence_m) if tree is not None else None
+        ridge_slope = tree_max_ridge_slope(tree, min_prominence_m) if tree is not None else None
         prov = {
             "area_km2": float(area_km2),
             "n_peaks": int(len(p)),
@@ -404,7 +427,8 @@ class TerrainType:
         return cls(name, hists, len(p) / float(area_km2), float(rho), float(min_prominence_m),
                    isolation_basis, prov, bands, source_crs=src_crs, source_center=center,
                    disks=_disk_record(x, y, z, prom, crs, extent, min_prominence_m), gradient=gradient,
-                   ridge_contrast=contrast)
+                   ridge_contrast=contrast, neighbour_gradient=_neighbour_gradient(*planar_xy(x, y, crs), z),
+                   max_ridge_slope=ridge_slope)
 
     @classmethod
     def from_divide_tree(cls, tree: Any, *, area_km2: float, min_prominence_m: float = 30.0,
@@ -483,7 +507,7 @@ class TerrainType:
         hists[feature] = h
         keep = self.bands if feature not in ("elevation", "prominence", "dominance") else None
         return self._edited(f"set {feature} histogram", histograms=hists, bands=keep,
-                            gradient=self._gradient_after(feature))
+                            **self._relief_after(feature))
 
     def with_counts(self, feature: str, counts: Any) -> "TerrainType":
         """New type with the counts of one histogram replaced (hand-edited bins)."""
@@ -511,11 +535,12 @@ class TerrainType:
             counts[-1] += np.asarray(h.counts)[~keep].sum()
             edges = np.append(edges[:-1][keep], 1.0)
             return self._edited(f"scale {feature} x{factor:g}", bands=None, histograms={
-                **self.histograms, feature: FeatureHistogram(tuple(edges), tuple(counts), h.open_last)})
+                **self.histograms, feature: FeatureHistogram(tuple(edges), tuple(counts), h.open_last)},
+                **self._relief_after(feature))
         new = FeatureHistogram(tuple(float(v) for v in edges), h.counts, h.open_last)
         _check_range(feature, new)
         return self._edited(f"scale {feature} x{factor:g}", histograms={**self.histograms, feature: new},
-                            gradient=self._gradient_after(feature))
+                            **self._relief_after(feature))
 
     def shifted(self, feature: str, offset: float) -> "TerrainType":
         """New type with a linear feature's values shifted by ``offset`` (elevation: metres)."""
@@ -525,15 +550,22 @@ class TerrainType:
         h = self.histograms[feature]
         new = FeatureHistogram(tuple(float(v) + float(offset) for v in h.edges), h.counts, h.open_last)
         _check_range(feature, new)
+        if feature == "elevation":  # a shift keeps every gradient and ridge slope
+            return self._edited(f"shift {feature} {offset:+g}", histograms={**self.histograms, feature: new})
         return self._edited(f"shift {feature} {offset:+g}", histograms={**self.histograms, feature: new},
-                            gradient=self.gradient if feature == "elevation" else self._gradient_after(feature))
+                            **self._relief_after(feature))
 
-    def _gradient_after(self, feature: str) -> FeatureHistogram | None:
-        """The gradient record after an edit of ``feature`` (dropped when it no longer holds)."""
-        return None if feature in ("elevation", "isolation_distance") else self.gradient
+    def _relief_after(self, feature: str) -> dict[str, Any]:
+        """The gradient and ridge-slope records after an edit of ``feature`` (dropped when they no longer hold)."""
+        drop_gradient = feature in ("elevation", "isolation_distance")
+        keep_slope = FEATURES[feature][1] != "linear"  # only the direction histograms leave it as it is
+        return {"gradient": None if drop_gradient else self.gradient,
+                "neighbour_gradient": None if drop_gradient else self.neighbour_gradient,
+                "max_ridge_slope": self.max_ridge_slope if keep_slope else None}
 
     def with_density(self, peak_density_per_km2: float) -> "TerrainType":
-        return self._edited(f"density {peak_density_per_km2:g}", peak_density_per_km2=float(peak_density_per_km2))
+        return self._edited(f"density {peak_density_per_km2:g}", peak_density_per_km2=float(peak_density_per_km2),
+                            neighbour_gradient=None, max_ridge_slope=None)
 
     def with_rho(self, rho: float) -> "TerrainType":
         return self._edited(f"rho {rho:g}", rho=float(rho))
@@ -558,6 +590,8 @@ class TerrainType:
             "disks": None if self.disks is None else dict(self.disks),
             "gradient": None if self.gradient is None else self.gradient.to_dict(),
             "ridge_contrast": self.ridge_contrast,
+            "neighbour_gradient": self.neighbour_gradient,
+            "max_ridge_slope": self.max_ridge_slope,
         }
 
     @classmethod
@@ -583,7 +617,8 @@ class TerrainType:
                        gradient=None if data.get("gradient") is None else FeatureHistogram(
                            tuple(float(e) for e in data["gradient"]["edges"]), tuple(data["gradient"]["counts"]),
                            bool(data["gradient"].get("open_last", False))),
-                       ridge_contrast=data.get("ridge_contrast"))
+                       ridge_contrast=data.get("ridge_contrast"),
+                       neighbour_gradient=data.get("neighbour_gradient"), max_ridge_slope=data.get("max_ridge_slope"))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, SchemaError):
                 raise
@@ -726,6 +761,34 @@ def tree_ridge_contrast(tree: Any, min_prominence_m: float = 30.0) -> float | No
     c = ridge_contrast(x, y, tree.peaks["elevation"].to_numpy(float), tree.edges["peak_a"].to_numpy(np.int64),
                        tree.edges["peak_b"].to_numpy(np.int64))
     return c if np.isfinite(c) else None
+
+
+def tree_max_ridge_slope(tree: Any, min_prominence_m: float = 30.0, quantile: float = 0.99) -> float | None:
+    """``quantile`` of ``(h_a + h_b - 2 s) / |AB|`` over the ridges of a Divide Tree pruned at
+    ``min_prominence_m`` (planar metres; None below 4 peaks or when undefined)."""
+    from orokit.synthesis.orometry import planar_xy
+
+    tree = tree.prune(min_prominence_m) if min_prominence_m > 0 else tree
+    if tree.n_peaks < 4:
+        return None
+    x, y = planar_xy(tree.peaks["x"].to_numpy(float), tree.peaks["y"].to_numpy(float), tree.crs)
+    z = tree.peaks["elevation"].to_numpy(float)
+    a, b = tree.edges["peak_a"].to_numpy(np.int64), tree.edges["peak_b"].to_numpy(np.int64)
+    s = tree.saddles["elevation"].to_numpy(float)[tree.edges["saddle"].to_numpy(np.int64)]
+    length = np.hypot(x[a] - x[b], y[a] - y[b])
+    ok = length > 0
+    if not ok.any():
+        return None
+    v = float(np.quantile((z[a] + z[b] - 2 * s)[ok] / length[ok], quantile))
+    return v if np.isfinite(v) and v >= 0 else None
+
+
+def _neighbour_gradient(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> float | None:
+    """Median ``|h_p - h_q| / d(p, q)`` from every peak to its nearest peak (planar metres)."""
+    from orokit.synthesis.orometry import neighbour_gradients
+
+    g = neighbour_gradients(x, y, z)
+    return float(np.median(g)) if g.size else None
 
 
 def estimate_rho(tree: Any, min_prominence_m: float = 30.0, choices: tuple[float, ...] = (0.0, 1.0, 2.0)) -> float:

@@ -136,6 +136,19 @@ class SynthesisParams:
         88 / 88 of 108 on the tuning group and 88 / 86 of 126 held out (on / off), mean distance over
         target 0.69 / 0.72 and 0.78 / 0.81, slope, curvature and 1 km relief distances lower in 9, 11
         and 11 of 13 regions (3-seed means); reclassification 9, 9, 10 / 10, 9, 9 of 12, vote 12 of 12.
+    follow_ridge_slope : no saddle is lowered below ``(h_a + h_b - m |AB|) / 2`` with m the type's
+        ``max_ridge_slope`` (the 99th percentile of its tree's ridge slopes; off for a type without it,
+        with several types their largest), so a deep saddle needs a long ridge. Default True (issue 11,
+        session 9: the twins' 99th percentile ridge slope was 1.2-1.6 x the real trees' in steep regions,
+        short ridges with deep saddles, the curvature tails of the renders).
+    follow_neighbour_gradient : the automatic C_H gets a component of correlation ``fine_elevation_m``
+        whose weight (:data:`FINE_WEIGHTS`, the first reaching it) brings the median elevation gradient
+        between neighbouring peaks to the type's ``neighbour_gradient`` (off for a type without it, with
+        a user C_H or several types). The dart throwing runs once per weight tried, with the same draws.
+        Default True (issue 11, session 9: with the 4 km C_H and its tight tolerance neighbouring twin
+        peaks were too alike, rockies 0.05 against 0.10).
+    fine_elevation_m : correlation length of that component (metres, default 1 km: the spacing of
+        neighbouring peaks).
     Measured for ``follow_gradient`` and the 4 km ``auto_elevation_m`` (``benchmarks/realism.py
     --twin-only``, 13 regions, seeds 0-2, session 7, load 6-9): twins' disks classified as their own
     region at least as often as the real disks under the spatial hold-out in 10, 9, 10 of 12 regions
@@ -161,11 +174,15 @@ class SynthesisParams:
     saddle_slope_ratio: float | None = 1.5
     follow_gradient: bool = True
     follow_ridge_contrast: bool = True
+    follow_ridge_slope: bool = True
+    follow_neighbour_gradient: bool = True
+    fine_elevation_m: float = 1000.0
 
     def __post_init__(self) -> None:
         if self.use_bands not in ("auto", True, False):
             raise InputError(f"use_bands must be 'auto', True or False, got {self.use_bands!r}")
-        for name in ("border_trend", "follow_gradient", "follow_ridge_contrast"):
+        for name in ("border_trend", "follow_gradient", "follow_ridge_contrast", "follow_ridge_slope",
+                     "follow_neighbour_gradient"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise InputError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.saddle_placement not in ("targeted", "paper"):
@@ -188,6 +205,8 @@ class SynthesisParams:
                 raise InputError(f"{name} must be a number >= 0, got {v!r}")
         if self.auto_elevation_m is not None and not float(self.auto_elevation_m) > 0:
             raise InputError(f"auto_elevation_m must be > 0 metres or None, got {self.auto_elevation_m!r}")
+        if not (isinstance(self.fine_elevation_m, (int, float)) and 0 < float(self.fine_elevation_m) < np.inf):
+            raise InputError(f"fine_elevation_m must be a number of metres > 0, got {self.fine_elevation_m!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -307,27 +326,44 @@ def synthesize_divide_tree(
     free_t = _free_peak_counts(types, controls, domain, n_peaks, fixed_xyz, fixed_type)
     # the default smooth C_H only once the counts are known to be sane (its smoothing is the
     # costly step on a tiny domain); nothing above draws from rng
-    if controls.elevation is None and p.auto_elevation_m and len(types) == 1:
-        from orokit.synthesis.controls import random_elevation_field
+    auto_m = p.auto_elevation_m if controls.elevation is None and len(types) == 1 else None
+    nn_target = types[0].neighbour_gradient if p.follow_neighbour_gradient else None
+    fit_fine = auto_m is not None and nn_target is not None
+    fields = None
+    if auto_m is not None:
+        from orokit.synthesis.controls import random_elevation_fields
 
         disks = types[0].disks or {}
-        controls = replace(controls, elevation=random_elevation_field(
-            domain, types[0].histograms["elevation"], correlation_m=float(p.auto_elevation_m), rng=rng,
-            border_rank=disks.get("border_rank") if p.border_trend else None))
+        fields = random_elevation_fields(
+            domain, types[0].histograms["elevation"], correlation_m=float(auto_m),
+            rng=rng.integers(2**63) if fit_fine else rng,
+            border_rank=disks.get("border_rank") if p.border_trend else None, fine_m=float(p.fine_elevation_m),
+            fine_weights=FINE_WEIGHTS if fit_fine else (0.0,))
+        if not fit_fine:
+            controls = replace(controls, elevation=next(fields))
     peaks = _peak_elevations(types, free_t, fixed_xyz, fixed_type, fragment, eps, rng)
     timings["elevations"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
     from orokit.synthesis.darts import place_peaks
 
-    px, py, dart_info = place_peaks(
-        peaks.z, peaks.ptype, peaks.fixed, peaks.fxy, controls, domain,
-        [t.histograms["isolation_distance"] for t in types], [t.histograms["isolation_direction"] for t in types],
-        peaks.rho, n_passes=p.n_passes, n_candidates=p.n_candidates, forced=peaks.forced,
-        void_weight=float(p.void_weight), disks=[t.disks for t in types], disk_weight=float(p.disk_weight),
-        elevation_tolerance=float(p.elevation_tolerance),
-        gradients=[t.gradient for t in types] if p.follow_gradient else None, rng=rng,
-    )
+    def throw(ctrl, gen):
+        return place_peaks(
+            peaks.z, peaks.ptype, peaks.fixed, peaks.fxy, ctrl, domain,
+            [t.histograms["isolation_distance"] for t in types], [t.histograms["isolation_direction"] for t in types],
+            peaks.rho, n_passes=p.n_passes, n_candidates=p.n_candidates, forced=peaks.forced,
+            void_weight=float(p.void_weight), disks=[t.disks for t in types], disk_weight=float(p.disk_weight),
+            elevation_tolerance=float(p.elevation_tolerance),
+            gradients=[t.gradient for t in types] if p.follow_gradient else None, rng=gen,
+        )
+
+    fine_fit = None
+    if fit_fine:
+        assert fields is not None and nn_target is not None
+        controls, (px, py, dart_info), fine_fit = _fit_fine_elevation(
+            fields, controls, throw, peaks.z, float(nn_target), int(rng.integers(2**63)))
+    else:
+        px, py, dart_info = throw(controls, rng)
     timings["dart_throwing"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
@@ -336,7 +372,9 @@ def synthesize_divide_tree(
     timings["ridges"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
-    sz, ot_info, below, band_mode = _saddle_elevations(types, peaks, px, py, a, b, sz, movable, eps, p, rng)
+    slope_cap = _ridge_slope_target(types) if p.follow_ridge_slope else None
+    sz, ot_info, below, band_mode = _saddle_elevations(types, peaks, px, py, a, b, sz, movable, eps, p, rng,
+                                                       slope_cap)
     timings["saddle_elevations"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
@@ -374,11 +412,51 @@ def synthesize_divide_tree(
             "timings_s": {k: round(v, 4) for k, v in timings.items()},
             "isolation": "nearest higher peak of the tree",
             "ridge_contrast": contrast,
+            "neighbour_gradient": fine_fit,
+            "max_ridge_slope": slope_cap,
         },
     )
     logger.info("synthesized %d peaks, %d ridges in %.2f s (OT rounds %d)", tree.n_peaks, a.size,
                 timings["total"], ot_info["iterations"])
     return tree
+
+
+#: weights of the ~1 km component of the automatic C_H tried, in order, by ``follow_neighbour_gradient``
+FINE_WEIGHTS: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
+
+
+def _fit_fine_elevation(fields: Any, controls: Any, throw: Any, z: np.ndarray, target: float, seed: int):
+    """The first C_H of ``fields`` (fine weights :data:`FINE_WEIGHTS`) whose peaks' median neighbour
+    gradient reaches ``target``, or the closer of it and the one before (log ratio).
+
+    Each weight places the peaks with the same random draws (``seed``), so the gradient grows
+    with the weight and the trials differ only by it. Returns the controls, the placement
+    ``(px, py, info)`` kept and a record of the fit.
+    """
+    from orokit.synthesis.orometry import neighbour_gradients
+
+    tried: list[tuple[float, float, Any, Any]] = []
+    for w, field in zip(FINE_WEIGHTS, fields):
+        ctrl = replace(controls, elevation=field)
+        placed = throw(ctrl, np.random.default_rng(seed))
+        g = neighbour_gradients(placed[0], placed[1], z)
+        got = float(np.median(g)) if g.size else float("nan")
+        tried.append((w, got, ctrl, placed))
+        if not np.isfinite(got) or got >= target:
+            break
+    def miss(t):
+        return abs(np.log(max(t[1], 1e-12) / max(target, 1e-12))) if np.isfinite(t[1]) else np.inf
+    best = min(tried[-2:], key=miss)
+    record = {"target": round(target, 5), "reached": round(best[1], 5), "fine_weight": best[0],
+              "trials": len(tried)}
+    logger.debug("neighbour gradient fit: %s", record)
+    return best[2], best[3], record
+
+
+def _ridge_slope_target(types: list[TerrainType]) -> float | None:
+    """The types' largest recorded ``max_ridge_slope`` (None if any type lacks it)."""
+    values = [t.max_ridge_slope for t in types]
+    return None if any(v is None for v in values) else float(max(v for v in values if v is not None))
 
 
 def _resolve_domain(domain: Domain | None, *, size_m: Any, crs: Any, center: Any, grid_cells: int) -> Domain:
@@ -530,7 +608,7 @@ def _ridges(px: np.ndarray, py: np.ndarray, peaks: _PeakSet, fragment: DivideTre
 
 def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray, py: np.ndarray, a: np.ndarray,
                        b: np.ndarray, sz0: np.ndarray, movable: np.ndarray, eps: float, p: SynthesisParams,
-                       rng: np.random.Generator):
+                       rng: np.random.Generator, max_ridge_slope: float | None = None):
     """OT saddle elevations; with use_bands="auto", the target set that matches the type's marginals better."""
     from orokit.synthesis.saddles import assign_saddle_elevations, enforce_min_prominence, max_bin_errors
 
@@ -541,7 +619,8 @@ def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray
     best: tuple[float, np.ndarray, dict, int, bool] | None = None
     for mode in modes:
         cand, info = assign_saddle_elevations(z, px, py, a, b, sz0, _saddle_targets(types, ptype, z, mode),
-                                              movable=movable, max_iterations=p.max_ot_iterations, rng=rng)
+                                              movable=movable, max_iterations=p.max_ot_iterations,
+                                              max_ridge_slope=max_ridge_slope, rng=rng)
         cand, below_c = enforce_min_prominence(z, a, b, cand, eps)
         score = max(max_bin_errors(z, a, b, cand, marginal))
         logger.debug("saddle targets %s: worst max-bin error %.4f", "per band" if mode else "marginal", score)

@@ -1,0 +1,142 @@
+"""Neighbour gradient and ridge-slope bound (issue 11, session 9): a type records how much its
+neighbouring peaks differ in elevation and how steep its steepest ridges are; synthesis follows
+both. Values are re-measured here by brute force, not with the code's KD-tree or quantile."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from orokit.errors import InputError, SchemaError
+from orokit.synthesis.controls import make_domain, random_elevation_field, random_elevation_fields
+from orokit.synthesis.fidelity import compare_to_type
+from orokit.synthesis.ridges import delaunay_mst
+from orokit.synthesis.saddles import SaddleTargets, assign_saddle_elevations
+from orokit.synthesis.terrain_type import TerrainType
+from orokit.synthesis.tree import SynthesisParams, synthesize_divide_tree
+
+
+def _nn_gradient_by_hand(x, y, z) -> np.ndarray:
+    d = np.hypot(x[:, None] - x[None, :], y[:, None] - y[None, :])
+    np.fill_diagonal(d, np.inf)
+    j = np.argmin(d, axis=1)
+    return np.abs(z - z[j]) / d[np.arange(x.size), j]
+
+
+def _ridge_slopes(tree) -> np.ndarray:
+    x, y, z = (tree.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
+    a, b = tree.edges["peak_a"].to_numpy(), tree.edges["peak_b"].to_numpy()
+    s = tree.saddles["elevation"].to_numpy(float)[tree.edges["saddle"].to_numpy()]
+    return (z[a] + z[b] - 2 * s) / np.hypot(x[a] - x[b], y[a] - y[b])
+
+
+@pytest.fixture(scope="module")
+def tree_type(small_type):
+    """A type measured on a synthesized tree (so it has a tree to record ridge slopes from)."""
+    tree = synthesize_divide_tree(small_type, size_m=30_000.0, rng=2,
+                                  params=SynthesisParams(follow_neighbour_gradient=False))
+    return tree, TerrainType.from_divide_tree(tree, area_km2=900.0, min_prominence_m=30.0)
+
+
+def test_type_records_neighbour_gradient_and_ridge_slope(tree_type):
+    tree, t = tree_type
+    pruned = tree.prune(30.0)
+    x, y, z = (pruned.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
+    assert t.neighbour_gradient == pytest.approx(float(np.median(_nn_gradient_by_hand(x, y, z))))
+    slopes = np.sort(_ridge_slopes(pruned))
+    # the 99th percentile lies between the two order statistics around it
+    k = 0.99 * (slopes.size - 1)
+    assert slopes[int(np.floor(k))] <= t.max_ridge_slope <= slopes[int(np.ceil(k))]
+    back = TerrainType.from_dict(t.to_dict())
+    assert (back.neighbour_gradient, back.max_ridge_slope) == (t.neighbour_gradient, t.max_ridge_slope)
+    old = t.to_dict()
+    del old["neighbour_gradient"], old["max_ridge_slope"]  # a type written before session 9
+    assert TerrainType.from_dict(old).neighbour_gradient is None and TerrainType.from_dict(old).max_ridge_slope is None
+    with pytest.raises(SchemaError, match="max_ridge_slope"):
+        dataclasses.replace(t, max_ridge_slope=-0.1)
+    with pytest.raises(SchemaError, match="neighbour_gradient"):
+        dataclasses.replace(t, neighbour_gradient=float("nan"))
+
+
+def test_edits_drop_the_records_that_no_longer_hold(tree_type):
+    _, t = tree_type
+    shifted = t.shifted("elevation", 500.0)  # a shift changes no gradient
+    assert (shifted.neighbour_gradient, shifted.max_ridge_slope) == (t.neighbour_gradient, t.max_ridge_slope)
+    scaled = t.scaled("elevation", 2.0)
+    assert scaled.neighbour_gradient is None and scaled.max_ridge_slope is None
+    prom = t.scaled("prominence", 1.5)  # deeper saddles: the ridge-slope bound goes, neighbours stay
+    assert prom.neighbour_gradient == t.neighbour_gradient and prom.max_ridge_slope is None
+    turned = t.with_counts("saddle_direction", np.ones(t.histograms["saddle_direction"].n_bins))
+    assert turned.max_ridge_slope == t.max_ridge_slope
+    dense = t.with_density(2 * t.peak_density_per_km2)
+    assert dense.neighbour_gradient is None and dense.max_ridge_slope is None
+
+
+def test_saddles_never_fall_below_the_ridge_slope_bound(small_type, peak_table):
+    rng = np.random.default_rng(4)
+    n = 300
+    x, y = rng.uniform(0, 30_000, n), rng.uniform(0, 30_000, n)
+    z = np.sort(rng.uniform(300, 2500, n))[::-1]
+    a, b = delaunay_mst(x, y, z)
+    targets = SaddleTargets(np.zeros(n, np.int64), [small_type.histograms["dominance"]],
+                            [small_type.histograms["prominence"]])
+    sz0 = np.minimum(z[a], z[b])
+    free, _ = assign_saddle_elevations(z, x, y, a, b, sz0, targets, rng=1)
+    length = np.hypot(x[a] - x[b], y[a] - y[b])
+    slope_free = (z[a] + z[b] - 2 * free) / length
+    cap = float(np.quantile(slope_free, 0.8))
+    capped, _ = assign_saddle_elevations(z, x, y, a, b, sz0, targets, rng=1, max_ridge_slope=cap)
+    floor = np.minimum(np.maximum(0.5 * (z[a] + z[b] - cap * length), 0.0), np.minimum(z[a], z[b]))
+    assert (free < floor - 1e-6).sum() >= 0.1 * a.size  # without the bound a fifth of the ridges go deeper
+    assert np.all(capped >= floor - 1e-9)
+    assert np.all(capped <= np.minimum(z[a], z[b]) + 1e-9)
+
+
+def test_synthesis_follows_the_ridge_slope_bound(tree_type):
+    _, t = tree_type
+    free = synthesize_divide_tree(dataclasses.replace(t, max_ridge_slope=None), size_m=30_000.0, rng=3)
+    cap = float(np.quantile(_ridge_slopes(free), 0.9))
+    capped_type = dataclasses.replace(t, max_ridge_slope=cap)
+    capped = synthesize_divide_tree(capped_type, size_m=30_000.0, rng=3)
+    off = synthesize_divide_tree(capped_type, size_m=30_000.0, rng=3, params=SynthesisParams(follow_ridge_slope=False))
+    assert capped.attrs["max_ridge_slope"] == pytest.approx(cap) and off.attrs["max_ridge_slope"] is None
+    assert off.saddles.equals(free.saddles)  # off: the record is ignored
+    over = lambda tr: float(np.mean(_ridge_slopes(tr) > cap + 1e-9))  # noqa: E731
+    assert over(free) >= 0.08 and over(capped) < 0.5 * over(free)
+    capped.validate()
+    assert compare_to_type(capped, t)["max_bin_error"].max() < 0.2
+
+
+def test_fine_elevation_fields():
+    dom = make_domain(30_000.0, grid_cells=128)
+    from orokit.synthesis.terrain_type import FeatureHistogram
+
+    hist = FeatureHistogram(tuple(np.linspace(500, 2500, 11)), tuple(np.ones(10)))
+    old = random_elevation_field(dom, hist, correlation_m=4000.0, rng=7)
+    w0, w1, w2 = random_elevation_fields(dom, hist, correlation_m=4000.0, rng=7, fine_weights=(0.0, 0.5, 2.0))
+    np.testing.assert_array_equal(old, w0)  # weight 0: the field without the fine component
+    step = lambda f: float(np.median(np.abs(np.diff(f, axis=1))))  # noqa: E731
+    assert step(w0) < step(w1) < step(w2)
+    for f in (w1, w2):  # every field follows the elevation histogram (rank mapping)
+        assert np.quantile(f, [0.0, 0.5, 1.0]) == pytest.approx(np.quantile(w0, [0.0, 0.5, 1.0]), abs=1.0)
+    with pytest.raises(InputError, match="fine_elevation_m"):
+        SynthesisParams(fine_elevation_m=0.0)
+
+
+def test_synthesis_fits_the_neighbour_gradient(tree_type):
+    _, t = tree_type
+    plain = synthesize_divide_tree(t, size_m=30_000.0, rng=6, params=SynthesisParams(follow_neighbour_gradient=False))
+    x, y, z = (plain.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
+    g0 = float(np.median(_nn_gradient_by_hand(x, y, z)))
+    target = 1.6 * g0
+    fitted = synthesize_divide_tree(dataclasses.replace(t, neighbour_gradient=target), size_m=30_000.0, rng=6)
+    x, y, z = (fitted.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
+    g1 = float(np.median(_nn_gradient_by_hand(x, y, z)))
+    rec = fitted.attrs["neighbour_gradient"]
+    assert rec["reached"] == pytest.approx(g1, rel=1e-4) and rec["fine_weight"] > 0
+    assert abs(np.log(g1 / target)) < 0.5 * abs(np.log(g0 / target))
+    again = synthesize_divide_tree(dataclasses.replace(t, neighbour_gradient=target), size_m=30_000.0, rng=6)
+    assert again.peaks.equals(fitted.peaks) and again.saddles.equals(fitted.saddles)  # same seed, same tree
+    assert plain.attrs["neighbour_gradient"] is None
+    fitted.validate()
