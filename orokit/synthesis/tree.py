@@ -138,15 +138,15 @@ class SynthesisParams:
         and 11 of 13 regions (3-seed means); reclassification 9, 9, 10 / 10, 9, 9 of 12, vote 12 of 12.
     follow_ridge_slope : no saddle is lowered below ``(h_a + h_b - m |AB|) / 2`` with m the type's
         ``max_ridge_slope`` (the 99th percentile of its tree's ridge slopes; off for a type without it,
-        with several types their largest), so a deep saddle needs a long ridge. Default True (issue 11,
-        session 9: the twins' 99th percentile ridge slope was 1.2-1.6 x the real trees' in steep regions,
-        short ridges with deep saddles, the curvature tails of the renders).
+        with several types their largest), so a deep saddle needs a long ridge (issue 11, session 9: the
+        twins' 99th percentile ridge slope was 1.2-1.6 x the real trees' in steep regions, short ridges
+        with deep saddles). An option, off: see NOTES (session 9) for what it did to the twins.
     follow_neighbour_gradient : the automatic C_H gets a component of correlation ``fine_elevation_m``
         whose weight (:data:`FINE_WEIGHTS`, the first reaching it) brings the median elevation gradient
         between neighbouring peaks to the type's ``neighbour_gradient`` (off for a type without it, with
-        a user C_H or several types). The dart throwing runs once per weight tried, with the same draws.
-        Default True (issue 11, session 9: with the 4 km C_H and its tight tolerance neighbouring twin
-        peaks were too alike, rockies 0.05 against 0.10).
+        a user C_H or several types). The dart throwing runs once per weight tried, with the same draws
+        (issue 11, session 9: with the 4 km C_H and its tight tolerance neighbouring twin peaks were too
+        alike, rockies 0.05 against 0.10). An option, off: see NOTES (session 9).
     fine_elevation_m : correlation length of that component (metres, default 1 km: the spacing of
         neighbouring peaks).
     Measured for ``follow_gradient`` and the 4 km ``auto_elevation_m`` (``benchmarks/realism.py
@@ -174,8 +174,8 @@ class SynthesisParams:
     saddle_slope_ratio: float | None = 1.5
     follow_gradient: bool = True
     follow_ridge_contrast: bool = True
-    follow_ridge_slope: bool = True
-    follow_neighbour_gradient: bool = True
+    follow_ridge_slope: bool = False
+    follow_neighbour_gradient: bool = False
     fine_elevation_m: float = 1000.0
 
     def __post_init__(self) -> None:

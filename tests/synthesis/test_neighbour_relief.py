@@ -34,8 +34,7 @@ def _ridge_slopes(tree) -> np.ndarray:
 @pytest.fixture(scope="module")
 def tree_type(small_type):
     """A type measured on a synthesized tree (so it has a tree to record ridge slopes from)."""
-    tree = synthesize_divide_tree(small_type, size_m=30_000.0, rng=2,
-                                  params=SynthesisParams(follow_neighbour_gradient=False))
+    tree = synthesize_divide_tree(small_type, size_m=30_000.0, rng=2)
     return tree, TerrainType.from_divide_tree(tree, area_km2=900.0, min_prominence_m=30.0)
 
 
@@ -95,10 +94,11 @@ def test_saddles_never_fall_below_the_ridge_slope_bound(small_type, peak_table):
 
 def test_synthesis_follows_the_ridge_slope_bound(tree_type):
     _, t = tree_type
-    free = synthesize_divide_tree(dataclasses.replace(t, max_ridge_slope=None), size_m=30_000.0, rng=3)
+    on = SynthesisParams(follow_ridge_slope=True)
+    free = synthesize_divide_tree(dataclasses.replace(t, max_ridge_slope=None), size_m=30_000.0, rng=3, params=on)
     cap = float(np.quantile(_ridge_slopes(free), 0.9))
     capped_type = dataclasses.replace(t, max_ridge_slope=cap)
-    capped = synthesize_divide_tree(capped_type, size_m=30_000.0, rng=3)
+    capped = synthesize_divide_tree(capped_type, size_m=30_000.0, rng=3, params=on)
     off = synthesize_divide_tree(capped_type, size_m=30_000.0, rng=3, params=SynthesisParams(follow_ridge_slope=False))
     assert capped.attrs["max_ridge_slope"] == pytest.approx(cap) and off.attrs["max_ridge_slope"] is None
     assert off.saddles.equals(free.saddles)  # off: the record is ignored
@@ -130,13 +130,16 @@ def test_synthesis_fits_the_neighbour_gradient(tree_type):
     x, y, z = (plain.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
     g0 = float(np.median(_nn_gradient_by_hand(x, y, z)))
     target = 1.6 * g0
-    fitted = synthesize_divide_tree(dataclasses.replace(t, neighbour_gradient=target), size_m=30_000.0, rng=6)
+    on = SynthesisParams(follow_neighbour_gradient=True)
+    fitted = synthesize_divide_tree(dataclasses.replace(t, neighbour_gradient=target), size_m=30_000.0, rng=6,
+                                    params=on)
     x, y, z = (fitted.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
     g1 = float(np.median(_nn_gradient_by_hand(x, y, z)))
     rec = fitted.attrs["neighbour_gradient"]
     assert rec["reached"] == pytest.approx(g1, rel=1e-4) and rec["fine_weight"] > 0
     assert abs(np.log(g1 / target)) < 0.5 * abs(np.log(g0 / target))
-    again = synthesize_divide_tree(dataclasses.replace(t, neighbour_gradient=target), size_m=30_000.0, rng=6)
+    again = synthesize_divide_tree(dataclasses.replace(t, neighbour_gradient=target), size_m=30_000.0, rng=6,
+                                   params=on)
     assert again.peaks.equals(fitted.peaks) and again.saddles.equals(fitted.saddles)  # same seed, same tree
     assert plain.attrs["neighbour_gradient"] is None
     fitted.validate()

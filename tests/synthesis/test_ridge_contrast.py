@@ -80,8 +80,7 @@ def test_type_records_its_tree_contrast_and_round_trips(small_type):
 
 def test_synthesis_follows_the_type_contrast(small_type):
     size = 30_000.0
-    # the peak field of the fine C_H fit (on by default) is not what this test is about
-    params_off = SynthesisParams(follow_ridge_contrast=False, follow_neighbour_gradient=False)
+    params_off = SynthesisParams(follow_ridge_contrast=False)
     base = synthesize_divide_tree(small_type, size_m=size, rng=5, params=params_off)
     x, y, z = (base.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
     c_paper = _contrast_by_hand(x, y, z, base.edges["peak_a"].to_numpy(), base.edges["peak_b"].to_numpy())
@@ -89,7 +88,7 @@ def test_synthesis_follows_the_type_contrast(small_type):
     target = dataclasses.replace(small_type, ridge_contrast=c_paper + 0.25)
     off = synthesize_divide_tree(target, size_m=size, rng=5, params=params_off)
     assert off.edges.equals(base.edges)  # off: the type's record is ignored
-    on = synthesize_divide_tree(target, size_m=size, rng=5, params=SynthesisParams(follow_neighbour_gradient=False))
+    on = synthesize_divide_tree(target, size_m=size, rng=5)
     x, y, z = (on.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
     got = _contrast_by_hand(x, y, z, on.edges["peak_a"].to_numpy(), on.edges["peak_b"].to_numpy())
     assert abs(got - (c_paper + 0.25)) < 0.05 and on.attrs["ridge_contrast"]["reached"] == pytest.approx(got, abs=1e-3)
