@@ -75,12 +75,13 @@ def test_river_floor_raises_beds_to_it_and_nothing_else():
 
 def test_render_with_the_floor_keeps_the_orometry_and_lifts_the_valleys():
     """The small tree rendered with a tight floor: every peak recovered, none extra, peaks and saddles
-    exact; the skeleton's beds sit on or above the floor; the default is off."""
-    assert RenderParams().saddle_floor_ratio is None
+    exact; the skeleton's beds sit on or above the floor (the default ratio is 1)."""
+    assert RenderParams().saddle_floor_ratio == 1.0
     tree = small_tree()
     params = RenderParams(lam=200.0, saddle_floor_ratio=0.0)
     dem, skel = render_elevation(tree, cell_size_m=50.0, erosion=False, params=params, return_skeleton=True, rng=7)
-    plain = render_elevation(tree, cell_size_m=50.0, erosion=False, params=RenderParams(lam=200.0), rng=7)
+    plain = render_elevation(tree, cell_size_m=50.0, erosion=False, params=RenderParams(lam=200.0,
+                             saddle_floor_ratio=None), rng=7)
     peaks = tree.peaks[["x", "y", "elevation"]].to_numpy(float)
     saddles = tree.saddles[["x", "y", "elevation"]].to_numpy(float)
     rv = skel.river_network
