@@ -320,7 +320,7 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     s_x, s_y = xy(s_r, s_c)
     del sc_sorted, first, kp
     # the tree first (its parents are peak columns); its frames are the only copies of these columns
-    edges = pd.DataFrame({"peak_a": core.ridge_a, "peak_b": core.ridge_b, "saddle": ridge_sid})
+    edges = pd.DataFrame({"peak_a": core.ridge_a, "peak_b": core.ridge_b, "saddle": ridge_sid}, copy=False)
     # copy=False: the tree's frames and the tables share these columns (pandas copies on write)
     tree = DivideTree(
         pd.DataFrame({"row": rows, "col": cols, "x": x, "y": y, "elevation": elev}, copy=False),
