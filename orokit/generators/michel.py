@@ -32,7 +32,7 @@ import xarray as xr
 from scipy import ndimage
 
 from orokit.errors import InputError
-from orokit.generators.base import as_dataarray, check_crs, exemplar_slope, tree_arrays
+from orokit.generators.base import as_dataarray, check_crs, exemplar_slope, spread, tree_arrays
 from orokit.raster.rasterize import Grid
 from orokit.raster.rivers import RiverNetwork
 
@@ -321,25 +321,8 @@ def watershed_map(rivers: RiverNetwork | None, grid: Grid, *, river_slope: float
     if not src.any():  # no river inside: the border is the sea
         src[0, :] = src[-1, :] = src[:, 0] = src[:, -1] = True
         h0[src] = 0.0
-    return _spread(h0, src, grid, hill_slope), src
+    return spread(h0, src, grid, hill_slope), src
 
-
-def _spread(h0: np.ndarray, src: np.ndarray, grid: Grid, hill_slope: float) -> np.ndarray:
-    """``min over source cells (h0 + hill_slope x 8-connected path length)`` on the grid."""
-    from orokit.generators import _rusnell_kernels as _k
-
-    gi, gj = np.nonzero(src)
-    w = np.full((grid.ny, grid.nx, 4), hill_slope * grid.cell_size_m)
-    w[:, :, 1] *= math.sqrt(2.0)
-    w[:, :, 3] *= math.sqrt(2.0)
-    stamp = np.full((grid.ny, grid.nx), -1, np.int32)
-    fixed = np.full((grid.ny, grid.nx), -1, np.int32)
-    cost = np.zeros((grid.ny, grid.nx))
-    srcc = np.zeros((grid.ny, grid.nx))
-    touched = np.empty(grid.ny * grid.nx, np.int64)
-    _k.cost_field(w, gi.astype(np.int64), gj.astype(np.int64), h0[gi, gj], np.inf, np.ones(2), False,
-                  np.zeros((0, 0)), 0.0, stamp, 0, cost, srcc, touched, fixed, np.zeros((0, 0), np.uint8))
-    return cost
 
 
 def land_mask(vmap: VectorMap, grid: Grid) -> np.ndarray:
@@ -418,7 +401,7 @@ def map_watershed(vmap: VectorMap, grid: Grid, *, river_slope: float, hill_slope
     if not src.any():
         src[0, :] = src[-1, :] = src[:, 0] = src[:, -1] = True
         h0[src] = 0.0
-    return _spread(h0, src, grid, hill_slope), river, land
+    return spread(h0, src, grid, hill_slope), river, land
 
 
 def render(tree, rivers: RiverNetwork | None, grid: Grid, rng: np.random.Generator,

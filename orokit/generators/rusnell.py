@@ -31,7 +31,7 @@ import xarray as xr
 
 from orokit.errors import InputError
 from orokit.generators import _rusnell_kernels as _k
-from orokit.generators.base import as_dataarray, check_crs, exemplar_slope, tree_arrays
+from orokit.generators.base import as_dataarray, check_crs, exemplar_slope, spread, tree_arrays
 from orokit.raster.rasterize import Grid
 
 logger = logging.getLogger(__name__)
@@ -386,7 +386,7 @@ def river_plain(rivers, grid: Grid, *, slope: float) -> np.ndarray:
             row, col, ok = grid.cell_of(xy)
             np.minimum.at(h0, (row[ok], col[ok]), h[ok])
     src = np.isfinite(h0)
-    return _spread(h0, src, grid, slope) if src.any() else h0
+    return spread(h0, src, grid, slope) if src.any() else h0
 
 
 def generator_cap(gi: np.ndarray, gj: np.ndarray, cost: np.ndarray, top: float, grid: Grid, *,
@@ -402,7 +402,7 @@ def generator_cap(gi: np.ndarray, gj: np.ndarray, cost: np.ndarray, top: float, 
     """
     h0 = np.full((grid.ny, grid.nx), np.inf)
     np.minimum.at(h0, (gi, gj), np.asarray(cost, float) - top)
-    return -_spread(h0, np.isfinite(h0), grid, slope)
+    return -spread(h0, np.isfinite(h0), grid, slope)
 
 
 def saddle_cap(feats, costs, top: float, grid: Grid) -> np.ndarray:
@@ -423,21 +423,6 @@ def saddle_cap(feats, costs, top: float, grid: Grid) -> np.ndarray:
     _, (ii, jj) = ndimage.distance_transform_edt(np.isnan(low), return_indices=True)
     return low[ii, jj]
 
-
-def _spread(h0: np.ndarray, src: np.ndarray, grid: Grid, slope: float) -> np.ndarray:
-    """``min over source cells (h0 + slope x 8-connected path length)`` on ``grid``."""
-    gi, gj = np.nonzero(src)
-    w = np.full((grid.ny, grid.nx, 4), slope * grid.cell_size_m)
-    w[:, :, 1] *= math.sqrt(2.0)
-    w[:, :, 3] *= math.sqrt(2.0)
-    stamp = np.full((grid.ny, grid.nx), -1, np.int32)
-    fixed = np.full((grid.ny, grid.nx), -1, np.int32)
-    cost = np.zeros((grid.ny, grid.nx))
-    srcc = np.zeros((grid.ny, grid.nx))
-    touched = np.empty(grid.ny * grid.nx, np.int64)
-    _k.cost_field(w, gi.astype(np.int64), gj.astype(np.int64), h0[gi, gj], np.inf, np.ones(2), False,
-                  np.zeros((0, 0)), 0.0, stamp, 0, cost, srcc, touched, fixed, np.zeros((0, 0), np.uint8))
-    return cost
 
 
 def learn(exemplar: xr.DataArray, grid: Grid, params: RusnellParams, rng: np.random.Generator
