@@ -3,7 +3,7 @@
 Mosaics of n x n copies of a 648 x 648 real DEM (mirrored so seams are continuous):
 the four mirror images are written once as GeoTIFF tiles and a VRT places them n * n
 times, so nothing large is written (49 x 49: 1.0 G cells, 98 x 98: 4.0 G cells).
-Each is analysed with ``orokit.analyze(read_dem(VRT, chunks=C), chunks=C, geometry=False)``
+Each is analysed with ``orokit.analyze(read_dem(VRT, chunks=C), chunks=C, geometry=False, blocks=True)``
 and written with ``orokit.write_analysis`` (what ``orokit analyze VRT -o OUT --chunks C`` does),
 isolation on, in a fresh subprocess so its peak resident memory (all threads) is its own.
 Prints M cells/s, peak RSS, the summed time of chunk tasks and of merge tasks, time per
@@ -257,8 +257,8 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
     rss.enter("read")
     t0 = time.perf_counter()
     dem = read_dem(vrt, chunks=chunks)
-    # as `orokit analyze VRT -o OUT --chunks N`: tables without point geometries, every file written
-    r = orokit.analyze(dem, min_prominence_m=eps, chunks=chunks, geometry=False, scheduler=client)
+    # as `orokit analyze VRT -o OUT --chunks N`: the peaks table made by blocks of rows as it is written
+    r = orokit.analyze(dem, min_prominence_m=eps, chunks=chunks, geometry=False, blocks=True, scheduler=client)
     t_analyze = time.perf_counter() - t0
     rss.enter("before writing")
     rss_analyze = max(rss.peak.values())

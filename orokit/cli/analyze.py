@@ -118,7 +118,8 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
     result = run(da, min_prominence_m=min_prominence_m, outside=outside, isolation=not no_isolation,
                  progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint,
                  depressions=depressions, sea_level_m=sea_level_m, dem_error_m=dem_error_m, error_k=error_k,
-                 error_corr_m=error_corr_m, samples=samples, seed=seed, geometry=False)
+                 error_corr_m=error_corr_m, samples=samples, seed=seed, geometry=False,
+                 blocks=True)
     from orokit.io.analysis_io import write_analysis
 
     shape = da.shape

@@ -17,7 +17,13 @@ from orokit._typing import PathLike
 from orokit.errors import InputError
 from orokit.io.atomic import atomic_path, staged_folder, write_text_atomic
 from orokit.io.files import read_json_file
-from orokit.topology.tables import AnalysisResult, upgrade_attrs, validate_peak_table, validate_saddle_table
+from orokit.topology.tables import (
+    AnalysisResult,
+    table_rows,
+    upgrade_attrs,
+    validate_peak_table,
+    validate_saddle_table,
+)
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -89,11 +95,12 @@ def _write(result: AnalysisResult, out: Path) -> Path:
 def _write_parquet(frame, path: Path, crs: Any = None, batch_rows: int | None = None) -> None:
     """A table as GeoParquet (point geometry from ``x``/``y``), in row groups of ``batch_rows``.
 
-    ``frame``: a GeoDataFrame, or a DataFrame without geometry (points are made from
-    ``x``/``y`` in ``crs``). The file is that of ``GeoDataFrame.to_parquet`` (the same
-    bytes while the table fits in one row group; beyond, the same table in row groups of
-    ``batch_rows``). Only the schema goes through geopandas (from the first row); the
-    columns go to Arrow without copies and the points straight to WKB.
+    ``frame``: a GeoDataFrame, or a DataFrame or :class:`~orokit.topology.tables.TableBlocks`
+    without geometry (points are made from ``x``/``y`` in ``crs``). The file is that of
+    ``GeoDataFrame.to_parquet`` (the same bytes while the table fits in one row group;
+    beyond, the same table in row groups of ``batch_rows``). Only the schema goes through
+    geopandas (from the first row); each row group's columns go to Arrow without copies
+    and its points straight to WKB.
     """
     import geopandas as gpd
     import pyarrow as pa
@@ -106,32 +113,30 @@ def _write_parquet(frame, path: Path, crs: Any = None, batch_rows: int | None = 
     step = batch_rows or WRITE_BATCH_ROWS
     n = len(frame)
     has_geometry = isinstance(frame, gpd.GeoDataFrame)
-    head = frame.iloc[:1]
+    head = table_rows(frame, 0, 1)
     if has_geometry:
         crs = frame.crs
         geometry_name = frame.geometry.name
     else:
         head = gpd.GeoDataFrame(head, geometry=gpd.points_from_xy(head["x"], head["y"]), crs=crs)
-        x, y = frame["x"].to_numpy(np.float64), frame["y"].to_numpy(np.float64)
         geometry_name = "geometry"
     schema = _geopandas_to_arrow(head).schema
     schema = schema.with_metadata(_whole_table_metadata(schema.metadata, frame, n))
     with atomic_path(path) as tmp, pq.ParquetWriter(str(tmp), schema, compression="snappy") as writer:
         # one row group at a time, its points made for it: no WKB of the whole table (~25 bytes per row)
         for start in range(0, max(n, 1), step):
-            stop = min(n, start + step)
+            rows = table_rows(frame, start, min(n, start + step))
             arrays = []
             for field in schema:
                 if field.name == geometry_name:
-                    arrays.append(_geometry_wkb(frame.geometry.values[start:stop]) if has_geometry
-                                  else point_wkb(x[start:stop], y[start:stop]))
-                elif field.name in frame.columns:
-                    arrays.append(pa.Array.from_pandas(frame[field.name].iloc[start:stop], type=field.type))
+                    arrays.append(_geometry_wkb(rows.geometry.values) if has_geometry
+                                  else point_wkb(rows["x"].to_numpy(np.float64), rows["y"].to_numpy(np.float64)))
+                elif field.name in rows.columns:
+                    arrays.append(pa.Array.from_pandas(rows[field.name], type=field.type))
                 else:  # an index stored as a column (not a RangeIndex)
-                    arrays.append(pa.Array.from_pandas(frame.index.get_level_values(field.name)[start:stop],
-                                                       type=field.type))
+                    arrays.append(pa.Array.from_pandas(rows.index.get_level_values(field.name), type=field.type))
             writer.write_table(pa.Table.from_arrays(arrays, schema=schema))
-            del arrays
+            del arrays, rows
 
 
 def _geometry_wkb(geometry):
@@ -162,19 +167,36 @@ def _whole_table_metadata(meta: dict, frame, n: int) -> dict:
     return meta
 
 
-def _write_csv(frame, path: Path) -> None:
-    """A (Geo)DataFrame without its geometry as CSV, index first, floats in full precision.
+def _write_csv(frame, path: Path, batch_rows: int | None = None) -> None:
+    """A (Geo)DataFrame or :class:`~orokit.topology.tables.TableBlocks` without its geometry as CSV,
+    index first, floats in full precision, by blocks of ``batch_rows`` rows.
 
-    The columns go to Arrow without copies (one Arrow table, written by Arrow's CSV writer).
+    Each block's columns go to Arrow without copies and to Arrow's CSV writer (the bytes
+    of one ``write_csv`` of the whole table).
     """
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    columns = [c for c in frame.columns if c != "geometry"]
-    names = [frame.index.name or "index", *columns]
-    arrays = [pa.Array.from_pandas(frame.index), *(pa.Array.from_pandas(frame[c]) for c in columns)]
+    from orokit.io.divide_tree_gpkg import WRITE_BATCH_ROWS
+
+    step = batch_rows or WRITE_BATCH_ROWS
+    n = len(frame)
     with atomic_path(path) as tmp:
-        pacsv.write_csv(pa.Table.from_arrays(arrays, names=names), str(tmp))
+        writer = None
+        try:
+            for start in range(0, max(n, 1), step):
+                rows = table_rows(frame, start, min(n, start + step))
+                columns = [c for c in rows.columns if c != "geometry"]
+                names = [rows.index.name or "index", *columns]
+                arrays = [pa.Array.from_pandas(rows.index), *(pa.Array.from_pandas(rows[c]) for c in columns)]
+                table = pa.Table.from_arrays(arrays, names=names)
+                if writer is None:
+                    writer = pacsv.CSVWriter(str(tmp), table.schema)
+                writer.write_table(table)
+                del rows, arrays, table
+        finally:
+            if writer is not None:
+                writer.close()
 
 
 def read_analysis(outdir: PathLike) -> AnalysisResult:

@@ -17,7 +17,7 @@ from orokit._typing import PathLike
 from orokit.errors import InputError
 from orokit.io.atomic import atomic_path
 from orokit.topology.divide_tree import DivideTree
-from orokit.topology.tables import upgrade_attrs
+from orokit.topology.tables import table_rows, upgrade_attrs
 from orokit.topology.tree_checks import check_read_tree
 
 logger = logging.getLogger(__name__)
@@ -116,11 +116,11 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
 
     crs = _gdal_crs(tree.crs)
 
-    def write(columns: dict[str, Any], wkb, n: int, layer: str, geometry_type: str) -> None:
+    def write(columns: dict[str, Any], wkb, n: int, layer: str, geometry_type: str, more=None) -> None:
         """One layer from whole columns (no copies), in one write streamed by batches of
         ``WRITE_BATCH_ROWS`` rows; ``wkb(start, stop)`` makes the geometries of a batch, so no
-        geometry column of the whole layer is ever held (the ridges': ~90 bytes per ridge)."""
-        names = [*columns, "geometry"]
+        geometry column of the whole layer is ever held (the ridges': ~90 bytes per ridge);
+        ``more(start, stop)``: further columns made for the batch (a dict, after ``columns``)."""
 
         def rows(v, start: int, stop: int):
             return v.iloc[start:stop] if isinstance(v, pd.Series) else v[start:stop]
@@ -129,10 +129,17 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
             types = None  # the first batch's column types, kept by the others
             for start in range(0, max(n, 1), WRITE_BATCH_ROWS):
                 stop = min(n, start + WRITE_BATCH_ROWS)
-                arrays = [pa.Array.from_pandas(rows(v, start, stop), type=None if types is None else types[i])
-                          for i, v in enumerate(columns.values())]
+                values = [rows(v, start, stop) for v in columns.values()]
+                names = list(columns)
+                if more is not None:
+                    extra = more(start, stop)
+                    values += list(extra.values())
+                    names += list(extra)
+                arrays = [pa.Array.from_pandas(v, type=None if types is None else types[i])
+                          for i, v in enumerate(values)]
                 types = [a.type for a in arrays]
-                yield pa.RecordBatch.from_arrays([*arrays, wkb(start, stop)], names=names)
+                del values
+                yield pa.RecordBatch.from_arrays([*arrays, wkb(start, stop)], names=[*names, "geometry"])
 
         stream = batches()
         first = next(stream)
@@ -141,13 +148,18 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
         pyogrio.write_arrow(reader, tmp, layer=layer, geometry_name="geometry", geometry_type=geometry_type, crs=crs,
                             **_GPKG)
 
-    def points(frame: pd.DataFrame, id_name: str, layer: str, extra: pd.DataFrame | None = None) -> None:
+    def points(frame: pd.DataFrame, id_name: str, layer: str, extra: Any = None) -> None:
+        """A point layer of ``frame``'s columns, then the ``added`` columns of ``extra`` (a table
+        with the same rows: a DataFrame or TableBlocks, whose rows are taken batch by batch)."""
         columns: dict[str, Any] = {id_name: np.arange(len(frame), dtype=np.int64)}
         columns.update((c, frame[c]) for c in frame.columns)
+        more = None
         if extra is not None:
-            columns.update((c, extra[c]) for c in added)
+            def more(i: int, j: int) -> dict[str, Any]:
+                block = table_rows(extra, i, j)
+                return {c: block[c] for c in added}
         x, y = frame["x"].to_numpy(np.float64), frame["y"].to_numpy(np.float64)
-        write(columns, lambda i, j: point_wkb(x[i:j], y[i:j]), len(frame), layer, "Point")
+        write(columns, lambda i, j: point_wkb(x[i:j], y[i:j]), len(frame), layer, "Point", more)
 
     with atomic_path(path) as tmp, _sqlite_without_sync(), warnings.catch_warnings():
         # a tree on a local grid has no CRS: that is recorded in attrs, not a problem

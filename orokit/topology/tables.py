@@ -11,16 +11,22 @@ and checked by :func:`validate_peak_table`.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
 
 from orokit.errors import SchemaError
 from orokit.geodesy import cell_size_key
 from orokit.topology.divide_tree import DivideTree
 
+if TYPE_CHECKING:
+    import pandas as pd
+
 __all__ = [
     "Column", "PEAK_SCHEMA", "PEAK_COLUMNS", "OROMETRY_COLUMNS", "SADDLE_SCHEMA", "SADDLE_COLUMNS", "NONE_ID",
-    "AnalysisResult", "validate_peak_table", "validate_saddle_table", "upgrade_attrs",
+    "AnalysisResult", "TableBlocks", "table_rows", "validate_peak_table", "validate_saddle_table", "upgrade_attrs",
 ]
 
 #: "none" of every integer column (raster cell, peak id)
@@ -120,6 +126,8 @@ def _validate(table: Any, schema: tuple[Column, ...], index: str, what: str, sou
     import pandas as pd
 
     where = f"{source}: " if source else ""
+    if isinstance(table, TableBlocks):  # its first block: every block has the same columns and dtypes
+        table = table.block(0, 1 << 16)
     if not isinstance(table, pd.DataFrame):
         raise SchemaError(f"{where}the {what} table must be a (Geo)DataFrame, got {type(table).__name__}")
     missing = [c.name for c in schema if c.name not in table.columns]
@@ -168,6 +176,77 @@ def validate_saddle_table(saddles: Any, *, source: str | None = None) -> None:
     _validate(saddles, SADDLE_SCHEMA, "saddle_id", "saddles", source)
 
 
+class TableBlocks:
+    """A table whose rows are made block by block when read (a table larger than memory).
+
+    ``make(start, stop)`` returns the DataFrame of rows ``start:stop`` (index named
+    ``index_name``, values ``start..stop-1``); every block has the same columns and
+    dtypes. ``shared``: whole columns already held elsewhere (returned without making
+    blocks). Columns set with ``table[name] = values`` (whole arrays) are appended to
+    every block. Writers take the rows with :meth:`blocks`; ``table[name]`` gives one
+    whole column; :meth:`to_frame` the whole table (all of it in memory).
+    """
+
+    def __init__(self, n: int, make: Callable[[int, int], pd.DataFrame], *, index_name: str,
+                 shared: dict[str, np.ndarray] | None = None) -> None:
+        self._n = int(n)
+        self._make = make
+        self.index_name = index_name
+        self._shared = dict(shared or {})
+        self._extra: dict[str, np.ndarray] = {}
+
+    def __len__(self) -> int:
+        return self._n
+
+    def block(self, start: int, stop: int) -> pd.DataFrame:
+        """Rows ``start:stop`` (clipped to the table) as a DataFrame."""
+        start, stop = max(0, int(start)), min(self._n, int(stop))
+        frame = self._make(start, max(start, stop))
+        for name, values in self._extra.items():
+            frame[name] = values[start:stop]
+        return frame
+
+    def blocks(self, rows: int) -> Iterator[pd.DataFrame]:
+        """The table in blocks of ``rows`` rows (one empty block for an empty table)."""
+        for start in range(0, max(self._n, 1), rows):
+            yield self.block(start, start + rows)
+
+    @property
+    def columns(self) -> list[str]:
+        return list(self.block(0, 0).columns)
+
+    def __getitem__(self, name: str) -> pd.Series:
+        """One whole column (made block by block unless shared or set)."""
+        import pandas as pd
+
+        if name in self._extra:
+            values = self._extra[name]
+        elif name in self._shared:
+            values = self._shared[name]
+        else:
+            step = 1 << 16
+            values = np.concatenate([b[name].to_numpy() for b in self.blocks(step)])
+        index = pd.RangeIndex(self._n, name=self.index_name)
+        return pd.Series(values, index=index, name=name, copy=False)
+
+    def __setitem__(self, name: str, values: Any) -> None:
+        values = np.asarray(values)
+        if values.shape != (self._n,):
+            raise ValueError(f"column {name!r} needs {self._n} values, got shape {values.shape}")
+        self._extra[name] = values
+
+    def to_frame(self) -> pd.DataFrame:
+        """The whole table as one DataFrame."""
+        return self.block(0, self._n)
+
+
+def table_rows(table: Any, start: int, stop: int) -> pd.DataFrame:
+    """Rows ``start:stop`` of a (Geo)DataFrame or a :class:`TableBlocks` as a (Geo)DataFrame."""
+    if isinstance(table, TableBlocks):
+        return table.block(start, stop)
+    return table.iloc[start:stop]
+
+
 @dataclass
 class AnalysisResult:
     """Output of :func:`orokit.analyze` (write it with :func:`orokit.write_analysis`).
@@ -175,7 +254,8 @@ class AnalysisResult:
     Attributes
     ----------
     peaks : GeoDataFrame indexed by ``peak_id`` with :data:`PEAK_COLUMNS` (:data:`PEAK_SCHEMA`);
-        a plain DataFrame (no point geometry) from ``analyze(geometry=False)``.
+        a plain DataFrame (no point geometry) from ``analyze(geometry=False)``; a
+        :class:`TableBlocks` (rows made by blocks when written) from ``analyze(blocks=True)``.
     saddles : GeoDataFrame (or DataFrame) indexed by ``saddle_id`` with :data:`SADDLE_COLUMNS`.
     tree : the Divide Tree pruned at the threshold (same ids).
     crs : CRS of x/y (None for a local metric grid without CRS).

@@ -167,3 +167,73 @@ def test_tables_without_geometry_write_the_same_files(result, tmp_path):
     for layer in ("peaks", "saddles", "ridges"):
         a = gpd.read_file(tmp_path / "lean" / "dividetree.gpkg", layer=layer)
         assert a.equals(gpd.read_file(tmp_path / "geo" / "dividetree.gpkg", layer=layer)), layer
+
+
+@pytest.mark.parametrize("batch", [None, 3])
+def test_tables_made_by_blocks_write_the_same_files(result, tmp_path, monkeypatch, batch):
+    """``analyze(blocks=True)`` (what the CLI runs): the peaks table's rows are made by blocks when
+    written; the same rows as the whole table, the same bytes of every table file and the same
+    GeoPackage layers, with one block and with blocks of 3 rows (several, the last one partial)."""
+    import geopandas as gpd
+    import xarray as xr
+
+    import orokit.io.divide_tree_gpkg as gp
+    from orokit.analysis import write_analysis
+    from orokit.topology.tables import TableBlocks
+
+    rng = np.random.default_rng(3)  # the grid of the ``result`` fixture
+    z = rng.integers(0, 40, (30, 40)).astype(np.float32)
+    z[5:8, 5:9] = np.nan
+    dem = xr.DataArray(z, dims=("y", "x"), coords={"y": 30.0 * np.arange(30)[::-1] + 15, "x": 30.0 * np.arange(40) + 15})
+    lean = orokit.analyze(dem.rio.write_crs("EPSG:32633"), min_prominence_m=5.0, geometry=False, blocks=True)
+    assert isinstance(lean.peaks, TableBlocks)
+    whole = result.peaks.drop(columns="geometry")
+    n = len(whole)
+    assert len(lean.peaks) == n > 7
+    assert lean.peaks.to_frame().equals(whole)
+    assert lean.peaks.block(2, 9).equals(whole.iloc[2:9])
+    assert lean.peaks.block(n - 2, n + 5).equals(whole.iloc[n - 2:])
+    for c in ("prominence", "lon", "x", "isolation_exact"):
+        assert lean.peaks[c].equals(whole[c]), c
+    if batch:
+        monkeypatch.setattr(gp, "WRITE_BATCH_ROWS", batch)
+    lean.attrs = dict(result.attrs)  # the same metadata (timings differ between runs)
+    write_analysis(lean, tmp_path / "blocks")
+    write_analysis(result, tmp_path / "frames")
+    for name in ("peaks.csv", "peaks.parquet", "saddles.parquet", "analysis.json"):
+        assert (tmp_path / "blocks" / name).read_bytes() == (tmp_path / "frames" / name).read_bytes(), name
+    for layer in ("peaks", "saddles", "ridges"):
+        a = gpd.read_file(tmp_path / "blocks" / "dividetree.gpkg", layer=layer)
+        assert a.equals(gpd.read_file(tmp_path / "frames" / "dividetree.gpkg", layer=layer)), layer
+
+
+def test_csv_written_by_blocks_is_one_csv_of_the_whole_table(result, tmp_path):
+    """peaks.csv by blocks of rows: the bytes of Arrow's one ``write_csv`` of the whole table."""
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    from orokit.io.analysis_io import _write_csv
+
+    p = result.peaks
+    columns = [c for c in p.columns if c != "geometry"]
+    whole = pa.Table.from_arrays([pa.Array.from_pandas(p.index), *(pa.Array.from_pandas(p[c]) for c in columns)],
+                                 names=["peak_id", *columns])
+    pacsv.write_csv(whole, str(tmp_path / "whole.csv"))
+    _write_csv(p, tmp_path / "blocks.csv", batch_rows=4)
+    assert (tmp_path / "blocks.csv").read_bytes() == (tmp_path / "whole.csv").read_bytes()
+
+
+def test_table_blocks_take_whole_extra_columns(result):
+    """Columns set on a TableBlocks (the DEM-error bounds) come after the others in every block."""
+    import xarray as xr
+
+    rng = np.random.default_rng(3)
+    z = rng.integers(0, 40, (30, 40)).astype(np.float32)
+    dem = xr.DataArray(z, dims=("y", "x"), coords={"y": 30.0 * np.arange(30)[::-1] + 15, "x": 30.0 * np.arange(40) + 15})
+    a = orokit.analyze(dem, min_prominence_m=5.0, dem_error_m=1.0)
+    b = orokit.analyze(dem, min_prominence_m=5.0, dem_error_m=1.0, geometry=False, blocks=True)
+    assert list(b.peaks.columns)[-2:] == ["prominence_low", "prominence_high"]
+    assert b.peaks.to_frame().equals(a.peaks.drop(columns="geometry"))
+    assert b.peaks.block(1, 4).equals(a.peaks.drop(columns="geometry").iloc[1:4])
+    with pytest.raises(ValueError, match="needs"):
+        b.peaks["bad"] = np.zeros(len(b.peaks) + 1)
