@@ -121,7 +121,7 @@ def as_dataarray(z: np.ndarray, grid: Grid, crs: Any, attrs: dict[str, Any] | No
 def spread(h0: np.ndarray, src: np.ndarray, grid: Grid, slope: float) -> np.ndarray:
     """``min over source cells (h0 + slope x 8-connected path length)`` on ``grid`` (Dijkstra on the
     8-connected grid, diagonal steps sqrt 2 cells long)."""
-    from orokit.generators import _rusnell_kernels as _k
+    from orokit.generators._rusnell_kernels import cost_field
 
     gi, gj = np.nonzero(src)
     w = np.full((grid.ny, grid.nx, 4), slope * grid.cell_size_m)
@@ -132,8 +132,8 @@ def spread(h0: np.ndarray, src: np.ndarray, grid: Grid, slope: float) -> np.ndar
     cost = np.zeros((grid.ny, grid.nx))
     srcc = np.zeros((grid.ny, grid.nx))
     touched = np.empty(grid.ny * grid.nx, np.int64)
-    _k.cost_field(w, gi.astype(np.int64), gj.astype(np.int64), h0[gi, gj], np.inf, np.ones(2), False,
-                  np.zeros((0, 0)), 0.0, stamp, 0, cost, srcc, touched, fixed, np.zeros((0, 0), np.uint8))
+    cost_field(w, gi.astype(np.int64), gj.astype(np.int64), h0[gi, gj], np.inf, np.ones(2), False,
+               np.zeros((0, 0)), 0.0, stamp, 0, cost, srcc, touched, fixed, np.zeros((0, 0), np.uint8))
     return cost
 
 
