@@ -23,7 +23,7 @@ from orokit.raster.rivers import RiverNetwork, ridge_segments, river_network
 
 __all__ = [
     "TreeArrays", "tree_arrays", "tree_rivers", "tree_sha256", "as_dataarray", "check_crs",
-    "params_to_dict", "parse_params",
+    "params_to_dict", "parse_params", "ridge_gradient", "ridge_cones",
 ]
 
 
@@ -85,20 +85,63 @@ def tree_sha256(tree) -> str:
     return h.hexdigest()
 
 
-def tree_rivers(tree, grid: Grid, *, margin_m: float = 5.0, slope: float = 0.01) -> RiverNetwork:
+def tree_rivers(tree, grid: Grid, *, margin_m: float = 5.0, slope: float = 0.01, cap=None) -> RiverNetwork:
     """The rivers of a tree on ``grid``'s extent: dual Voronoi edges of the straight ridges.
 
     :func:`orokit.raster.rivers.river_network` on the peaks and saddles with the
     unrefined (straight, no jitter) ridge pieces, so it is deterministic: every backend
     of one ranking run gets the same rivers. Outlets are on the grid border; beds lie
     ``margin_m`` below the ridges they face and fall ``slope`` m/m downstream, down to
-    ``min(peak, saddle elevations) - margin_m``.
+    ``min(peak, saddle elevations) - margin_m``. ``cap`` (e.g. :func:`ridge_cones`) keeps every
+    bed ``margin_m`` below it too (same nodes and receivers: the cap only moves the beds).
     """
     a = tree_arrays(tree)
     nodes = np.concatenate([a.peaks, a.saddles])
     ridges = ridge_segments(a.peaks, a.saddles, a.edges)
     base = float(nodes[:, 2].min()) - margin_m
-    return river_network(ridges, nodes[:, :2], grid.extent, base_elevation=base, margin_m=margin_m, slope=slope)
+    return river_network(ridges, nodes[:, :2], grid.extent, base_elevation=base, margin_m=margin_m, slope=slope,
+                         cap=cap)
+
+
+def ridge_gradient(tree) -> float:
+    """The tree's ridge gradient (m/m): the summed drops from each peak to the saddles of its
+    ridges over their summed horizontal lengths (0 for a tree without ridges)."""
+    a = tree_arrays(tree)
+    if not a.edges.size:
+        return 0.0
+    pk = np.concatenate([a.edges[:, 0], a.edges[:, 1]])
+    sd = np.concatenate([a.edges[:, 2], a.edges[:, 2]])
+    length = float(np.hypot(*(a.peaks[pk, :2] - a.saddles[sd, :2]).T).sum())
+    return float((a.peaks[pk, 2] - a.saddles[sd, 2]).sum()) / length if length > 0 else 0.0
+
+
+def ridge_cones(tree, slope: float, *, spacing_m: float, k_neighbours: int = 32):
+    """The ground the ridges' flanks leave: a callable ``(k, 2) xy -> (k,)`` giving
+    ``max_r (z_r - slope |xy - r|)`` over the ``k_neighbours`` ridge samples ``r`` nearest to each
+    point (ridges linear from peak to saddle, sampled every ``spacing_m``; ``slope`` in m/m).
+    A cap for :func:`tree_rivers`: beds stay ``margin_m`` below it."""
+    from scipy.spatial import cKDTree
+
+    a = tree_arrays(tree)
+    if not a.edges.size:
+        raise InputError("the Divide Tree has no ridge: no ridge cones")
+    pk = np.concatenate([a.edges[:, 0], a.edges[:, 1]])
+    sd = np.concatenate([a.edges[:, 2], a.edges[:, 2]])
+    p0, p1 = a.peaks[pk, :2], a.saddles[sd, :2]
+    n = np.maximum(np.ceil(np.hypot(*(p1 - p0).T) / spacing_m).astype(np.int64), 1) + 1
+    seg = np.repeat(np.arange(p0.shape[0]), n)
+    t = (np.arange(seg.size) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
+    rxy = p0[seg] + t[:, None] * (p1[seg] - p0[seg])
+    rz = a.peaks[pk, 2][seg] + t * (a.saddles[sd, 2][seg] - a.peaks[pk, 2][seg])
+    k = min(int(k_neighbours), rz.size)
+    kd = cKDTree(rxy)
+
+    def cap(xy: np.ndarray) -> np.ndarray:
+        d, i = kd.query(np.asarray(xy, float).reshape(-1, 2), k=k, workers=-1)
+        d, i = d.reshape(-1, k), i.reshape(-1, k)
+        return (rz[i] - float(slope) * d).max(axis=1)
+
+    return cap
 
 
 def as_dataarray(z: np.ndarray, grid: Grid, crs: Any, attrs: dict[str, Any] | None = None) -> xr.DataArray:

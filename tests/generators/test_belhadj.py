@@ -132,6 +132,66 @@ def test_river_cells_come_from_the_river_beds(tree_raster):
     assert z[river].min() >= rivers.elevation.min() - 1e-3
 
 
+def test_ridge_gradient_is_the_summed_drop_over_the_summed_length():
+    from orokit.generators.base import ridge_gradient, tree_arrays
+
+    tree = small_tree()
+    a = tree_arrays(tree)
+    drop = length = 0.0
+    for pa, pb, s in a.edges:  # brute force, ridge by ridge
+        for p in (pa, pb):
+            drop += a.peaks[p, 2] - a.saddles[s, 2]
+            length += float(np.hypot(*(a.peaks[p, :2] - a.saddles[s, :2])))
+    assert ridge_gradient(tree) == pytest.approx(drop / length)
+    assert ridge_gradient(tree) > 0
+
+
+@pytest.mark.parametrize("slope", [0.3, 1.0])
+def test_ridge_cones_cap_the_beds_of_the_same_rivers(tree_raster, slope):
+    from orokit.generators.base import ridge_cones, tree_arrays
+
+    tree, grid, rivers, _, _ = tree_raster
+    cap = ridge_cones(tree, slope, spacing_m=25.0, k_neighbours=10**6)
+    # brute force: the highest cone over every ridge point (sampled finely)
+    a = tree_arrays(tree)
+    t = np.linspace(0.0, 1.0, 401)
+    xy = rivers.xy
+    cone = np.full(xy.shape[0], -np.inf)
+    for pa, pb, s in a.edges:
+        for p in (pa, pb):
+            q = a.peaks[p] + t[:, None] * (a.saddles[s] - a.peaks[p])
+            d = np.hypot(xy[:, None, 0] - q[None, :, 0], xy[:, None, 1] - q[None, :, 1])
+            cone = np.maximum(cone, (q[None, :, 2] - slope * d).max(axis=1))
+    np.testing.assert_allclose(cap(xy), cone, atol=25.0 * slope)  # 25 m samples against 401 per ridge
+    low = tree_rivers(tree, grid, cap=cap)
+    np.testing.assert_array_equal(low.receiver, rivers.receiver)
+    np.testing.assert_array_equal(low.xy, rivers.xy)
+    base = rivers.elevation.min()
+    assert (low.elevation <= np.maximum(cap(xy) - 5.0, base) + 1e-6).all()
+    assert (low.elevation < rivers.elevation - 1.0).any()
+    has = low.receiver >= 0  # beds still fall downstream by at least 1 % (or sit on the base)
+    drop = low.elevation[has] - low.elevation[low.receiver[has]]
+    assert np.all((drop >= 0.01 * low.length[has] - 1e-6) | (low.elevation[low.receiver[has]] <= base + 1e-9))
+
+
+def test_valley_slope_default_is_the_ratio_times_the_ridge_gradient(tree_raster):
+    from orokit.generators.base import ridge_gradient
+
+    tree, grid, rivers, _, _ = tree_raster
+    _, s = B.valley_beds(tree, rivers, grid, B.BelhadjParams(valley_ratio=1.5))
+    assert s == pytest.approx(1.5 * ridge_gradient(tree))
+    given, s0 = B.valley_beds(tree, rivers, grid, B.BelhadjParams(valley_slope=0.0))
+    assert s0 == 0.0 and given is rivers
+    steep, s2 = B.valley_beds(tree, rivers, grid, B.BelhadjParams(valley_slope=1.0))
+    assert s2 == 1.0 and steep.receiver.size == rivers.receiver.size
+    dem = render_terrain(tree, generator="belhadj", grid=grid, seed=1, rivers=rivers)
+    import json
+
+    assert json.loads(dem.attrs["derived"])["valley_slope"] == pytest.approx(2.0 * ridge_gradient(tree))
+    flat = render_terrain(tree, generator="belhadj", grid=grid, seed=1, rivers=rivers, params={"valley_slope": 0.0})
+    assert not np.array_equal(dem.values, flat.values)
+
+
 def _edge_gradient(out: np.ndarray, known: np.ndarray) -> float:
     """Mean |step| between a skeleton cell and its 4-neighbours that are not skeleton."""
     steps = []
@@ -194,7 +254,8 @@ def test_padding_keeps_the_grid_and_crops():
                                  {"relief_displacement": -0.1},
                                  {"subdivision": "square-square"}, {"skeleton": "voronoi"},
                                  {"ridge_pairs": 0}, {"ridge_hurst": 1.0}, {"friction": 1.0}, {"gravity": 0.0},
-                                 {"river_particles": -1}])
+                                 {"river_particles": -1}, {"valley_slope": -0.1}, {"valley_slope": float("inf")},
+                                 {"valley_ratio": 0.0}])
 def test_out_of_range_parameters_are_refused(bad):
     from orokit.errors import InputError
 
