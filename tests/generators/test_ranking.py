@@ -111,6 +111,24 @@ def test_landform_status_tells_met_fixable_and_method_bound(monkeypatch):
     assert table.loc["flat_share", "norway"] == "fixable 1/2 (0.26 vs 0.06)"
 
 
+def test_landform_status_reads_the_label_before_the_backend(monkeypatch):
+    from orokit.reports import generators as rep
+
+    def run(label, seed):
+        r = _run(label, seed, region="norway")
+        r["backend"] = "guerin"
+        r["landform"] = {"curvature_per_km": 2.0}
+        r["landform_target"] = {"curvature_per_km": 1.0}
+        return r
+
+    monkeypatch.setattr(rep, "METHOD_BOUND", {"guerin-cross": {"curvature_per_km@norway": "another region's texture"}})
+    runs = [run("guerin", 0), run("guerin-cross", 0)]
+    assert rep.landform_status(runs, "guerin-cross").loc["curvature_per_km", "norway"] == "method 0/1 (2 vs 1)"
+    assert rep.landform_status(runs, "guerin").loc["curvature_per_km", "norway"] == "fixable 0/1 (2 vs 1)"
+    md = rep.ranking_markdown(runs)
+    assert md.count("another region's texture") == 1
+
+
 @pytest.fixture()
 def setup(tmp_path):
     """A tree file and a 'real' DEM of its domain (a smooth bump) at 100 m."""
