@@ -188,6 +188,12 @@ _MICHEL_HEIGHTS = ("peak heights are not an input (the paper's map gives peak po
                    "slopes (session 8: 19 = 19 of 36 targets)")
 _DRAINAGE = ("target: issue 11 gives no floor, and the real halves drain alike (targets 0.000-0.003 in karakoram, "
              "norway and sahara); argudo misses them too")
+_CROSS = ("the exemplar is another region's DEM (the row tests whether real texture flatters the "
+          "reclassification, issue 19): its texture is that region's; on the same trees with the region's own "
+          "exemplar guerin meets it (seed 0, session 10: appalachians curvature 1.42 with karakoram's exemplar, "
+          "norway curvature 2.00 and 5 km relief 0.099 with sahara's, sahara hypsometry 0.148 with "
+          "appalachians'; all met with their own; karakoram's DEM itself lies 0.70 from appalachians' spectral "
+          "slope, target 0.456)")
 METHOD_BOUND: dict[str, dict[str, str]] = {
     "*": {f"{k}@{r}": _DRAINAGE for k in ("drainage_share", "drainage_density")
           for r in ("karakoram", "norway", "sahara")},
@@ -208,6 +214,8 @@ METHOD_BOUND: dict[str, dict[str, str]] = {
                                         "0.5-1 km 0.44x; the dunes' flat spectrum (beta 0.83, guerin 2.96) is not in "
                                         "the tree, and exemplar atoms do not add it (max_detail 0 / 1 / 4: distance "
                                         "1.29 / 2.12 / 1.52; session 10)"},
+    "guerin-cross": {"curvature_per_km@appalachians": _CROSS, "spectral_slope@appalachians": _CROSS,
+                     "curvature_per_km@norway": _CROSS, "relief_5km@norway": _CROSS, "hypsometry@sahara": _CROSS},
     "michel": {"hypsometry": _MICHEL_HEIGHTS, "relief_5km": _MICHEL_HEIGHTS,
                "flat_share@norway": "norway's flat cells are its sea and coast: 7.8 of its 10.9 % flat cells lie "
                                     "within 50 m of the DEM's lowest point (10.3 % of the cells); the fold map, "
