@@ -188,6 +188,19 @@ _MICHEL_HEIGHTS = ("peak heights are not an input (the paper's map gives peak po
                    "slopes (session 8: 19 = 19 of 36 targets)")
 _DRAINAGE = ("target: issue 11 gives no floor, and the real halves drain alike (targets 0.000-0.003 in karakoram, "
              "norway and sahara); argudo misses them too")
+_GUERIN_COARSE = ("the coarse terrain interpolated from the tree's ridges and rivers is already steeper than "
+                  "the real terrain at the coarse cell (karakoram seed 0, 741 m cells: median slope 29.6 deg, 90th "
+                  "percentile 53.8, against 19.5 / 33.0 for the real DEM's 8x block means); amplification keeps it "
+                  "and adds the exemplar's detail (output 90th percentile 60.7 deg against 50.4). max_detail 0.5 / "
+                  "0.75 met both in seed 0 but lost the spectral slope (0.525) or the 1 km relief in other seeds "
+                  "(0.75: seed 1 spectral 0.316, seed 2 relief 0.370); step=radius: slope W1 8.6 (session 10)")
+_RUSNELL_FLOOR = ("eq. 1 maps every feature onto [c_g, c_s]: each feature's foot ends on the sea level, a flat "
+                  "floor, and the saddle cap adds plateaus (appalachians seed 0: 11.7 % of the cells flat against "
+                  "3.9 % real, 4.5 % within 50 m of the real DEM's lowest point where it has 0.04 %, 10th "
+                  "percentile 386 m against 585; sahara 32.5 % flat against 17.7 %). Measured variants (seed 0, "
+                  "targets met of 9, appalachians / norway): a saddle cap falling at the exemplar's slope 6 -> 5 / "
+                  "5 -> 5 (norway flatter); features on the river plain below c_s 6 -> 7 / 5 -> 3 (hypsometry 0.38; "
+                  "sahara 4); belhadj's valley beds 6 -> 6 / 5 -> 6 (session 10)")
 _CROSS = ("the exemplar is another region's DEM (the row tests whether real texture flatters the "
           "reclassification, issue 19): its texture is that region's; on the same trees with the region's own "
           "exemplar guerin meets it (seed 0, session 10: appalachians curvature 1.42 with karakoram's exemplar, "
@@ -198,9 +211,18 @@ METHOD_BOUND: dict[str, dict[str, str]] = {
     "*": {f"{k}@{r}": _DRAINAGE for k in ("drainage_share", "drainage_density")
           for r in ("karakoram", "norway", "sahara")},
     "belhadj": {"curvature_per_km": _BELHADJ_MDI,
+                "spectral_slope@appalachians": "the valley beds that meet the flat share (seed 0: 0.098 -> 0.041) "
+                                               "deepen the valleys: beta 3.19 -> 3.61 against 3.13 real (distance "
+                                               "0.47, target 0.456); the shared beds' flat corridors or deeper "
+                                               "cones (valley_ratio 1.5: 0.50; 3: 6 of 9 targets) do not meet both, "
+                                               "and MD's hurst does not move it (0.9: 3.61; session 10)",
                 "spectral_slope@sahara": "MD with hurst H has a spectral slope 2 + 2H >= 2; sahara's is 0.83 "
                                          "(the dunes' short-wave power)"},
-    "rusnell": {"curvature_per_km": "least-cost fields on the 8-connected grid are planar facets meeting in "
+    "rusnell": {"flat_share": _RUSNELL_FLOOR, "hypsometry@appalachians": _RUSNELL_FLOOR,
+                "spectral_slope@karakoram": "karakoram's beta is 3.84, rusnell's 3.31 (seed 0): the octagonal "
+                                            "cones' creases put the short-wave power (without the edge-weight noise, "
+                                            "r = 0: 3.19; session 10)",
+                "curvature_per_km": "least-cost fields on the 8-connected grid are planar facets meeting in "
                                     "creases (octagonal cones); the curvature sits on the creases",
                 "slope_deg@karakoram": "eq. 1 maps every feature's profile onto [c_g, c_s]: a feature falls its "
                                        "whole height within the profile's length, steeper than Karakoram's flanks "
@@ -208,7 +230,8 @@ METHOD_BOUND: dict[str, dict[str, str]] = {
                 "spectral_slope@sahara": "the features are smooth cones of the fitted profile with cell-scale "
                                          "edge-weight noise: none of the dunes' short-wave power (sahara's spectral "
                                          "slope 0.83)"},
-    "guerin": {"spectral_slope@sahara": "amplification keeps the coarse terrain (the tree's ridges and the shared "
+    "guerin": {"slope_deg@karakoram": _GUERIN_COARSE, "relief_1km@karakoram": _GUERIN_COARSE,
+               "spectral_slope@sahara": "amplification keeps the coarse terrain (the tree's ridges and the shared "
                                         "rivers, interpolated): seed 0, its power at 5-10 km wavelengths is 47x the "
                                         "real DEM's (belhadj on the same skeleton 47x, 13x without the rivers), at "
                                         "0.5-1 km 0.44x; the dunes' flat spectrum (beta 0.83, guerin 2.96) is not in "
@@ -217,6 +240,12 @@ METHOD_BOUND: dict[str, dict[str, str]] = {
     "guerin-cross": {"curvature_per_km@appalachians": _CROSS, "spectral_slope@appalachians": _CROSS,
                      "curvature_per_km@norway": _CROSS, "relief_5km@norway": _CROSS, "hypsometry@sahara": _CROSS},
     "michel": {"hypsometry": _MICHEL_HEIGHTS, "relief_5km": _MICHEL_HEIGHTS,
+               "curvature_per_km": "the folds are one fBm (beta 3) scaled to the tree's relief, so their curvature "
+                                   "follows the relief, not the region: seed 0, appalachians narrower than real "
+                                   "(10th / 90th percentiles -3.4 / 2.7 per km against -4.8 / 4.2), norway wider "
+                                   "(-5.3 / 4.7 against -3.8 / 3.6); one fbm_beta cannot move both ways, and "
+                                   "erosion off changes neither (distance 1.29 / 1.09 against 1.27 / 1.10; "
+                                   "session 10)",
                "flat_share@norway": "norway's flat cells are its sea and coast: 7.8 of its 10.9 % flat cells lie "
                                     "within 50 m of the DEM's lowest point (10.3 % of the cells); the fold map, "
                                     "scaled from the sea to the highest peak, puts 1.5 % there (seed 0, flat 1.9 %): "
