@@ -211,6 +211,9 @@ METHOD_BOUND: dict[str, dict[str, str]] = {
     "*": {f"{k}@{r}": _DRAINAGE for k in ("drainage_share", "drainage_density")
           for r in ("karakoram", "norway", "sahara")},
     "belhadj": {"curvature_per_km": _BELHADJ_MDI,
+                "relief_5km@sahara": "the valley beds trade sahara's hypsometry for its 5 km relief (seed 1: shared "
+                                     "beds hypsometry 0.169 against 0.138, 5 km relief met; valley beds hypsometry met, "
+                                     "5 km relief 0.247 against 0.243; valley_ratio 1.5: 0.245; session 10)",
                 "spectral_slope@appalachians": "the valley beds that meet the flat share (seed 0: 0.098 -> 0.041) "
                                                "deepen the valleys: beta 3.19 -> 3.61 against 3.13 real (distance "
                                                "0.47, target 0.456); the shared beds' flat corridors or deeper "
