@@ -26,6 +26,7 @@ so the merged result equals the in-memory engine's.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -123,16 +124,32 @@ def _reduce(s: ChunkSummary, min_prominence_m: float, needed: np.ndarray) -> Chu
     # defer: where one saddle joins several kept parts, a removed part stays and every edge of
     # that saddle is kept, until the final prune (same choices as the in-memory engine)
     oa, ob, oe, nb, nm, keep = _k.prune_edges(n, ea, eb, ez, ekey, keep, s.bmax, s.nmin, s.z, s.key, True)
-    del ea, eb
-    s.ea = s.eb = _NO_EDGES
-    tz, tk = ez, ekey
+    del ea, eb, ez, ekey
+    s.ea = s.eb = s.bmax = s.nmin = _NO_EDGES
     new_id = np.full(n, -1, np.int64)
     kept = np.flatnonzero(keep)
+    del keep
     new_id[kept] = np.arange(kept.size)
-    return ChunkSummary(
-        s.region, s.shape, s.key[kept], s.z[kept], s.ismax[kept], nb[kept], nm[kept], s.nexit[kept],
-        new_id[oa], new_id[ob], tz[oe], tk[oe], s.n_maxima,
-    )
+    # the reduced summary one array at a time, each source freed once taken (the top merges of a
+    # 4 G-cell mosaic: ~6.5 M nodes)
+    out: dict[str, Any] = {}
+    for f, src in (("bmax", nb), ("nmin", nm)):
+        out[f] = src[kept]
+    del nb, nm
+    for f in ("key", "z", "ismax", "nexit"):
+        out[f] = getattr(s, f)[kept]
+        setattr(s, f, _NO_EDGES)
+    del kept
+    out["ea"] = new_id[oa]
+    del oa
+    out["eb"] = new_id[ob]
+    del ob, new_id
+    out["ez"] = s.ez[oe]
+    s.ez = _NO_EDGES
+    out["ekey"] = s.ekey[oe]
+    s.ekey = _NO_EDGES
+    del oe
+    return ChunkSummary(s.region, s.shape, **out, n_maxima=s.n_maxima)
 
 
 def _frame(h: int, w: int) -> np.ndarray:
@@ -243,18 +260,25 @@ def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence_m: float, *
     sz = np.where(same_basin, np.inf, np.where(a_lower, za, zb))
     sk = np.where(a_lower, ka, kbb)
     sk = np.where(same_basin, -1 - sk, sk)
-    s = ChunkSummary(
-        region, a.shape,
-        np.concatenate([a.key, b.key]), np.concatenate([a.z, b.z]), np.concatenate([a.ismax, b.ismax]),
-        np.concatenate([a.bmax, b.bmax]), np.concatenate([a.nmin, b.nmin]), np.concatenate([a.nexit, b.nexit]),
-        np.concatenate([a.ea, b.ea + na, sea]), np.concatenate([a.eb, b.eb + na, seb + na]),
-        np.concatenate([a.ez, b.ez, sz]), np.concatenate([a.ekey, b.ekey, sk]),
-        a.n_maxima + b.n_maxima,
-    )
-    del za, zb, ka, kbb, sea, seb, sz, sk, a_lower, same_basin, order_b, kb, sa, ra, ca
+    del za, zb, ka, kbb, a_lower, same_basin, order_b, kb, sa, ra, ca
+    seam = {"ea": sea, "eb": seb + na, "ez": sz, "ekey": sk}
+    del sea, seb, sz, sk
+    n_maxima = a.n_maxima + b.n_maxima
+    merged: dict[str, Any] = {}
+    for f in _FIELDS:  # one field at a time; consumed inputs free each field once it is joined
+        parts = [getattr(a, f), getattr(b, f) + na if f in ("ea", "eb") else getattr(b, f)]
+        if f in seam:
+            parts.append(seam.pop(f))
+        merged[f] = np.concatenate(parts)
+        del parts
+        if consume:
+            setattr(a, f, _NO_EDGES)
+            setattr(b, f, _NO_EDGES)
     if consume:
         a.release()
         b.release()
+    s = ChunkSummary(region, a.shape, **merged, n_maxima=n_maxima)
+    del merged
     return _reduce(s, min_prominence_m, _side_mask(s.key, region, s.shape))
 
 

@@ -513,7 +513,7 @@ def _node_before(x, y, node_z, node_key):
 
 @njit(cache=True, nogil=True)
 def _before(g, h, key_t, key_hi, key_lo, node_z, node_key):
-    """Edge g goes before edge h at one saddle (see :func:`prune_edges`)."""
+    """Edge g goes before edge h at one saddle (see :func:`prune_edges`; g, h index the saddle's edges)."""
     for keys in (key_t, key_hi, key_lo):
         if keys[g] != keys[h]:
             return _node_before(keys[g], keys[h], node_z, node_key)
@@ -568,20 +568,29 @@ def prune_edges(n, ea, eb, ez, ekey, keep, bmax, nmin, node_z, node_key, defer):
     out_a = np.empty(ea.size, np.int64)
     out_b = np.empty(ea.size, np.int64)
     out_e = np.empty(ea.size, np.int64)
-    pre_a = np.empty(ea.size, np.int64)
-    pre_b = np.empty(ea.size, np.int64)
-    key_t = np.empty(ea.size, np.int64)
-    key_hi = np.empty(ea.size, np.int64)
-    key_lo = np.empty(ea.size, np.int64)
+    # per edge of the current saddle (index g - e), grown to the largest saddle: not per edge of
+    # the graph (16-40 bytes per edge at the top merges and the finalize of a 4 G-cell mosaic)
+    pre_a = np.empty(16, np.int64)
+    pre_b = np.empty(16, np.int64)
+    key_t = np.empty(16, np.int64)
+    key_hi = np.empty(16, np.int64)
+    key_lo = np.empty(16, np.int64)
     k = 0
     e = 0
     while e < ea.size:
         f = e + 1
         while f < ea.size and ekey[f] == ekey[e]:
             f += 1
+        if f - e > pre_a.size:
+            cap = max(f - e, 2 * pre_a.size)
+            pre_a = np.empty(cap, np.int64)
+            pre_b = np.empty(cap, np.int64)
+            key_t = np.empty(cap, np.int64)
+            key_hi = np.empty(cap, np.int64)
+            key_lo = np.empty(cap, np.int64)
         for g in range(e, f):
-            pre_a[g] = _find(uf, ea[g])
-            pre_b[g] = _find(uf, eb[g])
+            pre_a[g - e] = _find(uf, ea[g])
+            pre_b[g - e] = _find(uf, eb[g])
         seq = np.arange(e, f)
         if f - e > 1:
             if defer:
@@ -590,7 +599,7 @@ def prune_edges(n, ea, eb, ez, ekey, keep, bmax, nmin, node_z, node_key, defer):
                 roots = np.empty(2 * (f - e), np.int64)
                 m = 0
                 for g in range(e, f):
-                    for r in (pre_a[g], pre_b[g]):
+                    for r in (pre_a[g - e], pre_b[g - e]):
                         seen = False
                         for t in range(m):
                             if roots[t] == r:
@@ -602,7 +611,7 @@ def prune_edges(n, ea, eb, ez, ekey, keep, bmax, nmin, node_z, node_key, defer):
                     if not haskept[roots[t]]:
                         n_bare += 1
                 for g in range(e, f):
-                    if haskept[pre_a[g]] or haskept[pre_b[g]]:
+                    if haskept[pre_a[g - e]] or haskept[pre_b[g - e]]:
                         n_kept_parts += 1  # edges reaching a kept part
                 if n_kept_parts >= 2 and n_bare >= 1:
                     for t in range(m):
@@ -620,7 +629,7 @@ def prune_edges(n, ea, eb, ez, ekey, keep, bmax, nmin, node_z, node_key, defer):
                 hi = -1
                 lo = -1
                 for side in range(2):
-                    r = pre_a[g] if side == 0 else pre_b[g]
+                    r = pre_a[g - e] if side == 0 else pre_b[g - e]
                     x = ea[g] if side == 0 else eb[g]
                     if not haskept[r]:
                         continue
@@ -633,13 +642,13 @@ def prune_edges(n, ea, eb, ez, ekey, keep, bmax, nmin, node_z, node_key, defer):
                         hi = y
                     else:
                         lo = y
-                key_t[g] = best
-                key_hi[g] = hi
-                key_lo[g] = lo
+                key_t[g - e] = best
+                key_hi[g - e] = hi
+                key_lo[g - e] = lo
             for i in range(1, f - e):
                 g = seq[i]
                 j = i - 1
-                while j >= 0 and _before(g, seq[j], key_t, key_hi, key_lo, node_z, node_key):
+                while j >= 0 and _before(g - e, seq[j] - e, key_t, key_hi, key_lo, node_z, node_key):
                     seq[j + 1] = seq[j]
                     j -= 1
                 seq[j + 1] = g
@@ -651,7 +660,7 @@ def prune_edges(n, ea, eb, ez, ekey, keep, bmax, nmin, node_z, node_key, defer):
             if ra == rb:
                 # a second edge of this saddle between two parts it already joined: kept
                 # while deferring (the final prune chooses among them)
-                if defer and pre_a[g] != pre_b[g] and haskept[ra]:
+                if defer and pre_a[g - e] != pre_b[g - e] and haskept[ra]:
                     x = _find(anchor, a)
                     y = _find(anchor, b)
                     if x != y and keep[x] and keep[y]:
