@@ -81,6 +81,16 @@ class RenderParams:
     trench_slope, trench_depth_ratio : the trenches cut through saddles descend from the saddle at
         ``trench_slope`` (m/m) down to ``trench_depth_ratio * min_prominence_m`` below it (0: a level
         groove just below the saddle).
+    flank_slope_relief_m, flank_slope_relief_power, flank_slope_min, flank_slope_relief_k : the cone slope
+        ``flank_slope`` holds where the tree's local relief R at the ridge point (highest of its
+        ``flank_slope_relief_k`` nearest peaks - lowest of as many saddles, :func:`orokit.raster.rivers.local_relief`)
+        reaches ``flank_slope_relief_m``; below, the cones fall at
+        ``max(flank_slope_min, flank_slope * (R / flank_slope_relief_m)^flank_slope_relief_power)``
+        (:func:`orokit.raster.skeleton.relief_slope`): hillslopes stand at the critical angle only where relief is
+        large, below it in low, slowly eroding ranges (nonlinear diffusion, Roering et al. 1999); None = off.
+    flank_slope_gradient : as ``flank_slope_relief_m``, with the tree's relief gradient instead of its relief:
+        R divided by the distance to the farthest of those peaks (at least ``lam``), dimensionless; None = off
+        (at most one of the two).
     flank_relief_ratio, flank_relief_k : the cones also fall at least ``flank_relief_ratio`` x the tree's
         local relief gradient at the ridge point (the steepest drop to its ``flank_relief_k`` nearest
         peaks and saddles, :func:`orokit.raster.skeleton.tree_gradient`): gentle crests among deep
@@ -149,6 +159,11 @@ class RenderParams:
     erosion_k_dt: float = 0.02
     erosion_max_nodes: int = 4_000_000
     flank_slope: float = 0.5
+    flank_slope_relief_m: float | None = None
+    flank_slope_gradient: float | None = None
+    flank_slope_relief_power: float = 1.0
+    flank_slope_min: float = 0.05
+    flank_slope_relief_k: int = 16
     flank_relief_ratio: float = 0.0
     flank_relief_k: int = 8
     flank_ratio: float = 1.5
@@ -192,6 +207,12 @@ class RenderParams:
             raise InputError(f"hillslope_convexity must be in [0, 1], got {self.hillslope_convexity!r}")
         if self.max_slope_deg is not None and not 0.0 < float(self.max_slope_deg) < 90.0:
             raise InputError(f"max_slope_deg must be in (0, 90) degrees or None, got {self.max_slope_deg!r}")
+        if self.flank_slope_relief_m is not None and not float(self.flank_slope_relief_m) > 0.0:
+            raise InputError(f"flank_slope_relief_m must be > 0 metres or None, got {self.flank_slope_relief_m!r}")
+        if self.flank_slope_gradient is not None and not float(self.flank_slope_gradient) > 0.0:
+            raise InputError(f"flank_slope_gradient must be > 0 or None, got {self.flank_slope_gradient!r}")
+        if self.flank_slope_relief_m is not None and self.flank_slope_gradient is not None:
+            raise InputError("set at most one of flank_slope_relief_m and flank_slope_gradient")
         if self.surface not in ("tin", "field"):
             raise InputError(f"surface must be 'tin' or 'field', got {self.surface!r}")
 

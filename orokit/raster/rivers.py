@@ -18,7 +18,7 @@ from orokit.raster import _kernels
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["RidgeSegments", "RiverNetwork", "ridge_segments", "river_network", "saddle_floor"]
+__all__ = ["RidgeSegments", "RiverNetwork", "local_relief", "ridge_segments", "river_network", "saddle_floor"]
 
 
 @dataclass(frozen=True)
@@ -81,10 +81,34 @@ def ridge_segments(peak_xyz: np.ndarray, saddle_xyz: np.ndarray, edges: np.ndarr
     )
 
 
+def local_relief(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *,
+                 k: int = 16) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The Divide Tree's own relief around ``xy``: the lowest of the ``k`` nearest saddles, the highest
+    of the ``k`` nearest peaks and the distance to the farthest of those peaks (three ``(n,)`` arrays;
+    ``-inf`` / ``+inf`` / ``+inf`` without saddles or peaks).
+
+    >>> peaks = np.array([[0.0, 0.0, 150.0], [2000.0, 0.0, 120.0]])
+    >>> saddles = np.array([[1000.0, 0.0, 100.0]])
+    >>> [v.round(1).tolist() for v in local_relief(np.array([[1000.0, 0.0]]), peaks, saddles, k=4)]
+    [[100.0], [150.0], [1000.0]]
+    """
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    n = xy.shape[0]
+    if saddle_xyz.shape[0] == 0 or peak_xyz.shape[0] == 0 or n == 0:
+        return np.full(n, -np.inf), np.full(n, np.inf), np.full(n, np.inf)
+    from scipy.spatial import cKDTree
+
+    _, js = cKDTree(saddle_xyz[:, :2]).query(xy, k=min(int(k), saddle_xyz.shape[0]), workers=-1)
+    dp, jp = cKDTree(peak_xyz[:, :2]).query(xy, k=min(int(k), peak_xyz.shape[0]), workers=-1)
+    s = saddle_xyz[js.reshape(n, -1), 2].min(axis=1)
+    p = peak_xyz[jp.reshape(n, -1), 2].max(axis=1)
+    return s, p, dp.reshape(n, -1)[:, -1]
+
+
 def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *, ratio: float,
                  k: int = 16) -> np.ndarray:
     """Lowest ground the Divide Tree allows at ``xy``: ``s - ratio * (p - s)``, with ``s`` the lowest of the
-    ``k`` nearest saddles and ``p`` the highest of the ``k`` nearest peaks.
+    ``k`` nearest saddles and ``p`` the highest of the ``k`` nearest peaks (:func:`local_relief`).
 
     The tree's own local relief: in a dune field or on a plateau the saddles lie at the level of the
     flats between the hills and the peaks just above them, so the floor is close under the saddles;
@@ -100,12 +124,7 @@ def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
     xy = np.asarray(xy, float).reshape(-1, 2)
     if saddle_xyz.shape[0] == 0 or peak_xyz.shape[0] == 0 or xy.shape[0] == 0:
         return np.full(xy.shape[0], -np.inf)
-    from scipy.spatial import cKDTree
-
-    _, js = cKDTree(saddle_xyz[:, :2]).query(xy, k=min(int(k), saddle_xyz.shape[0]), workers=-1)
-    _, jp = cKDTree(peak_xyz[:, :2]).query(xy, k=min(int(k), peak_xyz.shape[0]), workers=-1)
-    s = saddle_xyz[js.reshape(xy.shape[0], -1), 2].min(axis=1)
-    p = peak_xyz[jp.reshape(xy.shape[0], -1), 2].max(axis=1)
+    s, p, _ = local_relief(xy, peak_xyz, saddle_xyz, k=k)
     return s - float(ratio) * np.maximum(p - s, 0.0)
 
 

@@ -15,12 +15,13 @@ from orokit.raster.interpolate import flank_envelope, poisson_samples, sample_el
 from orokit.raster.params import RenderParams
 from orokit.raster.profiles import hillslope_profile, ridge_profile, threshold_profile
 from orokit.raster.refine import Polylines, densify, refine_segments
-from orokit.raster.rivers import RidgeSegments, RiverNetwork, ridge_segments, river_network, saddle_floor
+from orokit.raster.rivers import (RidgeSegments, RiverNetwork, local_relief, ridge_segments, river_network,
+                                  saddle_floor)
 from orokit.raster.tin import TIN, constrained_tin
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["TerrainSkeleton", "build_skeleton", "separate_saddles", "tree_extent", "tree_gradient"]
+__all__ = ["TerrainSkeleton", "build_skeleton", "relief_slope", "separate_saddles", "tree_extent", "tree_gradient"]
 
 
 @dataclass(frozen=True)
@@ -129,6 +130,23 @@ def tree_gradient(xy: np.ndarray, z: np.ndarray, nodes: np.ndarray, *, k: int = 
     return np.max(drop / np.maximum(d, max(float(min_distance_m), 1e-9)), axis=1)
 
 
+def relief_slope(relief: np.ndarray, slope: float, relief_m: float, *, power: float = 1.0,
+                 min_slope: float = 0.0) -> np.ndarray:
+    """Cone slope for the tree's local relief: ``slope`` where ``relief >= relief_m``, below it
+    ``max(min_slope, slope * (relief / relief_m)^power)`` (never above ``slope``).
+
+    Hillslopes stand near a critical angle only where the relief is large (fast erosion); in low,
+    slowly eroding ranges they are gentler (nonlinear diffusion, Roering et al. 1999).
+
+    >>> relief_slope(np.array([0.0, 250.0, 500.0, 2000.0]), 0.5, 500.0, min_slope=0.05).tolist()
+    [0.05, 0.25, 0.5, 0.5]
+    """
+    if relief_m <= 0:
+        raise ValueError(f"relief_m must be > 0, got {relief_m!r}")
+    r = np.clip(np.asarray(relief, float) / float(relief_m), 0.0, 1.0)
+    return np.clip(float(slope) * r ** float(power), min(float(min_slope), float(slope)), float(slope))
+
+
 def _cone_floor(lines: Polylines, point_origin: np.ndarray, pieces: RidgeSegments, node_z: np.ndarray,
                 depth_ratio: float | None) -> np.ndarray | None:
     """Lowest elevation the flank cone of each densified ridge point may reach:
@@ -203,7 +221,17 @@ def build_skeleton(
     fine_ridges = RidgeSegments(ridge_lines.xy[fine[:, 0]], ridge_lines.xy[fine[:, 1]],
                                 ridge_lines.z[fine[:, 0]], ridge_lines.z[fine[:, 1]], fine[:, 0], fine[:, 1])
     rxy, rz, rs, rorig = densify(ridge_lines, lam / 4.0, value="slope", origin=True)
-    rs = np.maximum(params.flank_slope, params.flank_ratio * rs)
+    relief_scale = params.flank_slope_relief_m if params.flank_slope_gradient is None else params.flank_slope_gradient
+    if relief_scale is not None and n < nodes.shape[0]:
+        s_low, p_high, radius = local_relief(rxy, p, s, k=params.flank_slope_relief_k)
+        relief = p_high - s_low
+        if params.flank_slope_gradient is not None:
+            relief = relief / np.maximum(radius, lam)  # the tree's relief gradient
+        base_slope = relief_slope(relief, params.flank_slope, relief_scale,
+                                  power=params.flank_slope_relief_power, min_slope=params.flank_slope_min)
+        rs = np.maximum(base_slope, params.flank_ratio * rs)
+    else:
+        rs = np.maximum(params.flank_slope, params.flank_ratio * rs)
     if params.flank_relief_ratio > 0:
         rs = np.maximum(rs, params.flank_relief_ratio * tree_gradient(rxy, rz, nodes, k=params.flank_relief_k,
                                                                       min_distance_m=lam))

@@ -3,9 +3,12 @@ slope, as deep as the tree's own relief allows."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from orokit.errors import InputError
 from orokit.raster.params import RenderParams
-from orokit.raster.skeleton import build_skeleton
+from orokit.raster.rivers import local_relief
+from orokit.raster.skeleton import build_skeleton, relief_slope
 
 from helpers.trees import small_tree
 
@@ -29,3 +32,62 @@ def test_default_cones_cut_deeper_valleys_than_gentle_cones():
     # the ground between ridges and rivers is lower on average (deeper valleys, not only beds)
     assert steep.tin.z.mean() < gentle.tin.z.mean() - 10.0
 
+
+
+def test_relief_slope_follows_the_relief_up_to_the_critical_slope():
+    """``relief_slope`` against its formula: the full slope from ``relief_m`` up, a power law below,
+    never under ``min_slope``, monotone in the relief."""
+    r = np.linspace(0.0, 3000.0, 61)
+    for power in (0.5, 1.0, 2.0):
+        got = relief_slope(r, 0.5, 1000.0, power=power, min_slope=0.1)
+        want = np.maximum(0.1, 0.5 * np.minimum(r / 1000.0, 1.0) ** power)
+        np.testing.assert_allclose(got, want)
+        assert (np.diff(got) >= 0).all()
+    assert (relief_slope(r, 0.5, 1000.0)[r >= 1000.0] == 0.5).all()
+    # a minimum above the slope cannot raise the slope
+    assert (relief_slope(r, 0.05, 1000.0, min_slope=0.2) == 0.05).all()
+    with pytest.raises(ValueError):
+        relief_slope(r, 0.5, 0.0)
+    with pytest.raises(InputError):
+        RenderParams(flank_slope_relief_m=0.0)
+    with pytest.raises(InputError):
+        RenderParams(flank_slope_gradient=-0.1)
+    with pytest.raises(InputError):
+        RenderParams(flank_slope_relief_m=500.0, flank_slope_gradient=0.2)
+
+
+@pytest.mark.parametrize("name, mid_scale", [("flank_slope_relief_m", 1200.0), ("flank_slope_gradient", 0.2)])
+def test_relief_cones_lie_between_the_gentle_and_the_critical_cones(name, mid_scale):
+    """With the cone slope following the tree's local relief or relief gradient (off by default), a scale
+    far above the small tree's (600 m; over its ~5 km: ~0.1) gives the gentle cones of ``flank_slope_min``
+    exactly, one far below it the default cones exactly; in between every river bed lies between the two
+    (same network)."""
+    assert RenderParams().flank_slope_relief_m is None and RenderParams().flank_slope_gradient is None
+    tree = small_tree()
+    gentle = _skeleton(tree, flank_slope=0.05)
+    steep = _skeleton(tree)
+    low = _skeleton(tree, **{name: 1e9}, flank_slope_min=0.05)
+    high = _skeleton(tree, **{name: 1e-9})
+    np.testing.assert_array_equal(low.river_network.elevation, gentle.river_network.elevation)
+    np.testing.assert_array_equal(low.tin.z, gentle.tin.z)
+    np.testing.assert_array_equal(high.river_network.elevation, steep.river_network.elevation)
+    np.testing.assert_array_equal(high.tin.z, steep.tin.z)
+    mid = _skeleton(tree, **{name: mid_scale})
+    g, s, m = (k.river_network.elevation for k in (gentle, steep, mid))
+    assert np.array_equal(mid.river_network.receiver, steep.river_network.receiver)
+    assert (m <= g + 1e-9).all() and (m >= s - 1e-9).all()
+    assert (m < g - 10.0).any() and (m > s + 10.0).any()
+
+
+def test_local_relief_against_brute_force():
+    rng = np.random.default_rng(5)
+    peaks = np.column_stack([rng.uniform(0, 10_000, (30, 2)), rng.uniform(500, 900, 30)])
+    saddles = np.column_stack([rng.uniform(0, 10_000, (25, 2)), rng.uniform(300, 500, 25)])
+    q = rng.uniform(0, 10_000, (100, 2))
+    for k in (1, 7):
+        lo, hi, far = local_relief(q, peaks, saddles, k=k)
+        ds = np.hypot(*(q[:, None, :] - saddles[None, :, :2]).transpose(2, 0, 1))
+        dp = np.hypot(*(q[:, None, :] - peaks[None, :, :2]).transpose(2, 0, 1))
+        np.testing.assert_allclose(lo, saddles[np.argsort(ds, axis=1)[:, :k], 2].min(axis=1))
+        np.testing.assert_allclose(hi, peaks[np.argsort(dp, axis=1)[:, :k], 2].max(axis=1))
+        np.testing.assert_allclose(far, np.sort(dp, axis=1)[:, k - 1])
