@@ -154,9 +154,9 @@ def test_detail_leaves_the_flats_of_the_skeleton_flat():
     assert kept > everywhere
 
 
-@pytest.mark.parametrize("gain", [1.0, 40.0])
+@pytest.mark.parametrize("gain", [1.0, 60.0])
 def test_detail_never_makes_a_peak_of_the_tree_prominence(gain):
-    """Metamorphic: however strong the sub-lambda detail (at gain 40 it has ~37 m RMS, more than eps,
+    """Metamorphic: however strong the sub-lambda detail (at gain 60 it has more than 30 m RMS, more than eps,
     and makes hundreds of hills), with sub-eps hills kept, the render's peaks of prominence >= eps are
     exactly the tree's, with the tree's prominences."""
     p = RenderParams(detail_gain=gain, detail_flat_deg=2.0, keep_hill_ratio=0.5, cut_slope=0.05)

@@ -18,13 +18,13 @@ def _skeleton(tree, **kw):
 
 
 def test_default_cones_cut_deeper_valleys_than_gentle_cones():
-    """The default cones (``flank_slope`` 0.5, near the critical angle) put every river bed at or
+    """The session-9 cones (``flank_slope`` 0.5, near the critical angle) put every river bed at or
     below where the session-8 cones (0.05) put it (same network; the bed is monotone in the cap),
     and far lower where the ridges are high; the samples follow."""
     tree = small_tree()
-    assert RenderParams().flank_slope == 0.5 and RenderParams().flank_depth == 1.0
-    gentle = _skeleton(tree, flank_slope=0.05)
-    steep = _skeleton(tree)
+    assert RenderParams().flank_depth == 1.0
+    gentle = _skeleton(tree, flank_slope=0.05, flank_slope_relief_m=None)
+    steep = _skeleton(tree, flank_slope=0.5, flank_slope_relief_m=None)
     g, s = gentle.river_network.elevation, steep.river_network.elevation
     assert np.array_equal(gentle.river_network.receiver, steep.river_network.receiver)
     assert (s <= g + 1e-9).all()
@@ -54,25 +54,28 @@ def test_relief_slope_follows_the_relief_up_to_the_critical_slope():
         RenderParams(flank_slope_gradient=-0.1)
     with pytest.raises(InputError):
         RenderParams(flank_slope_relief_m=500.0, flank_slope_gradient=0.2)
+    # the default since session 10: the critical slope 0.6 from 1200 m of local relief up
+    d = RenderParams()
+    assert (d.flank_slope, d.flank_slope_relief_m, d.flank_slope_gradient) == (0.6, 1200.0, None)
 
 
 @pytest.mark.parametrize("name, mid_scale", [("flank_slope_relief_m", 1200.0), ("flank_slope_gradient", 0.2)])
 def test_relief_cones_lie_between_the_gentle_and_the_critical_cones(name, mid_scale):
-    """With the cone slope following the tree's local relief or relief gradient (off by default), a scale
+    """With the cone slope following the tree's local relief or relief gradient, a scale
     far above the small tree's (600 m; over its ~5 km: ~0.1) gives the gentle cones of ``flank_slope_min``
     exactly, one far below it the default cones exactly; in between every river bed lies between the two
     (same network)."""
-    assert RenderParams().flank_slope_relief_m is None and RenderParams().flank_slope_gradient is None
     tree = small_tree()
-    gentle = _skeleton(tree, flank_slope=0.05)
-    steep = _skeleton(tree)
-    low = _skeleton(tree, **{name: 1e9}, flank_slope_min=0.05)
-    high = _skeleton(tree, **{name: 1e-9})
+    off = {"flank_slope_relief_m": None}
+    gentle = _skeleton(tree, flank_slope=0.05, **off)
+    steep = _skeleton(tree, **off)
+    low = _skeleton(tree, **{**off, name: 1e9}, flank_slope_min=0.05)
+    high = _skeleton(tree, **{**off, name: 1e-9})
     np.testing.assert_array_equal(low.river_network.elevation, gentle.river_network.elevation)
     np.testing.assert_array_equal(low.tin.z, gentle.tin.z)
     np.testing.assert_array_equal(high.river_network.elevation, steep.river_network.elevation)
     np.testing.assert_array_equal(high.tin.z, steep.tin.z)
-    mid = _skeleton(tree, **{name: mid_scale})
+    mid = _skeleton(tree, **{**off, name: mid_scale})
     g, s, m = (k.river_network.elevation for k in (gentle, steep, mid))
     assert np.array_equal(mid.river_network.receiver, steep.river_network.receiver)
     assert (m <= g + 1e-9).all() and (m >= s - 1e-9).all()
