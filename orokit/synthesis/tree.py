@@ -149,6 +149,9 @@ class SynthesisParams:
         alike, rockies 0.05 against 0.10). An option, off: see NOTES (session 9).
     fine_elevation_m : correlation length of that component (metres, default 1 km: the spacing of
         neighbouring peaks).
+    ridge_slope_factor : ``follow_ridge_slope`` bounds the ridge slopes by this times the type's
+        ``max_ridge_slope`` (default 1; > 1 lets a few ridges be steeper than the real tree's 99th
+        percentile, as in the real tree's top 1 %).
     Measured for ``follow_gradient`` and the 4 km ``auto_elevation_m`` (``benchmarks/realism.py
     --twin-only``, 13 regions, seeds 0-2, session 7, load 6-9): twins' disks classified as their own
     region at least as often as the real disks under the spatial hold-out in 10, 9, 10 of 12 regions
@@ -177,6 +180,7 @@ class SynthesisParams:
     follow_ridge_slope: bool = False
     follow_neighbour_gradient: bool = False
     fine_elevation_m: float = 1000.0
+    ridge_slope_factor: float = 1.0
 
     def __post_init__(self) -> None:
         if self.use_bands not in ("auto", True, False):
@@ -195,6 +199,9 @@ class SynthesisParams:
         r = self.saddle_slope_ratio
         if r is not None and not (isinstance(r, (int, float)) and 1 <= float(r) < np.inf):
             raise InputError(f"saddle_slope_ratio must be a number >= 1 or None, got {r!r}")
+        f = self.ridge_slope_factor
+        if not (isinstance(f, (int, float)) and 0 < float(f) < np.inf):
+            raise InputError(f"ridge_slope_factor must be a number > 0, got {f!r}")
         for name in ("void_weight", "disk_weight"):
             v = getattr(self, name)
             try:
@@ -373,6 +380,8 @@ def synthesize_divide_tree(
 
     t1 = time.perf_counter()
     slope_cap = _ridge_slope_target(types) if p.follow_ridge_slope else None
+    if slope_cap is not None:
+        slope_cap *= float(p.ridge_slope_factor)
     sz, ot_info, below, band_mode = _saddle_elevations(types, peaks, px, py, a, b, sz, movable, eps, p, rng,
                                                        slope_cap)
     timings["saddle_elevations"] = time.perf_counter() - t1

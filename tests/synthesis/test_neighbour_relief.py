@@ -106,6 +106,13 @@ def test_synthesis_follows_the_ridge_slope_bound(tree_type):
     assert over(free) >= 0.08 and over(capped) < 0.5 * over(free)
     capped.validate()
     assert compare_to_type(capped, t)["max_bin_error"].max() < 0.2
+    # the factor scales the bound: twice the cap lets more ridges over the cap
+    loose = synthesize_divide_tree(capped_type, size_m=30_000.0, rng=3,
+                                   params=SynthesisParams(follow_ridge_slope=True, ridge_slope_factor=2.0))
+    assert loose.attrs["max_ridge_slope"] == pytest.approx(2 * cap)
+    assert over(loose) > over(capped)
+    with pytest.raises(InputError, match="ridge_slope_factor"):
+        SynthesisParams(ridge_slope_factor=0.0)
 
 
 def test_fine_elevation_fields():
