@@ -308,8 +308,6 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
         return x, y
 
     n = core.n_kept
-    rows, cols = core.peak_row, core.peak_col
-    x, y = xy(rows, cols)
     elev = core.peak_z.astype(np.float64, copy=False)
 
     # saddles of the pruned tree, in raster order (a monkey saddle serves several ridges)
@@ -319,11 +317,24 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     key_of = np.full(sc_sorted.size, -1, np.int64)
     kp = np.flatnonzero(core.key_saddle_cell >= 0)
     key_of[np.searchsorted(sc_sorted, core.key_saddle_cell[kp])] = kp
+    del first, kp
+    edges = pd.DataFrame({"peak_a": core.ridge_a, "peak_b": core.ridge_b, "saddle": ridge_sid}, copy=False)
+    line = prom_parent = None
+    if n:
+        # the parents read only the elevations and the ridges: found on a tree of those alone, before
+        # the places of peaks and saddles exist (~64 bytes per peak less under the sweeps' transient)
+        bare = DivideTree(pd.DataFrame({"x": elev, "y": elev, "elevation": elev}, copy=False),
+                          pd.DataFrame({"x": sad_z, "y": sad_z, "elevation": sad_z}, copy=False), edges)
+        parents = bare.parents()
+        del bare
+        line = parents["line_parent"].to_numpy(np.int64)
+        prom_parent = parents["prominence_parent"].to_numpy(np.int64)
+        del parents
+    rows, cols = core.peak_row, core.peak_col
+    x, y = xy(rows, cols)
     s_r, s_c = sc_sorted // W, sc_sorted % W
     s_x, s_y = xy(s_r, s_c)
-    del sc_sorted, first, kp
-    # the tree first (its parents are peak columns); its frames are the only copies of these columns
-    edges = pd.DataFrame({"peak_a": core.ridge_a, "peak_b": core.ridge_b, "saddle": ridge_sid}, copy=False)
+    del sc_sorted
     # copy=False: the tree's frames and the tables share these columns (pandas copies on write)
     tree = DivideTree(
         pd.DataFrame({"row": rows, "col": cols, "x": x, "y": y, "elevation": elev}, copy=False),
@@ -332,12 +343,6 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
         crs,
         {"units": "m"},
     )
-    line = prom_parent = None
-    if n:
-        parents = tree.parents()
-        line = parents["line_parent"].to_numpy(np.int64)
-        prom_parent = parents["prominence_parent"].to_numpy(np.int64)
-        del parents
     make = _peak_rows(core, rows, cols, x, y, elev, line, prom_parent, isolation, transform, crs)
     if blocks:
         shared = {"row": rows, "col": cols, "x": x, "y": y, "elevation": elev}

@@ -237,3 +237,12 @@ def test_table_blocks_take_whole_extra_columns(result):
     assert b.peaks.block(1, 4).equals(a.peaks.drop(columns="geometry").iloc[1:4])
     with pytest.raises(ValueError, match="needs"):
         b.peaks["bad"] = np.zeros(len(b.peaks) + 1)
+
+
+def test_table_parents_are_those_of_the_result_tree(result):
+    """``build_result`` finds the parents before the places exist (on the elevations and ridges alone):
+    the same as the finished Divide Tree's own ``parents()``."""
+    want = result.tree.parents()
+    for c in ("line_parent", "prominence_parent"):
+        assert np.array_equal(result.peaks[c].to_numpy(), want[c].to_numpy()), c
+    assert (want["line_parent"] >= 0).any()
