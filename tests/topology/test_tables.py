@@ -8,18 +8,24 @@ import orokit
 from orokit.errors import SchemaError
 from orokit.topology.tables import NONE_ID, PEAK_COLUMNS, PEAK_SCHEMA, validate_peak_table, validate_saddle_table
 
+from helpers.outputs import assert_same_analysis_files
+
 
 @pytest.fixture(scope="module")
 def result():
-    rng = np.random.default_rng(3)
-    z = rng.integers(0, 40, (30, 40)).astype(np.float32)
-    z[5:8, 5:9] = np.nan
+    return orokit.analyze(_dem(), min_prominence_m=5.0)
+
+
+def _dem():
+    """The grid of the ``result`` fixture: random integers with a hole of NaN, 30 m cells, UTM 33N."""
     import rioxarray  # noqa: F401 - registers .rio
     import xarray as xr
 
+    rng = np.random.default_rng(3)
+    z = rng.integers(0, 40, (30, 40)).astype(np.float32)
+    z[5:8, 5:9] = np.nan
     dem = xr.DataArray(z, dims=("y", "x"), coords={"y": 30.0 * np.arange(30)[::-1] + 15, "x": 30.0 * np.arange(40) + 15})
-    dem = dem.rio.write_crs("EPSG:32633")
-    return orokit.analyze(dem, min_prominence_m=5.0)
+    return dem.rio.write_crs("EPSG:32633")
 
 
 def test_analysis_tables_follow_the_schema(result):
@@ -147,26 +153,17 @@ def test_geoparquet_files_are_those_of_geopandas(result, tmp_path):
 def test_tables_without_geometry_write_the_same_files(result, tmp_path):
     """``analyze(geometry=False)`` (what the CLI runs): plain DataFrames, the same files."""
     import geopandas as gpd
-    import xarray as xr
 
     from orokit.analysis import write_analysis
 
-    rng = np.random.default_rng(3)  # the grid of the ``result`` fixture
-    z = rng.integers(0, 40, (30, 40)).astype(np.float32)
-    z[5:8, 5:9] = np.nan
-    dem = xr.DataArray(z, dims=("y", "x"), coords={"y": 30.0 * np.arange(30)[::-1] + 15, "x": 30.0 * np.arange(40) + 15})
-    lean = orokit.analyze(dem.rio.write_crs("EPSG:32633"), min_prominence_m=5.0, geometry=False)
+    lean = orokit.analyze(_dem(), min_prominence_m=5.0, geometry=False)
     assert not isinstance(lean.peaks, gpd.GeoDataFrame) and not isinstance(lean.saddles, gpd.GeoDataFrame)
     assert lean.peaks.equals(result.peaks.drop(columns="geometry"))
     assert lean.saddles.equals(result.saddles.drop(columns="geometry"))
     lean.attrs = dict(result.attrs)  # the same metadata (timings differ between runs)
     write_analysis(lean, tmp_path / "lean")
     write_analysis(result, tmp_path / "geo")
-    for name in ("peaks.csv", "peaks.parquet", "saddles.parquet", "analysis.json"):
-        assert (tmp_path / "lean" / name).read_bytes() == (tmp_path / "geo" / name).read_bytes(), name
-    for layer in ("peaks", "saddles", "ridges"):
-        a = gpd.read_file(tmp_path / "lean" / "dividetree.gpkg", layer=layer)
-        assert a.equals(gpd.read_file(tmp_path / "geo" / "dividetree.gpkg", layer=layer)), layer
+    assert_same_analysis_files(tmp_path / "lean", tmp_path / "geo")
 
 
 @pytest.mark.parametrize("batch", [None, 3])
@@ -174,18 +171,11 @@ def test_tables_made_by_blocks_write_the_same_files(result, tmp_path, monkeypatc
     """``analyze(blocks=True)`` (what the CLI runs): the peaks table's rows are made by blocks when
     written; the same rows as the whole table, the same bytes of every table file and the same
     GeoPackage layers, with one block and with blocks of 3 rows (several, the last one partial)."""
-    import geopandas as gpd
-    import xarray as xr
-
     import orokit.io.divide_tree_gpkg as gp
     from orokit.analysis import write_analysis
     from orokit.topology.tables import TableBlocks
 
-    rng = np.random.default_rng(3)  # the grid of the ``result`` fixture
-    z = rng.integers(0, 40, (30, 40)).astype(np.float32)
-    z[5:8, 5:9] = np.nan
-    dem = xr.DataArray(z, dims=("y", "x"), coords={"y": 30.0 * np.arange(30)[::-1] + 15, "x": 30.0 * np.arange(40) + 15})
-    lean = orokit.analyze(dem.rio.write_crs("EPSG:32633"), min_prominence_m=5.0, geometry=False, blocks=True)
+    lean = orokit.analyze(_dem(), min_prominence_m=5.0, geometry=False, blocks=True)
     assert isinstance(lean.peaks, TableBlocks)
     whole = result.peaks.drop(columns="geometry")
     n = len(whole)
@@ -200,11 +190,7 @@ def test_tables_made_by_blocks_write_the_same_files(result, tmp_path, monkeypatc
     lean.attrs = dict(result.attrs)  # the same metadata (timings differ between runs)
     write_analysis(lean, tmp_path / "blocks")
     write_analysis(result, tmp_path / "frames")
-    for name in ("peaks.csv", "peaks.parquet", "saddles.parquet", "analysis.json"):
-        assert (tmp_path / "blocks" / name).read_bytes() == (tmp_path / "frames" / name).read_bytes(), name
-    for layer in ("peaks", "saddles", "ridges"):
-        a = gpd.read_file(tmp_path / "blocks" / "dividetree.gpkg", layer=layer)
-        assert a.equals(gpd.read_file(tmp_path / "frames" / "dividetree.gpkg", layer=layer)), layer
+    assert_same_analysis_files(tmp_path / "blocks", tmp_path / "frames")
 
 
 def test_csv_written_by_blocks_is_one_csv_of_the_whole_table(result, tmp_path):
