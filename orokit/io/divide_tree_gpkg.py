@@ -15,7 +15,7 @@ import pandas as pd
 
 from orokit._typing import PathLike
 from orokit.errors import InputError
-from orokit.io.atomic import atomic_path
+from orokit.io.atomic import atomic_path, temp_path_for
 from orokit.topology.divide_tree import DivideTree
 from orokit.topology.tables import table_rows, upgrade_attrs
 from orokit.topology.tree_checks import check_read_tree
@@ -80,7 +80,7 @@ def _sqlite_without_sync() -> Iterator[None]:
 
 
 def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFrame | None = None,
-                           layers: dict | None = None) -> Path:
+                           layers: dict | None = None, parallel: bool = False) -> Path:
     """Write ``tree`` as a GeoPackage with layers ``peaks``, ``saddles`` and ``ridges``.
 
     ``ridges`` holds LineStrings peak_a -> saddle -> peak_b with the columns
@@ -96,6 +96,12 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
     derived: ``tree.prominence_table()`` recomputes them).
 
     ``layers``: further point GeoDataFrames by layer name (e.g. ``depressions``).
+
+    ``parallel``: the ``saddles`` and ``ridges`` layers are written into a second
+    GeoPackage by a second thread while this one writes ``peaks``, then copied into the
+    file by SQLite (:func:`_merge_layers`); the same layers, in the same order. GDAL
+    writes a layer at ~1-4 us per row in one thread, so this halves the file's wall time
+    with two idle cores (one core: use False, the copy costs ~0.05 s per 100,000 rows).
     """
     import pyarrow as pa
     import pyogrio
@@ -116,7 +122,7 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
 
     crs = _gdal_crs(tree.crs)
 
-    def write(columns: dict[str, Any], wkb, n: int, layer: str, geometry_type: str, more=None) -> None:
+    def write(dst: Path, columns: dict[str, Any], wkb, n: int, layer: str, geometry_type: str, more=None) -> None:
         """One layer from whole columns (no copies), in one write streamed by batches of
         ``WRITE_BATCH_ROWS`` rows; ``wkb(start, stop)`` makes the geometries of a batch, so no
         geometry column of the whole layer is ever held (the ridges': ~90 bytes per ridge);
@@ -145,10 +151,10 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
         first = next(stream)
         reader = pa.RecordBatchReader.from_batches(first.schema, itertools.chain([first], stream))
         del first
-        pyogrio.write_arrow(reader, tmp, layer=layer, geometry_name="geometry", geometry_type=geometry_type, crs=crs,
+        pyogrio.write_arrow(reader, dst, layer=layer, geometry_name="geometry", geometry_type=geometry_type, crs=crs,
                             **_GPKG)
 
-    def points(frame: pd.DataFrame, id_name: str, layer: str, extra: Any = None) -> None:
+    def points(dst: Path, frame: pd.DataFrame, id_name: str, layer: str, extra: Any = None) -> None:
         """A point layer of ``frame``'s columns, then the ``added`` columns of ``extra`` (a table
         with the same rows: a DataFrame or TableBlocks, whose rows are taken batch by batch)."""
         columns: dict[str, Any] = {id_name: np.arange(len(frame), dtype=np.int64)}
@@ -159,13 +165,10 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
                 block = table_rows(extra, i, j)
                 return {c: block[c] for c in added}
         x, y = frame["x"].to_numpy(np.float64), frame["y"].to_numpy(np.float64)
-        write(columns, lambda i, j: point_wkb(x[i:j], y[i:j]), len(frame), layer, "Point", more)
+        write(dst, columns, lambda i, j: point_wkb(x[i:j], y[i:j]), len(frame), layer, "Point", more)
 
-    with atomic_path(path) as tmp, _sqlite_without_sync(), warnings.catch_warnings():
-        # a tree on a local grid has no CRS: that is recorded in attrs, not a problem
-        warnings.filterwarnings("ignore", message="'crs' was not provided", category=UserWarning)
-        points(tree.peaks, "peak_id", "peaks", peaks)
-        points(tree.saddles, "saddle_id", "saddles")
+    def saddles_and_ridges(dst: Path) -> None:
+        points(dst, tree.saddles, "saddle_id", "saddles")
         a, b, s = tree._edge_arrays()
         px, py = tree.peaks["x"].to_numpy(np.float64), tree.peaks["y"].to_numpy(np.float64)
         sx, sy = tree.saddles["x"].to_numpy(np.float64), tree.saddles["y"].to_numpy(np.float64)
@@ -176,12 +179,32 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
             ai, bi, si = a[i:j], b[i:j], s[i:j]
             return polyline_wkb(np.stack([px[ai], sx[si], px[bi]], axis=1), np.stack([py[ai], sy[si], py[bi]], axis=1))
 
-        write(ridges, lines, len(a), "ridges", "LineString")
-        del a, b, s, ridges
+        write(dst, ridges, lines, len(a), "ridges", "LineString")
+
+    with atomic_path(path) as tmp, _sqlite_without_sync(), warnings.catch_warnings():
+        # a tree on a local grid has no CRS: that is recorded in attrs, not a problem
+        warnings.filterwarnings("ignore", message="'crs' was not provided", category=UserWarning)
+        if parallel:
+            from concurrent.futures import ThreadPoolExecutor
+
+            aux = temp_path_for(path)
+            try:
+                with ThreadPoolExecutor(1) as pool:
+                    second = pool.submit(saddles_and_ridges, aux)
+                    try:
+                        points(tmp, tree.peaks, "peak_id", "peaks", peaks)
+                    finally:
+                        second.result()  # the first failure is raised
+                _merge_layers(tmp, aux, ["saddles", "ridges"])
+            finally:
+                aux.unlink(missing_ok=True)
+        else:
+            points(tmp, tree.peaks, "peak_id", "peaks", peaks)
+            saddles_and_ridges(tmp)
         for key in ("runoffs", "basin_saddles"):
             extra = tree.attrs.get(key)
             if isinstance(extra, pd.DataFrame):
-                points(extra, "point_id", key)
+                points(tmp, extra, "point_id", key)
         for name, frame in (layers or {}).items():
             frame.reset_index().to_file(tmp, layer=name, geometry_type="Point", engine="pyogrio", use_arrow=True,
                                           **_GPKG)
@@ -190,6 +213,50 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
         pyogrio.write_dataframe(frame, tmp, layer="orokit_metadata", driver="GPKG")
     logger.info("wrote %s: %d peaks, %d ridges", path, tree.n_peaks, len(tree.edges))
     return path
+
+
+#: GeoPackage tables that describe a layer by a ``table_name`` column (those present in both files are copied)
+_GPKG_LAYER_TABLES = ("gpkg_contents", "gpkg_geometry_columns", "gpkg_ogr_contents", "gpkg_extensions",
+                      "gpkg_data_columns")
+
+
+def _merge_layers(path: Path, other: Path, layers: list[str]) -> None:
+    """Copy ``layers`` of the GeoPackage ``other`` into the GeoPackage ``path`` (both written by GDAL).
+
+    In one SQLite transaction: each layer's table, rows (fids kept), indexes and triggers,
+    its rows of the GeoPackage tables that describe layers (contents with the extent,
+    geometry column, feature count, extensions) and the spatial reference systems
+    ``path`` lacks. GDAL then reads the layers as if it had written them into ``path``.
+    """
+    import sqlite3
+
+    con = sqlite3.connect(str(path), isolation_level=None)
+    try:
+        con.execute("PRAGMA synchronous = OFF")  # the file is synced once by atomic_path
+        con.execute("ATTACH DATABASE ? AS other", (str(other),))
+        con.execute("BEGIN")
+        tables = {name for (name,) in con.execute("SELECT name FROM main.sqlite_master WHERE type = 'table'")}
+        theirs = {name for (name,) in con.execute("SELECT name FROM other.sqlite_master WHERE type = 'table'")}
+        con.execute("INSERT OR IGNORE INTO main.gpkg_spatial_ref_sys SELECT * FROM other.gpkg_spatial_ref_sys")
+        for layer in layers:
+            if layer in tables:
+                raise InputError(f"{path} already has a layer {layer!r}")
+            (sql,) = con.execute("SELECT sql FROM other.sqlite_master WHERE type = 'table' AND name = ?",
+                                 (layer,)).fetchone()
+            con.execute(sql)  # CREATE TABLE "layer" (...): in main
+            quoted = '"' + layer.replace('"', '""') + '"'
+            con.execute(f"INSERT INTO main.{quoted} SELECT * FROM other.{quoted}")
+            for table in _GPKG_LAYER_TABLES:
+                if table in tables and table in theirs:
+                    con.execute(f"INSERT INTO main.{table} SELECT * FROM other.{table} WHERE table_name = ?", (layer,))
+            # after the rows: the feature-count triggers would otherwise count them a second time
+            for (sql,) in con.execute("SELECT sql FROM other.sqlite_master WHERE type IN ('index', 'trigger') AND "
+                                      "tbl_name = ? AND sql IS NOT NULL ORDER BY type, rowid", (layer,)).fetchall():
+                con.execute(sql)
+        con.execute("COMMIT")
+        con.execute("DETACH DATABASE other")
+    finally:
+        con.close()
 
 
 def read_divide_tree_gpkg(path: PathLike) -> DivideTree:

@@ -129,6 +129,40 @@ def test_gpkg_round_trip(small_txt, tmp_path):
     assert read_divide_tree_gpkg(tmp_path / "again.gpkg").equals(tree)
 
 
+@pytest.mark.parametrize("crs", [None, "EPSG:32633", "EPSG:4326"])
+def test_gpkg_parallel_writer_writes_the_same_layers(small_txt, tmp_path, crs):
+    """``parallel=True`` (saddles and ridges from a second GeoPackage, copied by SQLite): the same layers, in
+    the same order, as one thread writes; GDAL reads and appends to the file; no temporary file is left."""
+    import geopandas as gpd
+    import pyogrio
+    from shapely.geometry import Point
+
+    import dataclasses
+
+    tree = dataclasses.replace(read_divide_tree_txt(small_txt, height=10), crs=crs)
+    extra = {"depressions": gpd.GeoDataFrame({"depth": [3.0, 4.5]}, geometry=[Point(0, 0), Point(1, 1)], crs=crs)}
+    one = write_divide_tree_gpkg(tree, tmp_path / "one.gpkg", layers=extra)
+    two = write_divide_tree_gpkg(tree, tmp_path / "two.gpkg", layers=extra, parallel=True)
+    layers = pyogrio.list_layers(one).tolist()
+    assert pyogrio.list_layers(two).tolist() == layers
+    assert [name for name, _ in layers] == ["peaks", "saddles", "ridges", "runoffs", "basin_saddles", "depressions",
+                                            "orokit_metadata"]
+    for name, _ in layers:
+        a, b = pyogrio.read_dataframe(one, layer=name), pyogrio.read_dataframe(two, layer=name)
+        assert a.equals(b), name
+        info_a, info_b = pyogrio.read_info(one, layer=name), pyogrio.read_info(two, layer=name)
+        assert info_a["features"] == info_b["features"] == len(a), name
+        assert info_a["crs"] == info_b["crs"], name
+        if info_a["geometry_type"]:
+            assert np.array_equal(info_a["total_bounds"], info_b["total_bounds"]), name
+    back = read_divide_tree_gpkg(two)
+    assert back.equals(tree) and back.equals(read_divide_tree_gpkg(one))
+    assert not list(tmp_path.glob(".*tmp*"))
+    # the file stays a GeoPackage GDAL edits: a layer appended and the copied layers' feature counts kept
+    pyogrio.write_dataframe(pd.DataFrame({"a": [1, 2]}), two, layer="more")
+    assert pyogrio.read_info(two, layer="saddles", force_feature_count=True)["features"] == tree.n_saddles
+
+
 def test_gpkg_keeps_crs(tmp_path):
     from pyproj import CRS
 
