@@ -195,21 +195,28 @@ def analyze(
         if not np.issubdtype(z.dtype, np.floating):
             z = z.astype(np.float64)
         z = np.ascontiguousarray(z)
-        from orokit.metrics.isolation import KernelMetric, finish_isolation, nearest_higher
+        from concurrent.futures import ThreadPoolExecutor
+
+        from orokit.metrics.isolation import KernelMetric, finish_isolation, nearest_higher, search_pyramid
 
         graph = engine.saddle_graph(z)
         # the engine's peak memory is past: the libraries of the tables and files load in a second
-        # thread while this one finishes the tree and searches the isolation (wall time)
+        # thread, and the isolation's pyramid is built in a third (numba, no GIL), while this one
+        # finishes the tree (wall time: the finalize is serial)
         libraries = _import_in_thread(_table_libraries)
-        core = engine.finalize_graph(**graph, min_prominence_m=min_prominence_m, outside=outside)
-        del graph
+        with ThreadPoolExecutor(1) as pool:
+            pyramid = pool.submit(search_pyramid, z) if isolation else None
+            core = engine.finalize_graph(**graph, min_prominence_m=min_prominence_m, outside=outside)
+            del graph
+            pyr = None if pyramid is None else pyramid.result()
         t_core = time.perf_counter()
         _advance(bar)
         iso = None
         if isolation and core.n_kept:
             metric = KernelMetric.from_grid(transform, crs)
             rows, cols = core.peak_row.astype(np.int64), core.peak_col.astype(np.int64)
-            best, cand, edge = nearest_higher(z, rows, cols, metric)
+            best, cand, edge = nearest_higher(z, rows, cols, metric, pyr)
+            del pyr
             libraries.join()  # no import in this thread while that one imports
             iso = finish_isolation(metric, rows, cols, best, cand, z.shape[1], edge)
             del best, cand, edge

@@ -129,3 +129,21 @@ def test_isolation_in_metres_on_a_foot_based_crs(chunks):
     finite = a["isolation"].dropna()
     assert finite.min() >= 30.0 * ft * (1 - 1e-9)  # metres, not feet: a neighbour is 9.14 m away
     np.testing.assert_array_equal(a["isolation_row"], b["isolation_row"])
+
+
+def test_prebuilt_search_pyramid_gives_the_same_search():
+    """``orokit analyze`` builds the pyramid beside the tree's finalize: the search is the same; a raster
+    with NaN gets None (the search then builds its NaN-free copy itself)."""
+    from affine import Affine
+
+    from orokit.metrics.isolation import KernelMetric, nearest_higher, search_pyramid
+
+    z = np.random.default_rng(5).random((40, 33)).astype(np.float32)
+    rows, cols = np.array([0, 7, 39, 20], np.int64), np.array([0, 12, 32, 5], np.int64)
+    metric = KernelMetric.from_grid(Affine(30.0, 0, 0, 0, -20.0, 0), None)
+    pyramid = search_pyramid(z)
+    assert pyramid is not None and pyramid[0] is z
+    for a, b in zip(nearest_higher(z, rows, cols, metric, pyramid), nearest_higher(z, rows, cols, metric)):
+        assert np.array_equal(a, b)
+    z[3, 4] = np.nan
+    assert search_pyramid(z) is None
