@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ import numpy as np
 
 from orokit.errors import TilingError
 from orokit.io.checkpoint_io import chunk_path, discard_chunk, open_checkpoint, read_chunk, write_chunk
+from orokit.io.spill_io import read_spill, spill_folder, write_spill
 from orokit.tiling.isolation import block_stats, chunk_isolation
 from orokit.tiling.memory import release_free_heap
 from orokit.tiling.summary import ChunkSummary, chunk_summary, finalize_summary, merge_summaries
@@ -105,14 +107,41 @@ def _load_summary(path: str) -> tuple[ChunkSummary, dict | None]:
     return ChunkSummary.from_npz(data), iso
 
 
-def _load_task(path: str, window: _Window, ij: tuple[int, int]) -> _Part:
+def _load_task(path: str, window: _Window, ij: tuple[int, int], spill: str | None = None) -> _Part:
     data = read_chunk(path)
     iso = {f: data[f"iso_{f}"] for f in _ISO_FIELDS} if "iso_key" in data else None
     if "stats" in data:
         stats = (float(data["stats"][0]), float(data["stats"][1]))
     else:  # written before the statistics were stored: read the chunk once more
         stats = block_stats(window.read()[1:-1, 1:-1])
-    return ChunkSummary.from_npz(data), iso, {ij: stats}
+    return ChunkSummary.from_npz(data), _spill_iso(iso, spill), {ij: stats}
+
+
+def _spill_iso(iso: dict | None, spill: str | None) -> dict | None:
+    """``iso`` written to the spill file ``spill`` (then None: it does not travel with the summaries)."""
+    if iso is None or spill is None:
+        return iso
+    write_spill(spill, iso)
+    return None
+
+
+def _read_spilled(paths: list[str], cells: np.ndarray) -> dict | None:
+    """Settled isolation of the peaks at ``cells`` (flat, increasing) from the chunks' spill files.
+
+    The others (candidate peaks the merges dropped) are left out as each file is read; the
+    parts are then joined one field at a time, each part's field freed once joined.
+    """
+    parts = []
+    for path in paths:
+        data = read_spill(path)
+        key = data["key"]
+        pos = np.minimum(np.searchsorted(cells, key), max(cells.size - 1, 0))
+        sel = cells[pos] == key if cells.size else np.zeros(key.size, bool)
+        parts.append({f: data[f][sel] for f in _ISO_FIELDS})
+        del data, key, pos, sel
+    if not parts:
+        return None
+    return _merge_iso(parts)
 
 
 def _corrupt_chunk(path: str) -> bool:
@@ -126,7 +155,7 @@ def _corrupt_chunk(path: str) -> bool:
 
 
 def _tile_task(window: _Window, ij: tuple[int, int], row0: int, col0: int, shape, min_prominence_m: float,
-               path: str | None, metric) -> _Part:
+               path: str | None, metric, spill: str | None = None) -> _Part:
     block = window.read()
     summary = chunk_summary(block, row0, col0, shape, min_prominence_m)
     core = np.ascontiguousarray(block[1:-1, 1:-1])  # made after the summary: one raster copy alive at a time
@@ -139,6 +168,7 @@ def _tile_task(window: _Window, ij: tuple[int, int], row0: int, col0: int, shape
         extra = {} if iso is None else {f"iso_{f}": v for f, v in iso.items()}
         write_chunk(path, {**summary.to_npz(), **extra, "stats": np.array(stats, np.float64)})
     del core
+    iso = _spill_iso(iso, spill)
     release_free_heap()  # the chunk's arrays: the heap keeps them otherwise (glibc: up to 32 MB each)
     return summary, iso, {ij: stats}
 
@@ -150,11 +180,15 @@ def _merge_iso(parts: list, keep: np.ndarray | None = None) -> dict | None:
     if not parts:
         return None
     width = max(p["cand"].shape[1] for p in parts)
-    out = {f: np.concatenate([p[f] for p in parts]) for f in ("key", "best", "nan")}
-    out["cand"] = np.concatenate([np.pad(p["cand"], ((0, 0), (0, width - p["cand"].shape[1])), constant_values=-1)
-                                  for p in parts])
-    for p in parts:
-        p.clear()
+    out = {}
+    for f in _ISO_FIELDS:  # one field at a time, each part's field freed once joined
+        if f == "cand":
+            out[f] = np.concatenate([np.pad(p[f], ((0, 0), (0, width - p[f].shape[1])), constant_values=-1)
+                                     for p in parts])
+        else:
+            out[f] = np.concatenate([p[f] for p in parts])
+        for p in parts:
+            del p[f]
     if keep is not None:
         sel = np.isin(out["key"], keep)
         out = {f: v[sel] for f, v in out.items()}
@@ -168,7 +202,7 @@ def _merge_task(a: _Part, b: _Part, min_prominence_m: float) -> _Part:
     until this task ends, and each part has this merge as its only consumer.
     """
     s = merge_summaries(a[0], b[0], min_prominence_m, consume=True)
-    iso = _merge_iso([a[1], b[1]], keep=s.key[s.ismax])
+    iso = None if a[1] is None and b[1] is None else _merge_iso([a[1], b[1]], keep=s.key[s.ismax])
     release_free_heap()
     return s, iso, {**a[2], **b[2]}
 
@@ -204,6 +238,24 @@ def _checkpoint_dir(checkpoint, data, min_prominence_m: float) -> Path | None:
     return open_checkpoint(checkpoint, fingerprint)
 
 
+def _same_disk(scheduler: Any) -> bool:
+    """True when every task of ``scheduler`` runs on this machine (threads, processes, or dask's
+    default without an active distributed client), so tasks can leave files for the caller."""
+    if scheduler is None:
+        import sys
+
+        if "distributed" in sys.modules:
+            from distributed import default_client
+
+            try:
+                default_client()
+            except ValueError:
+                return True
+            return False
+        return True
+    return scheduler in ("threads", "threading", "processes", "synchronous", "sync")
+
+
 def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", scheduler: Any = None,
                    checkpoint=None, progress: bool = False, isolation_metric=None) -> TiledOrometry:
     """Exact orometry of a 2-D dask array (NaN = nodata), chunk by chunk.
@@ -213,7 +265,22 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
     saddles). With ``isolation_metric`` (a :class:`~orokit.metrics.isolation.KernelMetric`),
     each chunk also settles the isolation of its candidate peaks whose higher ground lies
     inside it (``result.chunk_isolation``), so the cross-chunk search reads few chunks.
+    On a scheduler whose tasks run on this machine, each chunk's settled isolation is
+    spilled to a temporary file instead of travelling up the merges with the summaries
+    (~50 bytes per candidate peak alive through the top merges and the finalize), and read
+    back, for the kept peaks only, after the finalize.
     """
+    with ExitStack() as stack:
+        spill = None
+        if isolation_metric is not None and _same_disk(scheduler):
+            spill = stack.enter_context(spill_folder())
+        return _tiled_orometry(data, min_prominence_m=min_prominence_m, outside=outside, scheduler=scheduler,
+                               checkpoint=checkpoint, progress=progress, isolation_metric=isolation_metric,
+                               spill=spill)
+
+
+def _tiled_orometry(data, *, min_prominence_m: float, outside: str, scheduler: Any, checkpoint, progress: bool,
+                    isolation_metric, spill: Path | None) -> TiledOrometry:
     import dask
 
     if data.ndim != 2:
@@ -227,18 +294,23 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
     ckpt = _checkpoint_dir(checkpoint, data, min_prominence_m)
     tiles = {}
     reused = 0
+    spills = {} if spill is None else {(i, j): str(spill / f"iso_{i:05d}_{j:05d}.npz")
+                                       for i in range(nby) for j in range(nbx)}
     for i in range(nby):
         for j in range(nbx):
             path = None if ckpt is None else str(chunk_path(ckpt, i, j))
             window = _Window(data, int(rb[i]), int(rb[i + 1]), int(cb[j]), int(cb[j + 1]))
+            sp = spills.get((i, j))
             if path is not None and Path(path).exists() and not _corrupt_chunk(path):
-                tiles[i, j] = dask.delayed(_load_task)(path, window, (i, j),
-                                                       dask_key_name=f"orokit-load-{i}-{j}-{_h(path)}")
+                tiles[i, j] = dask.delayed(_load_task)(path, window, (i, j), sp,
+                                                       dask_key_name=f"orokit-load-{i}-{j}-{_h(path)}-{sp is None}")
                 reused += 1
             else:
                 tiles[i, j] = dask.delayed(_tile_task)(
                     window, (i, j), int(rb[i]), int(cb[j]), (H, W), float(min_prominence_m), path, isolation_metric,
-                    dask_key_name=f"orokit-tile-{i}-{j}-{data.name}-{min_prominence_m}-{isolation_metric is not None}",
+                    sp,
+                    dask_key_name=(f"orokit-tile-{i}-{j}-{data.name}-{min_prominence_m}-{isolation_metric is not None}"
+                                   f"-{sp is None}"),
                 )
     if reused:
         logger.info("reusing %d chunk summaries from %s", reused, ckpt)
@@ -271,6 +343,11 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
             ((result, iso, st),) = compute([final])
     else:
         ((result, iso, st),) = compute([final])
+    if spill is not None:  # the merges carried no settled isolation: read it back for the kept peaks
+        iso = _read_spilled([p for p in spills.values() if Path(p).exists()], result.peak_cell)
+        logger.info("settled isolation read back from %d spill files: %d peaks, %.1f MB", len(spills),
+                    0 if iso is None else iso["key"].size,
+                    0 if iso is None else sum(v.nbytes for v in iso.values()) / 2**20)
     release_free_heap()  # the chunks' and merges' arrays, freed inside the heap
     return TiledOrometry(orometry=result, chunk_stats=st, chunk_isolation=iso)
 

@@ -1,0 +1,40 @@
+"""Spill files: arrays a run sets aside on disk until it needs them again.
+
+A spill folder is a temporary folder of one run (removed when the run ends, also on
+error); each spill is an uncompressed ``.npz`` of arrays, written atomically, so a
+file that exists is complete.
+"""
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, cast
+
+import numpy as np
+
+from orokit._typing import PathLike
+from orokit.io.atomic import atomic_path
+
+__all__ = ["spill_folder", "write_spill", "read_spill"]
+
+
+@contextmanager
+def spill_folder(prefix: str = "orokit-spill-") -> Iterator[Path]:
+    """A new temporary folder (in ``TMPDIR``) for the spills of one run, removed on exit."""
+    with tempfile.TemporaryDirectory(prefix=prefix) as folder:
+        yield Path(folder)
+
+
+def write_spill(path: PathLike, arrays: dict[str, np.ndarray]) -> None:
+    """Write ``arrays`` to ``path`` (an ``.npz``) atomically, without fsync (the file is temporary)."""
+    with atomic_path(path, fsync=False) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **cast("dict[str, Any]", arrays))
+
+
+def read_spill(path: PathLike) -> dict[str, np.ndarray]:
+    """The arrays written by :func:`write_spill` (never unpickled)."""
+    with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
+        return {k: data[k] for k in data.files}

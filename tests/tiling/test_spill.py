@@ -1,0 +1,97 @@
+"""Settled isolation spilled to disk by the chunk tasks: the same result as carried up the merges."""
+from __future__ import annotations
+
+import tempfile
+
+import dask.array as da
+import numpy as np
+import pytest
+from affine import Affine
+from pyproj import CRS
+
+import orokit
+import orokit.tiling.engine as te
+from orokit.metrics.isolation import KernelMetric
+
+from helpers.outputs import assert_same_table_files
+
+GRIDS = {
+    "projected": (Affine(30.0, 0.0, 500000.0, 0.0, -30.0, 4000000.0), CRS.from_epsg(32633)),
+    "geographic": (Affine(0.001, 0.0, 10.0, 0.0, -0.001, 46.0), CRS.from_epsg(4326)),
+}
+
+
+def _grid():
+    rng = np.random.default_rng(11)
+    z = np.round(rng.normal(size=(90, 110)).cumsum(0) + rng.normal(size=(90, 110)) * 2, 1)
+    z[40:44, 50:57] = np.nan  # a void across a chunk corner
+    return z
+
+
+def _by_key(iso, cells):
+    """The settled isolation of the peaks at ``cells``, ordered by cell, candidates trimmed to used columns."""
+    sel = np.isin(iso["key"], cells)
+    order = np.argsort(iso["key"][sel])
+    out = {f: v[sel][order] for f, v in iso.items()}
+    c = out["cand"]
+    out["cand"] = c[:, :int((c >= 0).sum(axis=1).max(initial=0))]
+    return out
+
+
+@pytest.mark.parametrize("grid", GRIDS)
+def test_spilled_settled_isolation_equals_the_carried_one(grid, tmp_path, monkeypatch):
+    transform, crs = GRIDS[grid]
+    z = _grid()
+    metric = KernelMetric.from_grid(transform, crs)
+    data = da.from_array(z, chunks=(17, 23))  # 6 x 5 chunks
+    carried_parts = []
+    real_merge = te._merge_task
+
+    def merge(a, b, eps):
+        carried_parts.extend([a[1], b[1]])
+        return real_merge(a, b, eps)
+
+    monkeypatch.setattr(te, "_merge_task", merge)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    spilled = te.tiled_orometry(data, min_prominence_m=1.0, scheduler="synchronous", isolation_metric=metric)
+    assert len(carried_parts) == 2 * 29 and all(p is None for p in carried_parts)  # nothing travelled
+    assert list(tmp_path.iterdir()) == []  # the spill folder is gone
+    carried_parts.clear()
+    monkeypatch.setattr(te, "_same_disk", lambda scheduler: False)
+    carried = te.tiled_orometry(data, min_prominence_m=1.0, scheduler="synchronous", isolation_metric=metric)
+    assert any(p is not None for p in carried_parts)
+    a, b = spilled.orometry, carried.orometry
+    for f in ("peak_cell", "prominence", "key_saddle_cell", "parent", "prominence_exact", "ridge_saddle_cell"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+    np.testing.assert_array_equal(spilled.chunk_stats, carried.chunk_stats)
+    cells = a.peak_cell
+    assert cells.size > 50
+    # only kept peaks are read back; the carried one may hold candidates the finalize dropped
+    assert np.isin(spilled.chunk_isolation["key"], cells).all()
+    got, want = _by_key(spilled.chunk_isolation, cells), _by_key(carried.chunk_isolation, cells)
+    assert got["key"].size > 20
+    for f in got:
+        np.testing.assert_array_equal(got[f], want[f], err_msg=f)
+
+
+def test_chunked_analysis_with_spill_writes_the_in_memory_files(make_dem, tmp_path):
+    """Many chunks, isolation on, a void: the tables' files are the in-memory run's, byte for byte."""
+    z = _grid()
+    dem = make_dem(z, res=(30.0, 30.0))
+    a = orokit.analyze(dem, min_prominence_m=1.0, geometry=False)
+    b = orokit.analyze(dem, min_prominence_m=1.0, chunks=(13, 16), geometry=False, blocks=True, scheduler="threads")
+    assert b.attrs["engine"] == "tiled" and b.peaks["isolation"].notna().sum() > 50
+    b.attrs = dict(a.attrs)  # the same metadata (engine, timings)
+    orokit.write_analysis(a, tmp_path / "a")
+    orokit.write_analysis(b, tmp_path / "b")
+    assert_same_table_files(tmp_path / "a", tmp_path / "b")
+
+
+def test_reused_checkpoint_chunks_spill_their_isolation(make_dem, tmp_path):
+    z = _grid()
+    dem = make_dem(z)
+    ck = tmp_path / "ck"
+    a = orokit.analyze(dem, min_prominence_m=1.0, chunks=30, checkpoint=ck, scheduler="synchronous")
+    b = orokit.analyze(dem, min_prominence_m=1.0, chunks=30, checkpoint=ck, scheduler="synchronous")  # all reused
+    for c in ("isolation", "isolation_row", "isolation_col", "isolation_exact"):
+        np.testing.assert_array_equal(a.peaks[c].to_numpy(), b.peaks[c].to_numpy(), err_msg=c)
