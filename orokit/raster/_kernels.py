@@ -10,7 +10,7 @@ from __future__ import annotations
 import heapq
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 
 @njit(cache=True)
@@ -222,6 +222,15 @@ def carve_saddles(z: np.ndarray, x0: float, y0: float, res: float, sx: np.ndarra
                     z[i, j] = here
                     count += 1
     return count
+
+
+@njit(cache=True, nogil=True)
+def _grow(a: np.ndarray, n: int) -> np.ndarray:
+    if n < a.size:
+        return a
+    b = np.empty(2 * a.size, a.dtype)
+    b[:a.size] = a
+    return b
 
 
 @njit(cache=True)
@@ -462,3 +471,126 @@ def border_pairs(owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                             ib[cnt] = (i + dr) * nx + j + dc
                         cnt += 1
     return ia, ib
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _ascent_pointer(z: np.ndarray, r: int, c: int) -> int:
+    """Flat index of the highest 8-neighbour of cell ``(r, c)`` in the engine's total order
+    (elevation, then raster order: earlier is higher), the cell itself when none is above it,
+    -1 for a NaN cell; outside the raster and NaN cells are skipped (the rule of
+    :func:`orokit.topology._kernels.ascent_labels`)."""
+    H, W = z.shape
+    zi = z[r, c]
+    if zi != zi:
+        return -1
+    best = r * W + c
+    bz = zi
+    for dr in range(-1, 2):
+        rr = r + dr
+        if rr < 0 or rr >= H:
+            continue
+        for dc in range(-1, 2):
+            cc = c + dc
+            if (dr == 0 and dc == 0) or cc < 0 or cc >= W:
+                continue
+            zn = z[rr, cc]
+            if zn != zn:
+                continue
+            j = rr * W + cc
+            if zn > bz or (zn == bz and j < best):
+                best = j
+                bz = zn
+    return best
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def ascent_pointers(z: np.ndarray) -> np.ndarray:
+    """:func:`_ascent_pointer` of every cell (flat int64; row blocks on all threads)."""
+    H, W = z.shape
+    ptr = np.empty(H * W, np.int64)
+    for r in prange(H):
+        for c in range(W):
+            ptr[r * W + c] = _ascent_pointer(z, r, c)
+    return ptr
+
+
+@njit(cache=True, nogil=True)
+def update_basins(z: np.ndarray, ptr: np.ndarray, lab: np.ndarray, own: np.ndarray, tid: np.ndarray,
+                  changed: np.ndarray, peak_cells: np.ndarray, peak_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Basins of steepest ascent after the cells ``changed`` (flat) of ``z`` changed (in place).
+
+    ``ptr`` (:func:`ascent_pointers`), ``lab`` (basin id per cell) and ``own`` (``tid`` of the
+    basin: the tree peak owning it, -1 for a spurious maximum, -2 for NaN cells) held for the
+    raster before the change. Only the pointers of the changed cells and their neighbours can
+    change; only the cells whose ascent chain passes through a changed pointer (found backwards
+    from those cells) can change basin; they are relabelled by following their new chains. A new
+    maximum gets the next basin id (``tid.size``, ...) and the tree peak of its cell
+    (``peak_cells`` sorted, ``peak_ids`` beside them; -1 if none). Returns the new maxima's cells
+    and their ``tid`` (append them to the basin arrays). Each cell's owner is that of a full
+    relabelling; basin ids differ from it (old ids of vanished maxima are left unused).
+    """
+    H, W = z.shape
+    mark = np.zeros(H * W, np.uint8)  # 1: pointer recomputed, 2: may change basin
+    queue = np.empty(max(16, 4 * changed.size), np.int64)
+    nq = 0
+    for t in range(changed.size):
+        c0 = changed[t]
+        r0 = c0 // W
+        k0 = c0 - r0 * W
+        for r in range(max(r0 - 1, 0), min(r0 + 2, H)):
+            for c in range(max(k0 - 1, 0), min(k0 + 2, W)):
+                j = r * W + c
+                if mark[j] != 0:
+                    continue
+                mark[j] = 1
+                p = _ascent_pointer(z, r, c)
+                if p != ptr[j]:
+                    ptr[j] = p
+                    mark[j] = 2
+                    queue = _grow(queue, nq)
+                    queue[nq] = j
+                    nq += 1
+    head = 0
+    while head < nq:  # every cell whose chain enters a changed pointer
+        x = queue[head]
+        head += 1
+        r0 = x // W
+        k0 = x - r0 * W
+        for r in range(max(r0 - 1, 0), min(r0 + 2, H)):
+            for c in range(max(k0 - 1, 0), min(k0 + 2, W)):
+                j = r * W + c
+                if mark[j] != 2 and ptr[j] == x:
+                    mark[j] = 2
+                    queue = _grow(queue, nq)
+                    queue[nq] = j
+                    nq += 1
+    n0 = tid.size
+    new_top = np.empty(16, np.int64)
+    new_tid = np.empty(16, np.int64)
+    nn = 0
+    for t in range(nq):
+        lab[queue[t]] = -3  # unresolved
+    stack = np.empty(1024, np.int64)
+    for t in range(nq):
+        j = queue[t]
+        top = 0
+        while lab[j] == -3:
+            stack = _grow(stack, top)
+            stack[top] = j
+            top += 1
+            if ptr[j] == j:  # a new maximum
+                new_top = _grow(new_top, nn)
+                new_tid = _grow(new_tid, nn)
+                k = np.searchsorted(peak_cells, j)
+                new_top[nn] = j
+                new_tid[nn] = peak_ids[k] if k < peak_cells.size and peak_cells[k] == j else -1
+                lab[j] = n0 + nn
+                nn += 1
+                break
+            j = ptr[j]
+        v = lab[j]
+        o = tid[v] if v < n0 else new_tid[v - n0]
+        for s in range(top):
+            lab[stack[s]] = v
+            own[stack[s]] = o
+    return new_top[:nn].copy(), new_tid[:nn].copy()

@@ -93,14 +93,43 @@ def _border_pairs(owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _kernels.border_pairs(np.ascontiguousarray(owner, np.int64))
 
 
+class _Basins:
+    """Basins of steepest ascent of a raster and the tree peak owning each, kept up to date as cells change.
+
+    Labelled once with the orometry engine's kernels (:func:`steepest_ascent_basins`); after a change
+    only the cells whose ascent chain the change can reach are relabelled
+    (:func:`_kernels.update_basins`), so every cell keeps the owner a full relabelling gives
+    (basin ids differ: a vanished maximum's id is left unused, a new one gets the next id).
+    """
+
+    def __init__(self, z: np.ndarray, cells: np.ndarray, pid: np.ndarray) -> None:
+        self.z, self.cells, self.pid = z, np.ascontiguousarray(cells, np.int64), np.ascontiguousarray(pid, np.int64)
+        self.lab, self.top = steepest_ascent_basins(z)
+        k = np.minimum(np.searchsorted(cells, self.top), cells.size - 1)
+        self.tid = np.where(cells[k] == self.top, pid[k], -1).astype(np.int64)
+        self.own = _kernels.basin_owner(self.lab, self.tid)
+        self.ptr = _kernels.ascent_pointers(z)
+
+    def update(self, changed: np.ndarray) -> None:
+        """Relabel after the cells ``changed`` (flat indices) of the raster changed."""
+        if changed.size == 0:
+            return
+        top, tid = _kernels.update_basins(self.z, self.ptr, self.lab, self.own, self.tid,
+                                          np.ascontiguousarray(changed, np.int64), self.cells, self.pid)
+        if top.size:
+            self.top = np.concatenate([self.top, top])
+            self.tid = np.concatenate([self.tid, tid])
+
+
 def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.ndarray, drop_m: float = 0.5,
                keep_hills_m: float = 0.0, cut_slope: float = 0.0, cut_depth_m: float = 0.0,
                max_rounds: int = 6) -> dict[str, int]:
     """Rounds of spurious-hill cutting and pass capping on the raster's own basins (in place).
 
-    Each round labels the basins of steepest ascent with the orometry engine's own
-    kernels (:func:`orokit.topology.engine.steepest_ascent_basins`, so
-    the total order and tie-breaks are the engine's). A basin whose maximum is not a tree
+    The basins of steepest ascent are labelled once with the orometry engine's own
+    kernels (:func:`orokit.topology.engine.steepest_ascent_basins`, so the total order and
+    tie-breaks are the engine's) and kept up to date after every cut and cap (:class:`_Basins`:
+    only the cells whose ascent the change reaches are relabelled). A basin whose maximum is not a tree
     peak is a spurious hill: its pass (best path from tree-owned ground) and the tree
     peak that path comes from are found by a flood (:func:`_kernels.flood_levels`). Hills
     whose top is less than ``keep_hills_m`` above their pass and below that tree peak are
@@ -139,12 +168,11 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
     if cells.size == 0:
         return stats
 
+    basins = _Basins(z, cells, pid)
+
     def owners() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Tree peak owning each cell's basin (-1: a spurious maximum, -2: NaN), basin labels, basin tops."""
-        lab, peak_cell = steepest_ascent_basins(z)
-        k = np.minimum(np.searchsorted(cells, peak_cell), cells.size - 1)
-        tid = np.where(cells[k] == peak_cell, pid[k], -1).astype(np.int64)
-        return _kernels.basin_owner(lab.reshape(-1), tid).reshape(z.shape), lab, peak_cell
+        return basins.own.reshape(z.shape), basins.lab, basins.top
 
     def spurious_hills(own: np.ndarray, lab: np.ndarray, top: np.ndarray):
         """Mask of spurious basins, the tree peak each drains to and whether it is kept."""
@@ -165,8 +193,11 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
         if sp.any():
             cutting = sp & ~keep[np.maximum(lab, 0)].reshape(z.shape)
             if cutting.any():
+                before = z.copy()
                 cut = _kernels.reconstruct_masked(z, cutting, 1e-3, cut_slope * grid.cell_size_m, cut_depth_m)
                 stats["cut"] += cut
+                basins.update(np.flatnonzero(before.view(np.uint32) != z.view(np.uint32)))
+                del before
                 own, lab, top = owners()
                 sp, src, keep = spurious_hills(own, lab, top)
         if sp.any() and keep_hills_m > 0:
@@ -193,7 +224,9 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
         pick = np.where(ff[low] <= lim, low, np.where(ff[high] <= lim, high, -1))
         keep_pair = pick >= 0
         pick = pick[keep_pair]
+        before = zf[pick]
         np.minimum.at(zf, pick, np.maximum(target[keep_pair].astype(zf.dtype), ff[pick]))
+        basins.update(pick[zf[pick].view(np.uint32) != before.view(np.uint32)])
         stats["capped"] += int(keep_pair.sum())
         if not keep_pair.any() and cut == 0:
             break

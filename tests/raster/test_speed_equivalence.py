@@ -147,3 +147,85 @@ def test_write_cog_threads_give_the_same_file(tmp_path):
         dst.set_band_description(1, desc[0])
         dst.update_tags(**tags)
     assert (tmp_path / "threads.tif").read_bytes() == (tmp_path / "one.tif").read_bytes()
+
+
+def _raster_with_ties(shape, seed, nan_share=0.05):
+    """Integer heights (many ties, flats) with a few NaN cells."""
+    rng = np.random.default_rng(seed)
+    z = ndimage.uniform_filter(rng.integers(0, 6, shape).astype(np.float32), 2).round(0)
+    z[rng.random(shape) < nan_share] = np.nan
+    return np.ascontiguousarray(z, np.float32)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (2, 3), (23, 31)])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_ascent_pointers_equal_the_engine(shape, seed):
+    """The renderer's pointer of steepest ascent is the engine's (total order, ties, NaN)."""
+    from orokit.topology._kernels import steepest_ascent
+
+    z = _raster_with_ties(shape, seed)
+    zh = np.pad(z, 1, constant_values=np.nan)
+    want, exit_to, _ = steepest_ascent(zh)
+    assert (exit_to == -1).all()
+    assert np.array_equal(_kernels.ascent_pointers(z), want)
+
+
+def _same_basins(basins, z, cells, pid):
+    """The kept-up-to-date basins give every cell the maximum and owner of a full relabelling."""
+    from orokit.raster.enforce import _Basins
+
+    full = _Basins(z, cells, pid)
+    assert np.array_equal(basins.own, full.own)
+    ok = full.lab >= 0
+    assert np.array_equal(basins.lab >= 0, ok)
+    assert np.array_equal(basins.top[basins.lab[ok]], full.top[full.lab[ok]])
+    assert np.array_equal(basins.ptr, full.ptr)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_basins_kept_up_to_date_equal_a_full_relabelling(seed):
+    """After random lowerings (single cells, blocks, flats made), :class:`_Basins` equals a fresh one."""
+    from orokit.raster.enforce import _Basins
+
+    rng = np.random.default_rng(seed)
+    z = _raster_with_ties((37, 29), seed)
+    finite = np.flatnonzero(np.isfinite(z.ravel()))
+    cells = np.sort(rng.choice(finite, 6, replace=False))
+    pid = rng.permutation(6).astype(np.int64)
+    basins = _Basins(z, cells, pid)
+    zf = z.reshape(-1)
+    for _ in range(8):
+        if rng.random() < 0.5:
+            pick = rng.choice(finite, int(rng.integers(1, 30)))
+        else:
+            r, c = rng.integers(0, 30), rng.integers(0, 22)
+            pick = (np.arange(r, r + 7)[:, None] * z.shape[1] + np.arange(c, c + 7)[None, :]).ravel()
+            pick = pick[np.isfinite(zf[pick])]
+        before = zf.copy()
+        zf[pick] = np.minimum(zf[pick], np.floor(zf[pick] - rng.integers(0, 3, pick.size)))
+        basins.update(np.flatnonzero(before.view(np.uint32) != zf.view(np.uint32)))
+        _same_basins(basins, z, cells, pid)
+
+
+def _full_relabelling(self, changed):
+    """The reference for :meth:`_Basins.update`: label the whole raster again."""
+    from orokit.raster.enforce import _Basins
+
+    if changed.size:
+        fresh = _Basins(self.z, self.cells, self.pid)
+        self.lab, self.top, self.tid, self.own, self.ptr = fresh.lab, fresh.top, fresh.tid, fresh.own, fresh.ptr
+
+
+@pytest.mark.parametrize("params", [{}, {"keep_hill_ratio": 0.3, "cut_slope": 0.3}])
+def test_enforcement_with_basins_kept_up_to_date_same_bytes(monkeypatch, params):
+    """A render whose enforcement relabels the whole raster after every change gives the same bytes."""
+    from helpers.trees import small_tree
+    from orokit.raster.enforce import _Basins
+    from orokit.raster.params import RenderParams
+    from orokit.raster.render import render_elevation
+
+    p = RenderParams(lam=200.0, **params)
+    fast = render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=3).values
+    monkeypatch.setattr(_Basins, "update", _full_relabelling)
+    ref = render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=3).values
+    assert fast.tobytes() == ref.tobytes()
