@@ -45,7 +45,8 @@ def _json_attrs(attrs: dict) -> dict:
 WRITE_BATCH_ROWS = 65_536
 #: how every layer is written: through GDAL's Arrow interface, without spatial index (GIS tools
 #: build one on demand; it would double the writing time)
-_GPKG = {"driver": "GPKG", "layer_options": {"SPATIAL_INDEX": "NO"}}
+_LAYER_OPTIONS = {"SPATIAL_INDEX": "NO"}
+_GPKG = {"driver": "GPKG", "layer_options": _LAYER_OPTIONS}
 
 
 def _gdal_crs(crs) -> str | None:
@@ -97,15 +98,20 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
 
     ``layers``: further point GeoDataFrames by layer name (e.g. ``depressions``).
 
+    The layers go through GDAL's C API without the GIL (:mod:`orokit.io.gdal_arrow`;
+    pyogrio's writer, which holds it, when that library is not found), so other Python
+    threads run while GDAL writes.
+
     ``parallel``: the ``saddles`` and ``ridges`` layers are written into a second
     GeoPackage by a second thread while this one writes ``peaks``, then copied into the
     file by SQLite (:func:`_merge_layers`); the same layers, in the same order. GDAL
     writes a layer at ~1-4 us per row in one thread, so this halves the file's wall time
-    with two idle cores (one core: use False, the copy costs ~0.05 s per 100,000 rows).
+    with two idle cores (one core: use False, the copy costs ~0.1 s per 100,000 rows).
     """
     import pyarrow as pa
     import pyogrio
 
+    from orokit.io.gdal_arrow import gdal_library, write_arrow_layer
     from orokit.io.wkb import point_wkb, polyline_wkb
     from orokit.topology.tables import OROMETRY_COLUMNS, validate_peak_table
 
@@ -149,7 +155,12 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
 
         stream = batches()
         first = next(stream)
-        reader = pa.RecordBatchReader.from_batches(first.schema, itertools.chain([first], stream))
+        schema = first.schema
+        if gdal_library() is not None:  # GDAL without the GIL: the other writers' threads run meanwhile
+            write_arrow_layer(dst, layer, schema, itertools.chain([first], stream), geometry_name="geometry",
+                              geometry_type=geometry_type, crs=crs, layer_options=_LAYER_OPTIONS)
+            return
+        reader = pa.RecordBatchReader.from_batches(schema, itertools.chain([first], stream))
         del first
         pyogrio.write_arrow(reader, dst, layer=layer, geometry_name="geometry", geometry_type=geometry_type, crs=crs,
                             **_GPKG)
