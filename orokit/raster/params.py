@@ -31,6 +31,11 @@ class RenderParams:
         of 7 shared DEMs measured none has more than 1.4 % of its cells below that floor (k 16; norway), and
         on the renders of the 13 real trees it lowered 27 of the 78 distances by more than 0.005 and raised 5
         (same counts within all six: 3 / 5).
+    saddle_floor_relief_m, saddle_floor_min_ratio : the floor's ratio follows the tree's local relief
+        ``R = p - s``: ``max(saddle_floor_min_ratio, saddle_floor_ratio * min(1, R / saddle_floor_relief_m))``
+        (:func:`orokit.raster.rivers.saddle_floor`): low-relief trees keep their beds nearer their saddles; None =
+        the constant ratio. 800 m and 0.5 since session 11 (with ``flank_slope_min`` 0.25): the dune fields'
+        interdune corridors no longer sink to ``s - R`` as a network of channels below the plain.
     valley_slope_exponent : the valley floor narrows on steep river beds,
         ``w * min(1, (S / river_slope)^-valley_slope_exponent)`` (S the bed slope;
         :func:`orokit.raster.interpolate.valley_width`); 0 = off.
@@ -91,6 +96,9 @@ class RenderParams:
         large, below it in low, slowly eroding ranges (nonlinear diffusion, Roering et al. 1999); None = off.
         1200 m (with ``flank_slope`` 0.6) since session 10: renders of the 13 real trees within all six tune
         3 -> 4 of 6 (appalachians in: its render's mean slope 19.4 -> 15.8 deg, real 14.1), held out 5 of 7 as before.
+        ``flank_slope_min`` 0.25 (0.05 before) since session 11, with the relief-following saddle floor: gentle
+        cones (R of ~100 m gave ~0.05) reached ~2 km from every dune crest and filled or emptied whole corridors
+        (gobi's 5-10 km power 5.4x real); renders of the real trees within all six tune 4 -> 5 of 6 (gobi in).
     flank_slope_gradient : as ``flank_slope_relief_m``, with the tree's relief gradient instead of its relief:
         R divided by the distance to the farthest of those peaks (at least ``lam``), dimensionless; None = off
         (at most one of the two).
@@ -153,6 +161,8 @@ class RenderParams:
     river_sink_relief_ratio: float | None = None
     saddle_floor_ratio: float | None = 1.0
     saddle_floor_k: int = 16
+    saddle_floor_relief_m: float | None = 800.0
+    saddle_floor_min_ratio: float = 0.5
     floor_relief_ratio: float = 0.0
     min_prominence_m: float = 30.0
     noise_ratio: float = 0.0
@@ -165,7 +175,7 @@ class RenderParams:
     flank_slope_relief_m: float | None = 1200.0
     flank_slope_gradient: float | None = None
     flank_slope_relief_power: float = 1.0
-    flank_slope_min: float = 0.05
+    flank_slope_min: float = 0.25
     flank_slope_relief_k: int = 16
     flank_relief_ratio: float = 0.0
     flank_relief_k: int = 8
@@ -212,6 +222,8 @@ class RenderParams:
             raise InputError(f"max_slope_deg must be in (0, 90) degrees or None, got {self.max_slope_deg!r}")
         if self.flank_slope_relief_m is not None and not float(self.flank_slope_relief_m) > 0.0:
             raise InputError(f"flank_slope_relief_m must be > 0 metres or None, got {self.flank_slope_relief_m!r}")
+        if self.saddle_floor_relief_m is not None and not float(self.saddle_floor_relief_m) > 0.0:
+            raise InputError(f"saddle_floor_relief_m must be > 0 metres or None, got {self.saddle_floor_relief_m!r}")
         if self.flank_slope_gradient is not None and not float(self.flank_slope_gradient) > 0.0:
             raise InputError(f"flank_slope_gradient must be > 0 or None, got {self.flank_slope_gradient!r}")
         if self.flank_slope_relief_m is not None and self.flank_slope_gradient is not None:

@@ -106,7 +106,7 @@ def local_relief(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
 
 
 def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *, ratio: float,
-                 k: int = 16) -> np.ndarray:
+                 k: int = 16, relief_m: float | None = None, min_ratio: float = 0.0) -> np.ndarray:
     """Lowest ground the Divide Tree allows at ``xy``: ``s - ratio * (p - s)``, with ``s`` the lowest of the
     ``k`` nearest saddles and ``p`` the highest of the ``k`` nearest peaks (:func:`local_relief`).
 
@@ -116,16 +116,29 @@ def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
     most 1.4 % of a real DEM's cells lie below it (norway), none in gobi, sahara, andes-chile, appalachians;
     at 0.5 up to 6 % (norway), gobi 2.6 %.)
 
+    With ``relief_m`` the ratio follows the local relief ``R = p - s``: ``max(min_ratio, ratio * min(1, R /
+    relief_m))`` (never above ``ratio``): low-relief trees (dune fields, plains) keep their beds closer under
+    their saddles, high ranges keep the full depth.
+
     >>> peaks = np.array([[0.0, 0.0, 150.0], [2000.0, 0.0, 120.0]])
     >>> saddles = np.array([[1000.0, 0.0, 100.0]])
     >>> saddle_floor(np.array([[1000.0, 500.0]]), peaks, saddles, ratio=0.5, k=4).tolist()
     [75.0]
+    >>> saddle_floor(np.array([[1000.0, 500.0]]), peaks, saddles, ratio=1.0, k=4, relief_m=200.0,
+    ...              min_ratio=0.1).tolist()
+    [87.5]
     """
     xy = np.asarray(xy, float).reshape(-1, 2)
     if saddle_xyz.shape[0] == 0 or peak_xyz.shape[0] == 0 or xy.shape[0] == 0:
         return np.full(xy.shape[0], -np.inf)
     s, p, _ = local_relief(xy, peak_xyz, saddle_xyz, k=k)
-    return s - float(ratio) * np.maximum(p - s, 0.0)
+    r = np.maximum(p - s, 0.0)
+    if relief_m is None:
+        return s - float(ratio) * r
+    if not float(relief_m) > 0.0:
+        raise ValueError(f"relief_m must be > 0, got {relief_m!r}")
+    rat = np.clip(float(ratio) * np.minimum(r / float(relief_m), 1.0), min(float(min_ratio), float(ratio)), float(ratio))
+    return s - rat * r
 
 
 def _segment_params(p0, p1, q0, q1):

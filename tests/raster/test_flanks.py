@@ -57,6 +57,8 @@ def test_relief_slope_follows_the_relief_up_to_the_critical_slope():
     # the default since session 10: the critical slope 0.6 from 1200 m of local relief up
     d = RenderParams()
     assert (d.flank_slope, d.flank_slope_relief_m, d.flank_slope_gradient) == (0.6, 1200.0, None)
+    # since session 11: no cone gentler than 0.25, and the floor's ratio follows the same relief
+    assert (d.flank_slope_min, d.saddle_floor_relief_m, d.saddle_floor_min_ratio) == (0.25, 800.0, 0.5)
 
 
 @pytest.mark.parametrize("name, mid_scale", [("flank_slope_relief_m", 1200.0), ("flank_slope_gradient", 0.2)])

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import orokit
+from orokit.errors import InputError
 from orokit.raster.params import RenderParams
 from orokit.raster.render import render_elevation
 from orokit.raster.rivers import ridge_segments, river_network, saddle_floor
@@ -97,3 +98,45 @@ def test_render_with_the_floor_keeps_the_orometry_and_lifts_the_valleys():
         col = np.floor(frame["x"].to_numpy() / 50.0).astype(int)
         row = np.floor((8000.0 - frame["y"].to_numpy()) / 50.0).astype(int)
         np.testing.assert_allclose(z[row, col], frame["elevation"].to_numpy(), atol=0.01)
+
+
+def test_saddle_floor_ratio_follows_the_local_relief():
+    """With ``relief_m`` the ratio is ``max(min_ratio, ratio x min(1, R / relief_m))`` of the brute-force
+    relief ``R = p - s``: the full ratio where R reaches relief_m, min_ratio where R is small, between
+    the two never above the constant-ratio floor's depth nor below min_ratio's."""
+    peaks, saddles, q = _random_nodes(4)
+    k = 8
+    s0 = saddle_floor(q, peaks, saddles, ratio=0.0, k=k)
+    r = saddle_floor(q, peaks, saddles, ratio=-1.0, k=k) - s0  # p - s
+    assert (r > 0).all()
+    for relief_m, lo in ((float(np.median(r)), 0.5), (1e9, 0.25), (1.0, 0.0)):
+        got = saddle_floor(q, peaks, saddles, ratio=1.0, k=k, relief_m=relief_m, min_ratio=lo)
+        np.testing.assert_allclose(got, s0 - np.maximum(lo, np.minimum(r / relief_m, 1.0)) * r)
+        assert (got >= saddle_floor(q, peaks, saddles, ratio=1.0, k=k) - 1e-9).all()
+        assert (got <= saddle_floor(q, peaks, saddles, ratio=lo, k=k) + 1e-9).all()
+    # relief_m small: every point reaches the full ratio; a min_ratio above the ratio is capped at it
+    np.testing.assert_allclose(saddle_floor(q, peaks, saddles, ratio=0.3, k=k, relief_m=1.0, min_ratio=0.9),
+                               saddle_floor(q, peaks, saddles, ratio=0.3, k=k))
+    with pytest.raises(ValueError, match="relief_m"):
+        saddle_floor(q, peaks, saddles, ratio=1.0, relief_m=0.0)
+    with pytest.raises(InputError, match="saddle_floor_relief_m"):
+        RenderParams(saddle_floor_relief_m=-5.0)
+
+
+def test_render_with_a_relief_following_floor_keeps_the_orometry():
+    """The small tree (relief ~300 m) with the floor's ratio scaled by its relief: its beds lie on or
+    above the constant-ratio floor and on or above the relief-scaled floor (ridge crossings aside); every
+    peak recovered, none extra."""
+    tree = small_tree()
+    kw = dict(lam=200.0, saddle_floor_ratio=1.0)
+    params = RenderParams(**kw, saddle_floor_relief_m=2000.0, saddle_floor_min_ratio=0.1)
+    dem, skel = render_elevation(tree, cell_size_m=50.0, erosion=False, params=params, return_skeleton=True, rng=7)
+    peaks = tree.peaks[["x", "y", "elevation"]].to_numpy(float)
+    saddles = tree.saddles[["x", "y", "elevation"]].to_numpy(float)
+    rv = skel.river_network
+    f = saddle_floor(rv.xy, peaks, saddles, ratio=1.0, relief_m=2000.0, min_ratio=0.1)
+    assert (f > saddle_floor(rv.xy, peaks, saddles, ratio=1.0) + 1.0).all()  # a shallower floor everywhere
+    assert (rv.elevation >= np.minimum(f, 900.0 - 5.0) - 1e-6).all()
+    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
