@@ -123,6 +123,7 @@ def place_peaks(
     disk_weight: float = 0.0,
     elevation_tolerance: float = 0.05,
     gradients: list | None = None,
+    gradient_tail: float | None = None,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Positions of peaks sorted by decreasing elevation ``z``.
@@ -143,6 +144,9 @@ def place_peaks(
     gradients : per type, the histogram of the elevation gradient from a peak to its nearest
         higher peak (:attr:`orokit.synthesis.terrain_type.TerrainType.gradient`), followed like
         the isolation histograms; None (for the list or a type): not followed.
+    gradient_tail : the open last bin of each gradient histogram (values from the real tree's 99th
+        percentile up) ends at this times its lower edge: a steeper candidate counts as out of range
+        (None: open, any steepness fills that bin).
 
     Returns
     -------
@@ -190,6 +194,9 @@ def place_peaks(
             ge[t, : ne_g[t]] = h.edges
             gt[t, : ne_g[t] - 1] = h.probabilities() * max(counts_t[t] - 1, 0)
             gopen[t] = h.open_last
+            if h.open_last and gradient_tail is not None:
+                ge[t, ne_g[t] - 1] = max(float(gradient_tail), 1.0) * h.edges[-1]
+                gopen[t] = False
     gh = np.zeros_like(gt)
     # grid hash of placed peaks: cells about the final mean spacing
     spacing = np.sqrt(domain.width * domain.height / max(n, 1))

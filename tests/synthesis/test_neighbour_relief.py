@@ -150,3 +150,54 @@ def test_synthesis_fits_the_neighbour_gradient(tree_type):
     assert again.peaks.equals(fitted.peaks) and again.saddles.equals(fitted.saddles)  # same seed, same tree
     assert plain.attrs["neighbour_gradient"] is None
     fitted.validate()
+
+
+def test_fine_component_needs_reach(tree_type):
+    """Session 11: with ``fine_needs_reach`` a median no weight reaches gets no fine component."""
+    _, t = tree_type
+    far = dataclasses.replace(t, neighbour_gradient=100.0 * t.neighbour_gradient)
+    closest = synthesize_divide_tree(far, size_m=30_000.0, rng=6,
+                                     params=SynthesisParams(follow_neighbour_gradient=True))
+    none = synthesize_divide_tree(far, size_m=30_000.0, rng=6,
+                                  params=SynthesisParams(follow_neighbour_gradient=True, fine_needs_reach=True))
+    assert closest.attrs["neighbour_gradient"]["fine_weight"] > 0
+    rec = none.attrs["neighbour_gradient"]
+    assert rec["fine_weight"] == 0.0 and rec["trials"] == closest.attrs["neighbour_gradient"]["trials"]
+    x, y, z = (none.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
+    assert rec["reached"] == pytest.approx(float(np.median(_nn_gradient_by_hand(x, y, z))), rel=1e-4)
+    plain = synthesize_divide_tree(t, size_m=30_000.0, rng=6)
+    x, y, z = (plain.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
+    near = dataclasses.replace(t, neighbour_gradient=1.6 * float(np.median(_nn_gradient_by_hand(x, y, z))))
+    a, b = (synthesize_divide_tree(near, size_m=30_000.0, rng=6, params=SynthesisParams(
+        follow_neighbour_gradient=True, fine_needs_reach=r)) for r in (False, True))
+    assert a.peaks.equals(b.peaks) and a.attrs["neighbour_gradient"]["fine_weight"] > 0
+    with pytest.raises(InputError, match="fine_needs_reach"):
+        SynthesisParams(fine_needs_reach=1)  # type: ignore[arg-type]
+
+
+def _higher_gradient_by_hand(tree) -> np.ndarray:
+    x, y, z = (tree.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
+    d = np.hypot(x[:, None] - x[None, :], y[:, None] - y[None, :])
+    d[~(z[None, :] > z[:, None])] = np.inf
+    j = np.argmin(d, axis=1)
+    has = np.isfinite(d[np.arange(x.size), j])
+    return (z[j] - z)[has] / d[np.arange(x.size), j][has]
+
+
+def test_gradient_tail_bounds_the_steepest_peaks(tree_type):
+    """Session 11: ``gradient_tail`` closes the open last bin of the gradient histogram."""
+    _, t = tree_type
+    edge = float(t.gradient.edges[-1])
+    assert t.gradient.open_last
+    steep = dataclasses.replace(t, neighbour_gradient=3.0 * t.neighbour_gradient)  # a large fine component
+    kw = dict(follow_neighbour_gradient=True)
+    free = synthesize_divide_tree(steep, size_m=30_000.0, rng=4, params=SynthesisParams(**kw))
+    capped = synthesize_divide_tree(steep, size_m=30_000.0, rng=4, params=SynthesisParams(gradient_tail=1.5, **kw))
+    over = lambda tr: float(np.mean(_higher_gradient_by_hand(tr) > 1.5 * edge))  # noqa: E731
+    assert over(free) >= 0.02 and over(capped) < 0.5 * over(free)
+    capped.validate()
+    plain = synthesize_divide_tree(t, size_m=30_000.0, rng=4)
+    same = synthesize_divide_tree(t, size_m=30_000.0, rng=4, params=SynthesisParams(gradient_tail=None))
+    assert plain.peaks.equals(same.peaks)  # None: the bin stays open, the same tree
+    with pytest.raises(InputError, match="gradient_tail"):
+        SynthesisParams(gradient_tail=0.5)
