@@ -233,7 +233,164 @@ def _grow(a: np.ndarray, n: int) -> np.ndarray:
     return b
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
+def _heap_push(hk: np.ndarray, hv: np.ndarray, n: int, key: np.float32, val: np.int64
+               ) -> tuple[np.ndarray, np.ndarray, int]:
+    """Push ``(key, val)`` on the binary max-heap ``hk[:n], hv[:n]`` (grown by doubling when full);
+    returns the arrays and the new size. The top is the highest key, then the lowest value: the
+    order ``heapq`` gives ``(-key, val)``, so distinct entries pop in the same sequence."""
+    if n == hk.size:
+        k2 = np.empty(2 * n, hk.dtype)
+        v2 = np.empty(2 * n, hv.dtype)
+        k2[:n] = hk
+        v2[:n] = hv
+        hk, hv = k2, v2
+    i = n
+    while i > 0:
+        p = (i - 1) >> 1
+        if not (key > hk[p] or (key == hk[p] and val < hv[p])):
+            break
+        hk[i] = hk[p]
+        hv[i] = hv[p]
+        i = p
+    hk[i] = key
+    hv[i] = val
+    return hk, hv, n + 1
+
+
+@njit(cache=True, nogil=True)
+def _heap_pop(hk: np.ndarray, hv: np.ndarray, n: int) -> int:
+    """Remove the top ``hk[0], hv[0]`` of the heap of size ``n`` (read it first); returns the new size."""
+    n -= 1
+    key = hk[n]
+    val = hv[n]
+    i = 0
+    while True:
+        c = 2 * i + 1
+        if c >= n:
+            break
+        if c + 1 < n and (hk[c + 1] > hk[c] or (hk[c + 1] == hk[c] and hv[c + 1] < hv[c])):
+            c += 1
+        if not (hk[c] > key or (hk[c] == key and hv[c] < val)):
+            break
+        hk[i] = hk[c]
+        hv[i] = hv[c]
+        i = c
+    hk[i] = key
+    hv[i] = val
+    return n
+
+
+@njit(cache=True, nogil=True)
+def mask_components(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """8-connected components of ``mask``: ``comp`` (int32 per cell, -1 outside the mask), the
+    flat cells of each component (``cells[offsets[k]:offsets[k + 1]]``, components in raster order
+    of their first cell) and ``offsets`` (numba: breadth-first search)."""
+    ny, nx = mask.shape
+    comp = np.full((ny, nx), -1, np.int32)
+    cells = np.empty(max(int(mask.sum()), 1), np.int64)
+    offsets = [0]
+    n = 0
+    k = 0
+    for i0 in range(ny):
+        for j0 in range(nx):
+            if not mask[i0, j0] or comp[i0, j0] >= 0:
+                continue
+            comp[i0, j0] = k
+            head = n
+            cells[n] = i0 * nx + j0
+            n += 1
+            while head < n:
+                v = cells[head]
+                head += 1
+                i = v // nx
+                j = v - i * nx
+                for ii in range(max(i - 1, 0), min(i + 2, ny)):
+                    for jj in range(max(j - 1, 0), min(j + 2, nx)):
+                        if mask[ii, jj] and comp[ii, jj] < 0:
+                            comp[ii, jj] = k
+                            cells[n] = ii * nx + jj
+                            n += 1
+            k += 1
+            offsets.append(n)
+    return comp, cells[:n], np.array(offsets, np.int64)
+
+
+@njit(cache=True, nogil=True)
+def _flood_component(z: np.ndarray, comp: np.ndarray, best: np.ndarray, base: np.ndarray, cells: np.ndarray,
+                     k: int, step: float, grade: float, max_depth: float) -> int:
+    """:func:`reconstruct_masked` on the component ``k`` of the mask (its ``cells``): only its cells
+    and the unmasked cells beside them take part, so components flood independently."""
+    ny, nx = z.shape
+    graded = grade > 0.0
+    seeds = np.empty(max(16, cells.size), np.int64)
+    ns = 0
+    for t in range(cells.size):
+        i = cells[t] // nx
+        j = cells[t] - i * nx
+        for ii in range(max(i - 1, 0), min(i + 2, ny)):
+            for jj in range(max(j - 1, 0), min(j + 2, nx)):
+                if comp[ii, jj] < 0 and np.isfinite(z[ii, jj]):
+                    if ns == seeds.size:
+                        s2 = np.empty(2 * ns, np.int64)
+                        s2[:ns] = seeds
+                        seeds = s2
+                    seeds[ns] = ii * nx + jj
+                    ns += 1
+    seeds = np.unique(seeds[:ns])
+    hk = np.empty(max(16, seeds.size), np.float32)
+    hv = np.empty(max(16, seeds.size), np.int64)
+    nh = 0
+    for t in range(seeds.size):
+        s = seeds[t]
+        i = s // nx
+        hk, hv, nh = _heap_push(hk, hv, nh, z[i, s - i * nx], s)
+    inf = np.float32(np.inf)
+    count = 0
+    while nh > 0:
+        zv = hk[0]
+        v = hv[0]
+        nh = _heap_pop(hk, hv, nh)
+        i = v // nx
+        j = v - i * nx
+        bv = zv  # an unmasked cell is its own pass
+        if comp[i, j] == k:
+            if best[i, j] == inf:  # popped before at a higher offer: final
+                continue
+            if best[i, j] < z[i, j]:
+                z[i, j] = best[i, j]
+                count += 1
+            best[i, j] = inf
+            if graded:
+                bv = base[i, j]
+        down = np.float32(step)
+        if graded and zv - grade >= bv - max_depth:
+            down = np.float32(grade)
+        for ii in range(max(i - 1, 0), min(i + 2, ny)):
+            for jj in range(max(j - 1, 0), min(j + 2, nx)):
+                if comp[ii, jj] != k:
+                    continue
+                b = best[ii, jj]
+                if b == inf:
+                    continue
+                h = z[ii, jj]
+                if not np.isfinite(h):
+                    continue
+                if h < zv:
+                    cand = h
+                    cb = h
+                else:
+                    cand = zv - down
+                    cb = bv
+                if cand > b:
+                    best[ii, jj] = cand
+                    if graded:
+                        base[ii, jj] = cb
+                    hk, hv, nh = _heap_push(hk, hv, nh, cand, ii * nx + jj)
+    return count
+
+
+@njit(cache=True, nogil=True, parallel=True)
 def reconstruct_masked(z: np.ndarray, mask: np.ndarray, step: float, grade: float = 0.0,
                        max_depth: float = 0.0) -> int:
     """Lower the hills inside ``mask`` that hold no marker (peak cutting, in place).
@@ -245,71 +402,18 @@ def reconstruct_masked(z: np.ndarray, mask: np.ndarray, step: float, grade: floa
     shallow bowl below the pass instead of a flat shelf) until it is ``max_depth`` below
     the pass it hangs from, then ``step`` per cell again. Used with ``mask`` = basins of
     spurious maxima, whose outside already ascends to a marker. Returns the number of
-    lowered cells (numba: priority queue).
+    lowered cells (numba: a priority queue per 8-connected component of the mask
+    (:func:`mask_components`), the components on all threads; a component's cells take
+    offers only from each other and the unmasked cells beside them, so this is the one
+    flood of the whole mask).
     """
     ny, nx = z.shape
-    heap = [(np.float32(0.0), np.int64(0))]
-    heap.pop()
-    best = np.full((ny, nx), -np.inf, np.float32)
-    base = np.zeros((ny, nx), np.float32)  # the pass (last unlowered height) a cut cell hangs from
-    for i in range(ny):
-        for j in range(nx):
-            if not mask[i, j]:
-                continue
-            for di in range(-1, 2):
-                ii = i + di
-                if ii < 0 or ii >= ny:
-                    continue
-                for dj in range(-1, 2):
-                    jj = j + dj
-                    if jj < 0 or jj >= nx or mask[ii, jj]:
-                        continue
-                    h = z[ii, jj]
-                    if np.isfinite(h) and h > best[ii, jj]:
-                        best[ii, jj] = h
-                        base[ii, jj] = h
-                        heapq.heappush(heap, (-h, np.int64(ii * nx + jj)))
-    done = ~mask
+    comp, cells, offsets = mask_components(mask)
+    best = np.full((ny, nx), -np.inf, np.float32)  # the best offer so far; +inf once final
+    base = np.zeros((ny, nx) if grade > 0.0 else (1, 1), np.float32)  # the pass a cut cell hangs from
     count = 0
-    while heap:
-        negz, v = heapq.heappop(heap)
-        i = v // nx
-        j = v - i * nx
-        zv = -negz
-        if mask[i, j]:
-            if done[i, j]:
-                continue
-            done[i, j] = True
-            if best[i, j] < z[i, j]:
-                z[i, j] = best[i, j]
-                count += 1
-        elif zv < best[i, j]:
-            continue
-        bv = base[i, j]
-        down = np.float32(step)
-        if grade > 0.0 and zv - grade >= bv - max_depth:
-            down = np.float32(grade)
-        for di in range(-1, 2):
-            ii = i + di
-            if ii < 0 or ii >= ny:
-                continue
-            for dj in range(-1, 2):
-                jj = j + dj
-                if jj < 0 or jj >= nx or done[ii, jj]:
-                    continue
-                h = z[ii, jj]
-                if not np.isfinite(h):
-                    continue
-                if h < zv:
-                    cand = h
-                    cb = h
-                else:
-                    cand = zv - down
-                    cb = bv
-                if cand > best[ii, jj]:
-                    best[ii, jj] = cand
-                    base[ii, jj] = cb
-                    heapq.heappush(heap, (-cand, np.int64(ii * nx + jj)))
+    for k in prange(offsets.size - 1):
+        count += _flood_component(z, comp, best, base, cells[offsets[k]:offsets[k + 1]], k, step, grade, max_depth)
     return count
 
 

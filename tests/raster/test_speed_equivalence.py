@@ -2,8 +2,11 @@
 here as the reference): same seed, same bytes."""
 from __future__ import annotations
 
+import heapq
+
 import numpy as np
 import pytest
+from numba import njit
 from scipy import ndimage
 
 from orokit.raster import _kernels
@@ -229,3 +232,100 @@ def test_enforcement_with_basins_kept_up_to_date_same_bytes(monkeypatch, params)
     monkeypatch.setattr(_Basins, "update", _full_relabelling)
     ref = render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=3).values
     assert fast.tobytes() == ref.tobytes()
+
+
+@njit(cache=True)
+def _reconstruct_masked_reference(z: np.ndarray, mask: np.ndarray, step: float, grade: float = 0.0,
+                       max_depth: float = 0.0) -> int:
+    """The single global flood replaced by :func:`_kernels.reconstruct_masked` (heapq on the whole mask)."""
+    ny, nx = z.shape
+    heap = [(np.float32(0.0), np.int64(0))]
+    heap.pop()
+    best = np.full((ny, nx), -np.inf, np.float32)
+    base = np.zeros((ny, nx), np.float32)  # the pass (last unlowered height) a cut cell hangs from
+    for i in range(ny):
+        for j in range(nx):
+            if not mask[i, j]:
+                continue
+            for di in range(-1, 2):
+                ii = i + di
+                if ii < 0 or ii >= ny:
+                    continue
+                for dj in range(-1, 2):
+                    jj = j + dj
+                    if jj < 0 or jj >= nx or mask[ii, jj]:
+                        continue
+                    h = z[ii, jj]
+                    if np.isfinite(h) and h > best[ii, jj]:
+                        best[ii, jj] = h
+                        base[ii, jj] = h
+                        heapq.heappush(heap, (-h, np.int64(ii * nx + jj)))
+    done = ~mask
+    count = 0
+    while heap:
+        negz, v = heapq.heappop(heap)
+        i = v // nx
+        j = v - i * nx
+        zv = -negz
+        if mask[i, j]:
+            if done[i, j]:
+                continue
+            done[i, j] = True
+            if best[i, j] < z[i, j]:
+                z[i, j] = best[i, j]
+                count += 1
+        elif zv < best[i, j]:
+            continue
+        bv = base[i, j]
+        down = np.float32(step)
+        if grade > 0.0 and zv - grade >= bv - max_depth:
+            down = np.float32(grade)
+        for di in range(-1, 2):
+            ii = i + di
+            if ii < 0 or ii >= ny:
+                continue
+            for dj in range(-1, 2):
+                jj = j + dj
+                if jj < 0 or jj >= nx or done[ii, jj]:
+                    continue
+                h = z[ii, jj]
+                if not np.isfinite(h):
+                    continue
+                if h < zv:
+                    cand = h
+                    cb = h
+                else:
+                    cand = zv - down
+                    cb = bv
+                if cand > best[ii, jj]:
+                    best[ii, jj] = cand
+                    base[ii, jj] = cb
+                    heapq.heappush(heap, (-cand, np.int64(ii * nx + jj)))
+    return count
+
+
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("grade", [0.0, 1.5])
+def test_reconstruct_masked_by_components_equals_the_global_flood(seed, grade):
+    """The flood per mask component (both cores) gives the bytes and count of one flood of the whole mask."""
+    rng = np.random.default_rng(seed)
+    z = _raster_with_ties((41, 37), seed, nan_share=0.03) * np.float32(3.0)
+    z += rng.integers(0, 2, z.shape).astype(np.float32)  # ties and near-ties
+    mask = ndimage.binary_dilation(rng.random(z.shape) < 0.08, iterations=int(rng.integers(1, 4)))
+    mask[0, :] |= seed % 2 == 0  # a component along the border
+    want, got = z.copy(), z.copy()
+    n_want = _reconstruct_masked_reference(want, mask, 1e-3, grade, 2.0)
+    n_got = _kernels.reconstruct_masked(got, mask, 1e-3, grade, 2.0)
+    assert n_got == n_want and got.tobytes() == want.tobytes()
+    assert n_want > 0
+
+
+def test_mask_components_are_scipy_labels():
+    mask = np.random.default_rng(3).random((50, 60)) < 0.4
+    comp, cells, offsets = _kernels.mask_components(mask)
+    lab, n = ndimage.label(mask, structure=np.ones((3, 3)))
+    assert offsets.size - 1 == n and cells.size == mask.sum()
+    # same partition; numbered in raster order of the first cell (as scipy does)
+    assert np.array_equal(comp + 1, lab)
+    for k in range(n):
+        assert (comp.reshape(-1)[cells[offsets[k]:offsets[k + 1]]] == k).all()
