@@ -162,7 +162,8 @@ class DivideTree:
 
         Parameters
         ----------
-        table : the tree's :meth:`prominence_table`, when already computed.
+        table : the tree's :meth:`prominence_table`, when already computed (only its
+            ``prominence`` and the sign of ``key_saddle`` are read: the engine passes its own).
 
         Returns
         -------

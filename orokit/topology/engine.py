@@ -329,7 +329,12 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
         # the places of peaks and saddles exist (~64 bytes per peak less under the sweeps' transient)
         bare = DivideTree(pd.DataFrame({"x": elev, "y": elev, "elevation": elev}, copy=False),
                           pd.DataFrame({"x": sad_z, "y": sad_z, "elevation": sad_z}, copy=False), edges)
-        parents = bare.parents()
+        # the engine's prominences and roots are the pruned tree's (pruning keeps every kept peak's
+        # prominence; a root is the highest peak of its domain): no second Kruskal sweep over the tree
+        # for them (~100 bytes per peak of sorted edge copies and sweep state at the tables' peak)
+        known = pd.DataFrame({"prominence": core.prominence, "key_saddle": core.key_saddle_cell}, copy=False)
+        parents = bare.parents(known)
+        del known
         del bare
         line = parents["line_parent"].to_numpy(np.int64)
         prom_parent = parents["prominence_parent"].to_numpy(np.int64)

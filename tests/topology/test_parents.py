@@ -160,3 +160,33 @@ def test_chunked_engine_parents_are_the_walk_on_its_own_tree(make_dem):
         lp, pp, _, _ = brute_parents(tree.peaks["elevation"], tree.saddles["elevation"], e)
         np.testing.assert_array_equal(result.peaks["line_parent"].to_numpy(), lp)
         np.testing.assert_array_equal(result.peaks["prominence_parent"].to_numpy(), pp)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 5), st.sampled_from([0.0, 1.0, 2.0]))
+def test_tables_parents_from_the_engine_prominences_are_the_trees_own(seed, levels, eps):
+    """``build_result`` gives ``parents`` the engine's prominences and roots instead of a sweep of
+    the pruned tree: on tie-heavy grids (plateaus, equal saddles, voids) they are the tree's own,
+    bit for bit, and the parent columns are the brute-force walk on the tree."""
+    import orokit
+    from helpers.dems import build_dem
+
+    rng = np.random.default_rng(seed)
+    h, w = rng.integers(3, 16, size=2)
+    z = rng.integers(0, levels, size=(h, w)).astype(np.float32)
+    z[rng.random((h, w)) < 0.08] = np.nan
+    if np.isnan(z).all():
+        return
+    result = orokit.analyze(build_dem(z), min_prominence_m=eps, isolation=False)
+    tree, peaks = result.tree, result.peaks
+    own = tree.prominence_table()
+    np.testing.assert_array_equal(own["prominence"].to_numpy(), peaks["prominence"].to_numpy())
+    np.testing.assert_array_equal(own["key_saddle"].to_numpy() < 0, peaks["island_parent"].to_numpy() < 0)
+    mine = tree.parents(own)
+    np.testing.assert_array_equal(mine["line_parent"].to_numpy(), peaks["line_parent"].to_numpy())
+    np.testing.assert_array_equal(mine["prominence_parent"].to_numpy(), peaks["prominence_parent"].to_numpy())
+    if len(peaks):
+        e = tree.edges[["peak_a", "peak_b", "saddle"]].to_numpy(np.int64)
+        lp, pp, _, _ = brute_parents(tree.peaks["elevation"], tree.saddles["elevation"], e)
+        np.testing.assert_array_equal(peaks["line_parent"].to_numpy(), lp)
+        np.testing.assert_array_equal(peaks["prominence_parent"].to_numpy(), pp)
