@@ -54,18 +54,17 @@ GEOMETRY_TYPES = {"Point": 1, "LineString": 2}
 @functools.lru_cache(maxsize=1)
 def gdal_library() -> ctypes.CDLL | None:
     """The GDAL library pyogrio loaded (its C functions declared), or None when it is not found."""
-    import pyogrio  # noqa: F401  (loads GDAL and registers its drivers)
+    import pyogrio  # loads GDAL and registers its drivers
 
-    path = None
     try:
         with open("/proc/self/maps") as maps:
-            for line in maps:
-                name = line.rsplit(None, 1)[-1]
-                if "/libgdal" in name and ".so" in name:
-                    path = name
-                    break
+            mapped = {line.rsplit(None, 1)[-1] for line in maps if "/libgdal" in line and ".so" in line}
     except OSError:
         return None
+    # rasterio's wheel maps its own GDAL too: take pyogrio's (its wheel's pyogrio.libs), or the only one
+    own = Path(pyogrio.__file__).resolve().parent.parent / "pyogrio.libs"
+    ours = [p for p in mapped if Path(p).parent == own]
+    path = ours[0] if len(ours) == 1 else (next(iter(mapped)) if len(mapped) == 1 else None)
     if path is None:
         return None
     try:
