@@ -34,7 +34,7 @@ def write_spill(path: PathLike, arrays: dict[str, np.ndarray]) -> None:
             np.savez(fh, **cast("dict[str, Any]", arrays))
 
 
-def read_spill(path: PathLike) -> dict[str, np.ndarray]:
-    """The arrays written by :func:`write_spill` (never unpickled)."""
+def read_spill(path: PathLike, names: tuple[str, ...] | None = None) -> dict[str, np.ndarray]:
+    """The arrays written by :func:`write_spill` (never unpickled): all, or only ``names``."""
     with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
-        return {k: data[k] for k in data.files}
+        return {k: data[k] for k in (data.files if names is None else names)}

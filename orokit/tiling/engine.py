@@ -128,20 +128,42 @@ def _spill_iso(iso: dict | None, spill: str | None) -> dict | None:
 def _read_spilled(paths: list[str], cells: np.ndarray) -> dict | None:
     """Settled isolation of the peaks at ``cells`` (flat, increasing) from the chunks' spill files.
 
-    The others (candidate peaks the merges dropped) are left out as each file is read; the
-    parts are then joined one field at a time, each part's field freed once joined.
+    The others (candidate peaks the merges dropped) are left out. Two passes: the keys of every
+    file are read to size the output, then each file fills its rows, so only the output and one
+    file's arrays are in memory (not every file's rows and their concatenation).
     """
-    parts = []
-    for path in paths:
-        data = read_spill(path)
-        key = data["key"]
-        pos = np.minimum(np.searchsorted(cells, key), max(cells.size - 1, 0))
-        sel = cells[pos] == key if cells.size else np.zeros(key.size, bool)
-        parts.append({f: data[f][sel] for f in _ISO_FIELDS})
-        del data, key, pos, sel
-    if not parts:
+    if not paths:
         return None
-    return _merge_iso(parts)
+
+    def selected(key: np.ndarray) -> np.ndarray:
+        if not cells.size:
+            return np.zeros(key.size, bool)
+        return cells[np.minimum(np.searchsorted(cells, key), cells.size - 1)] == key
+
+    counts, width = [], 0
+    for path in paths:
+        data = read_spill(path, ("key", "cand"))
+        sel = selected(data["key"])
+        counts.append(int(sel.sum()))
+        if counts[-1]:
+            width = max(width, int((data["cand"][sel] >= 0).sum(axis=1).max(initial=0)))
+    total = sum(counts)
+    out = {"key": np.empty(total, np.int64), "best": np.empty(total), "nan": np.empty(total),
+           "cand": np.full((total, width), -1, np.int64)}
+    at = 0
+    for path, count in zip(paths, counts):
+        if not count:
+            continue
+        data = read_spill(path)
+        sel = selected(data["key"])
+        for f in ("key", "best", "nan"):
+            out[f][at:at + count] = data[f][sel]
+        c = data["cand"][sel]
+        m = min(width, c.shape[1])
+        out["cand"][at:at + count, :m] = c[:, :m]
+        at += count
+        del data, sel, c
+    return out
 
 
 def _corrupt_chunk(path: str) -> bool:
@@ -344,6 +366,7 @@ def _tiled_orometry(data, *, min_prominence_m: float, outside: str, scheduler: A
     else:
         ((result, iso, st),) = compute([final])
     if spill is not None:  # the merges carried no settled isolation: read it back for the kept peaks
+        release_free_heap()  # first, the root's and the finalize's arrays freed inside the heap
         iso = _read_spilled([p for p in spills.values() if Path(p).exists()], result.peak_cell)
         logger.info("settled isolation read back from %d spill files: %d peaks, %.1f MB", len(spills),
                     0 if iso is None else iso["key"].size,
