@@ -698,3 +698,19 @@ def update_basins(z: np.ndarray, ptr: np.ndarray, lab: np.ndarray, own: np.ndarr
             lab[stack[s]] = v
             own[stack[s]] = o
     return new_top[:nn].copy(), new_tid[:nn].copy()
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def feature_distance(ft: np.ndarray, sampling: float) -> np.ndarray:
+    """float32 distance of every cell to the feature cell ``ft[:, i, j]`` (``return_indices`` of
+    :func:`scipy.ndimage.distance_transform_edt`): the same float64 operations as scipy's own
+    distances (``sqrt((di s)^2 + (dj s)^2)``), then rounded to float32, without its four float64
+    rasters (rows on all threads)."""
+    _, ny, nx = ft.shape
+    out = np.empty((ny, nx), np.float32)
+    for i in prange(ny):
+        for j in range(nx):
+            di = np.float64(ft[0, i, j] - i) * sampling
+            dj = np.float64(ft[1, i, j] - j) * sampling
+            out[i, j] = np.float32(np.sqrt(di * di + dj * dj))
+    return out

@@ -21,6 +21,7 @@ from scipy import ndimage
 from orokit import __version__
 from orokit._typing import SeedLike
 from orokit.errors import CRSError, DivideTreeError, InputError, OrokitWarning
+from orokit.raster import _kernels
 from orokit.raster.enforce import enforce_orometry
 from orokit.raster.erosion import erode_multiscale
 from orokit.raster.hillslope import limit_slope
@@ -66,6 +67,15 @@ def resolve_seed(rng: SeedLike | np.random.SeedSequence) -> int:
     if isinstance(rng, np.random.Generator):
         return int(rng.integers(0, 2**63 - 1))
     raise InputError(f"rng must be an int seed, a numpy Generator, a SeedSequence or None, got {type(rng).__name__}")
+
+
+def _node_distance(mask: np.ndarray, res: float) -> np.ndarray:
+    """float32 Euclidean distance (metres) of every cell to the nearest cell where ``mask`` is False: the
+    values of ``distance_transform_edt(mask, sampling=res).astype(np.float32)`` (same feature cells,
+    same float64 arithmetic; :func:`_kernels.feature_distance`)."""
+    ft = np.zeros((2,) + mask.shape, np.int32)
+    ndimage.distance_transform_edt(mask, sampling=res, return_distances=False, return_indices=True, indices=ft)
+    return _kernels.feature_distance(ft, float(res))
 
 
 def _slope_weight(z: np.ndarray, res: float, smooth_m: float, power: float) -> np.ndarray:
@@ -257,7 +267,7 @@ def render_elevation(
     mask = np.ones(z.shape, bool)
     row, col, ok = grid.cell_of(nodes[:, :2])
     mask[row[ok], col[ok]] = False
-    dist = ndimage.distance_transform_edt(mask, sampling=grid.cell_size_m).astype(np.float32)
+    dist = _node_distance(mask, grid.cell_size_m)
     uplift = falloff(dist / np.float32(params.uplift_radius))
     detail = {}
     # the detail draws from its own stream: turning it on leaves the texture and noise of the render as they were

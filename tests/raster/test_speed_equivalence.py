@@ -329,3 +329,16 @@ def test_mask_components_are_scipy_labels():
     assert np.array_equal(comp + 1, lab)
     for k in range(n):
         assert (comp.reshape(-1)[cells[offsets[k]:offsets[k + 1]]] == k).all()
+
+
+@pytest.mark.parametrize("res", [30.0, 92.6, 0.7, 1.0 / 3.0])
+@pytest.mark.parametrize("share", [0.0005, 0.02, 0.5, 1.0])
+def test_node_distance_equals_scipy_edt(res, share):
+    """The renderer's distance to peaks and saddles has the bytes of ``distance_transform_edt(...).astype(float32)``."""
+    from orokit.raster.render import _node_distance
+
+    mask = np.random.default_rng(int(share * 1e4)).random((61, 47)) >= share
+    mask[0, 0] = False  # at least one feature
+    want = ndimage.distance_transform_edt(mask, sampling=res).astype(np.float32)
+    got = _node_distance(mask, res)
+    assert got.dtype == np.float32 and got.tobytes() == want.tobytes()
