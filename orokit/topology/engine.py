@@ -385,6 +385,10 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
 
     W = core.shape[1]
     n = core.n_kept
+    # the engine's columns the rows need, not ``core``: its ridge arrays and cells (24 bytes per peak)
+    # are free once the tables exist, while the blocks live until the files are written
+    c_prom, c_ksc, c_ksz = core.prominence, core.key_saddle_cell, core.key_saddle_z
+    c_parent, c_exact = core.parent, core.prominence_exact
     iso = None
     if isolation is not None and n:
         # the isolation table's own columns, no copies (the caller drops it)
@@ -413,8 +417,8 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
             return np.where(has, rows[idx] if n else 0, -1), np.where(has, cols[idx] if n else 0, -1)
 
         e = elev[sl]
-        prom = core.prominence[sl]
-        ksc = core.key_saddle_cell[sl]
+        prom = c_prom[sl]
+        ksc = c_ksc[sl]
         has_saddle = ksc >= 0
         ks = np.where(has_saddle, ksc, 0)
         k_rows = np.where(has_saddle, ks // W, -1)
@@ -431,7 +435,7 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
             found = iso_r >= 0
             iso_x, iso_y = np.where(found, ix, np.nan), np.where(found, iy, np.nan)
             del ix, iy, found
-        parent = core.parent[sl].astype(np.int64, copy=False)
+        parent = c_parent[sl].astype(np.int64, copy=False)
         island_rc, line_rc, prom_rc = cell_of(parent), cell_of(ln), cell_of(pp)
         px, py = x[sl], y[sl]
         lon, lat = nan(), nan()
@@ -454,7 +458,7 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
             "saddle_col": k_cols,
             "saddle_x": np.where(has_saddle, kx, np.nan),
             "saddle_y": np.where(has_saddle, ky, np.nan),
-            "saddle_elevation": core.key_saddle_z[sl].astype(np.float64, copy=False),
+            "saddle_elevation": c_ksz[sl].astype(np.float64, copy=False),
             "island_parent": parent,
             "island_parent_row": island_rc[0],
             "island_parent_col": island_rc[1],
@@ -470,7 +474,7 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
             "isolation_col": iso_c,
             "isolation_x": iso_x,
             "isolation_y": iso_y,
-            "prominence_exact": core.prominence_exact[sl].astype(bool, copy=False),
+            "prominence_exact": c_exact[sl].astype(bool, copy=False),
             "isolation_exact": iso_exact,
         }
         assert list(columns) == PEAK_COLUMNS

@@ -232,3 +232,27 @@ def test_table_parents_are_those_of_the_result_tree(result):
     for c in ("line_parent", "prominence_parent"):
         assert np.array_equal(result.peaks[c].to_numpy(), want[c].to_numpy()), c
     assert (want["line_parent"] >= 0).any()
+
+
+def test_table_blocks_do_not_keep_the_engine_output_alive(result):
+    """The peak blocks hold the engine's columns they read, not its ``Orometry`` (whose ridge arrays
+    and cells, ~24 bytes per peak, are not needed once the tables exist), and still make the rows."""
+    import gc
+    import weakref
+
+    from affine import Affine
+    from pyproj import CRS
+
+    from orokit.topology import engine
+
+    z = _dem().values
+    core = engine.orometry(z, min_prominence_m=5.0)
+    ref = weakref.ref(core)
+    lean = engine.build_result(core, transform=Affine(30.0, 0.0, 0.0, 0.0, -30.0, 900.0), crs=CRS.from_epsg(32633),
+                               isolation=None, geometry=False, blocks=True)
+    del core
+    gc.collect()
+    assert ref() is None
+    whole = lean.peaks.to_frame()
+    assert len(whole) > 7
+    np.testing.assert_array_equal(whole["prominence"].to_numpy(), result.peaks["prominence"].to_numpy())
