@@ -714,3 +714,83 @@ def feature_distance(ft: np.ndarray, sampling: float) -> np.ndarray:
             dj = np.float64(ft[1, i, j] - j) * sampling
             out[i, j] = np.float32(np.sqrt(di * di + dj * dj))
     return out
+
+
+_HASH_MUL = np.int64(-7046029254386353131)  # 0x9E3779B97F4A7C15 (Fibonacci hashing), wrapping int64
+
+
+@njit(cache=True, nogil=True)
+def _bottleneck(parent: np.ndarray, height: np.ndarray, depth: np.ndarray, u: int, v: int) -> float:
+    """:func:`bottlenecks` of one pair."""
+    while depth[u] > depth[v]:
+        u = parent[u]
+    while depth[v] > depth[u]:
+        v = parent[v]
+    while u != v and u >= 0 and v >= 0:
+        u = parent[u]
+        v = parent[v]
+    return height[u] if (u == v and u >= 0) else -np.inf
+
+
+@njit(cache=True, nogil=True)
+def pass_violations(owner: np.ndarray, z: np.ndarray, parent: np.ndarray, height: np.ndarray, depth: np.ndarray,
+                    n: int, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The pairs of :func:`border_pairs` (same order) whose lower cell is more than ``tol`` above the
+    finite bottleneck (:func:`bottlenecks`) between their two owners: flat indices ``(a, b)``, the
+    bottleneck of each, and the number of pairs looked at. One pass; each owner pair's bottleneck is
+    computed once (a hash table on ``lo * n + hi``)."""
+    ny, nx = owner.shape
+    size = 1 << 12
+    keys = np.full(size, -1, np.int64)
+    vals = np.empty(size, np.float64)
+    used = 0
+    ia = np.empty(64, np.int64)
+    ib = np.empty(64, np.int64)
+    bv = np.empty(64, np.float64)
+    nv = 0
+    total = 0
+    for d in range(4):
+        dr = 0 if d == 0 else 1
+        dc = 1 if d == 0 else d - 2  # E, then SW, S, SE
+        for i in range(ny - dr):
+            for j in range(max(0, -dc), nx - max(0, dc)):
+                oa = owner[i, j]
+                ob = owner[i + dr, j + dc]
+                if oa == ob or oa < 0 or ob < 0:
+                    continue
+                total += 1
+                lo = min(oa, ob)
+                hi = max(oa, ob)
+                key = lo * n + hi
+                if 2 * (used + 1) > size:  # grow the table (load <= 1/2)
+                    size *= 2
+                    k2 = np.full(size, -1, np.int64)
+                    v2 = np.empty(size, np.float64)
+                    for t in range(keys.size):
+                        if keys[t] >= 0:
+                            s = (keys[t] * _HASH_MUL) & (size - 1)
+                            while k2[s] >= 0:
+                                s = (s + 1) & (size - 1)
+                            k2[s] = keys[t]
+                            v2[s] = vals[t]
+                    keys, vals = k2, v2
+                s = (key * _HASH_MUL) & (size - 1)
+                while keys[s] >= 0 and keys[s] != key:
+                    s = (s + 1) & (size - 1)
+                if keys[s] < 0:
+                    keys[s] = key
+                    vals[s] = _bottleneck(parent, height, depth, lo, hi)
+                    used += 1
+                bn = vals[s]
+                za = np.float64(z[i, j])
+                zb = np.float64(z[i + dr, j + dc])
+                if min(za, zb) > bn + tol and np.isfinite(bn):
+                    if nv == ia.size:
+                        ia = _grow(ia, nv)
+                        ib = _grow(ib, nv)
+                        bv = _grow(bv, nv)
+                    ia[nv] = i * nx + j
+                    ib[nv] = (i + dr) * nx + j + dc
+                    bv[nv] = bn
+                    nv += 1
+    return ia[:nv].copy(), ib[:nv].copy(), bv[:nv].copy(), total

@@ -205,22 +205,17 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
             # cell ascends to the hill top, whose best path out reaches that basin)
             stats["kept"] = int(np.unique(lab[sp.reshape(-1)]).size)
             own = np.where(sp, src[np.maximum(lab, 0)].reshape(z.shape), own)
-        ia, ib = _border_pairs(own)
-        ta, tb = own.reshape(-1)[ia], own.reshape(-1)[ib]
-        lo, hi = np.minimum(ta, tb), np.maximum(ta, tb)
-        keys, inv = np.unique(lo * n + hi, return_inverse=True)
-        bn = _kernels.bottlenecks(parent, height, depth, keys // n, keys % n)[inv.ravel()]
-        za, zb = zf[ia].astype(np.float64), zf[ib].astype(np.float64)
-        viol = (np.minimum(za, zb) > bn + 1e-3) & np.isfinite(bn)  # -inf: peaks of separate trees
-        stats["left"] = int(viol.sum())
-        if not viol.any():
+        # border pairs (_border_pairs) whose pass is above the tree's bottleneck (-inf: separate trees)
+        ia, ib, bn, _ = _kernels.pass_violations(np.ascontiguousarray(own, np.int64), z, parent, height, depth, n, 1e-3)
+        stats["left"] = int(ia.size)
+        if not ia.size:
             break
-        ia, ib, za, zb, target = ia[viol], ib[viol], za[viol], zb[viol], bn[viol] - drop_m
+        za, zb, target = zf[ia].astype(np.float64), zf[ib].astype(np.float64), bn - drop_m
         low = np.where(za <= zb, ia, ib)
         high = np.where(za <= zb, ib, ia)
         # a cell may go down to max(target, its floor) if that floor is not above the bottleneck
         # (ridge cells of the saddle itself end at the saddle's height: a tie, not a bypass)
-        lim = (bn[viol] + 1e-4).astype(zf.dtype)
+        lim = (bn + 1e-4).astype(zf.dtype)
         pick = np.where(ff[low] <= lim, low, np.where(ff[high] <= lim, high, -1))
         keep_pair = pick >= 0
         pick = pick[keep_pair]

@@ -342,3 +342,26 @@ def test_node_distance_equals_scipy_edt(res, share):
     want = ndimage.distance_transform_edt(mask, sampling=res).astype(np.float32)
     got = _node_distance(mask, res)
     assert got.dtype == np.float32 and got.tobytes() == want.tobytes()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_pass_violations_equal_the_numpy_version(seed):
+    """One pass with a table of bottlenecks gives the border pairs above their bottleneck of the
+    numpy version it replaced (border pairs, np.unique of the owner pairs, bottlenecks, filter)."""
+    rng = np.random.default_rng(seed)
+    n = 30
+    own = rng.integers(-2, n, (50, 40))
+    own[rng.random(own.shape) < 0.5] = rng.integers(0, 3)  # large basins and ties of owners
+    z = (rng.random((50, 40)) * 100).astype(np.float32)
+    m = n - 1 - seed  # with seed > 0, peaks without an edge: separate trees (-inf bottlenecks)
+    parent, height, depth = _kernels.merge_tree(n, np.arange(m), np.arange(1, m + 1), rng.random(m) * 50)
+    ia, ib, bn, total = _kernels.pass_violations(own, z, parent, height, depth, n, 1e-3)
+    ra, rb = _border_pairs(own)
+    o = own.reshape(-1)
+    lo, hi = np.minimum(o[ra], o[rb]), np.maximum(o[ra], o[rb])
+    keys, inv = np.unique(lo * n + hi, return_inverse=True)
+    b = _kernels.bottlenecks(parent, height, depth, keys // n, keys % n)[inv.ravel()]
+    za, zb = z.reshape(-1)[ra].astype(np.float64), z.reshape(-1)[rb].astype(np.float64)
+    viol = (np.minimum(za, zb) > b + 1e-3) & np.isfinite(b)
+    assert total == ra.size and viol.any()
+    assert np.array_equal(ia, ra[viol]) and np.array_equal(ib, rb[viol]) and np.array_equal(bn, b[viol])
