@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import threading
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -51,52 +52,85 @@ _OPEN_UPDATE_VECTOR = 0x01 | 0x04 | 0x40
 GEOMETRY_TYPES = {"Point": 1, "LineString": 2}
 
 
-@functools.lru_cache(maxsize=1)
-def gdal_library() -> ctypes.CDLL | None:
-    """The GDAL library pyogrio loaded (its C functions declared), or None when it is not found."""
-    import pyogrio  # loads GDAL and registers its drivers
+_SIGNATURES: dict[str, tuple[Any, list[Any]]] = {
+    "GDALGetDriverByName": (ctypes.c_void_p, [ctypes.c_char_p]),
+    "GDALCreate": (ctypes.c_void_p, [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int, ctypes.c_int,
+                                     ctypes.c_int, ctypes.c_int, _OPTIONS]),
+    "GDALOpenEx": (ctypes.c_void_p, [ctypes.c_char_p, ctypes.c_uint, ctypes.c_void_p, ctypes.c_void_p,
+                                     ctypes.c_void_p]),
+    "GDALClose": (ctypes.c_int, [ctypes.c_void_p]),
+    "GDALDatasetCreateLayer": (ctypes.c_void_p, [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_void_p,
+                                                 ctypes.c_int, _OPTIONS]),
+    "GDALDatasetStartTransaction": (ctypes.c_int, [ctypes.c_void_p, ctypes.c_int]),
+    "GDALDatasetCommitTransaction": (ctypes.c_int, [ctypes.c_void_p]),
+    "OGR_L_CreateFieldFromArrowSchema": (ctypes.c_bool, [ctypes.c_void_p, ctypes.POINTER(_ArrowSchema),
+                                                         _OPTIONS]),
+    "OGR_L_WriteArrowBatch": (ctypes.c_bool, [ctypes.c_void_p, ctypes.POINTER(_ArrowSchema),
+                                              ctypes.POINTER(_ArrowArray), _OPTIONS]),
+    "OSRNewSpatialReference": (ctypes.c_void_p, [ctypes.c_char_p]),
+    "OSRSetFromUserInput": (ctypes.c_int, [ctypes.c_void_p, ctypes.c_char_p]),
+    "OSRRelease": (None, [ctypes.c_void_p]),
+    "CPLErrorReset": (None, []),
+    "CPLGetLastErrorMsg": (ctypes.c_char_p, []),
+    "CPLGetConfigOption": (ctypes.c_char_p, [ctypes.c_char_p, ctypes.c_char_p]),
+    "CPLPushErrorHandler": (None, [ctypes.c_void_p]),
+    "CPLPopErrorHandler": (None, []),
+}
+#: a GDAL configuration option set through pyogrio to tell its library from other loaded ones
+_PROBE = "OROKIT_GDAL_ARROW_PROBE"
 
+
+def _loaded_libraries() -> list[str]:
+    """Paths of the GDAL libraries mapped into this process (Linux; others: none), first seen first."""
+    paths: list[str] = []
     try:
         with open("/proc/self/maps") as maps:
-            mapped = {line.rsplit(None, 1)[-1] for line in maps if "/libgdal" in line and ".so" in line}
+            for line in maps:
+                name = line.rsplit(None, 1)[-1]
+                if "/libgdal" in name and ".so" in name and name not in paths:
+                    paths.append(name)
     except OSError:
-        return None
-    # rasterio's wheel maps its own GDAL too: take pyogrio's (its wheel's pyogrio.libs), or the only one
-    own = Path(pyogrio.__file__).resolve().parent.parent / "pyogrio.libs"
-    ours = [p for p in mapped if Path(p).parent == own]
-    path = ours[0] if len(ours) == 1 else (next(iter(mapped)) if len(mapped) == 1 else None)
-    if path is None:
-        return None
+        return []
+    return paths
+
+
+_FIND = threading.Lock()  # one search, also when two writer threads ask first at once
+
+
+def gdal_library() -> ctypes.CDLL | None:
+    """The GDAL library pyogrio uses (its C functions declared), or None when it is not found.
+
+    Another GDAL may be loaded beside it (rasterio's wheels bundle their own, of another
+    version, with its own drivers and settings): the one whose configuration pyogrio sets
+    is taken.
+    """
+    with _FIND:
+        return _find_library()
+
+
+@functools.lru_cache(maxsize=1)
+def _find_library() -> ctypes.CDLL | None:
+    import uuid
+
+    import pyogrio  # loads GDAL and registers its drivers
+
+    token = uuid.uuid4().hex
+    pyogrio.set_gdal_config_options({_PROBE: token})
     try:
-        lib = ctypes.CDLL(path)  # the loaded library (same handle); ctypes calls release the GIL
-        sig = {
-            "GDALAllRegister": (None, []),
-            "GDALGetDriverByName": (ctypes.c_void_p, [ctypes.c_char_p]),
-            "GDALCreate": (ctypes.c_void_p, [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int, ctypes.c_int,
-                                             ctypes.c_int, ctypes.c_int, _OPTIONS]),
-            "GDALOpenEx": (ctypes.c_void_p, [ctypes.c_char_p, ctypes.c_uint, ctypes.c_void_p, ctypes.c_void_p,
-                                             ctypes.c_void_p]),
-            "GDALClose": (ctypes.c_int, [ctypes.c_void_p]),
-            "GDALDatasetCreateLayer": (ctypes.c_void_p, [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_void_p,
-                                                         ctypes.c_int, _OPTIONS]),
-            "GDALDatasetStartTransaction": (ctypes.c_int, [ctypes.c_void_p, ctypes.c_int]),
-            "GDALDatasetCommitTransaction": (ctypes.c_int, [ctypes.c_void_p]),
-            "OGR_L_CreateFieldFromArrowSchema": (ctypes.c_bool, [ctypes.c_void_p, ctypes.POINTER(_ArrowSchema),
-                                                                 _OPTIONS]),
-            "OGR_L_WriteArrowBatch": (ctypes.c_bool, [ctypes.c_void_p, ctypes.POINTER(_ArrowSchema),
-                                                      ctypes.POINTER(_ArrowArray), _OPTIONS]),
-            "OSRNewSpatialReference": (ctypes.c_void_p, [ctypes.c_char_p]),
-            "OSRSetFromUserInput": (ctypes.c_int, [ctypes.c_void_p, ctypes.c_char_p]),
-            "OSRRelease": (None, [ctypes.c_void_p]),
-            "CPLErrorReset": (None, []),
-            "CPLGetLastErrorMsg": (ctypes.c_char_p, []),
-        }
-        for name, (restype, argtypes) in sig.items():
-            fn = getattr(lib, name)
-            fn.restype, fn.argtypes = restype, argtypes
-    except (OSError, AttributeError):
+        for path in _loaded_libraries():
+            try:
+                lib = ctypes.CDLL(path)  # the loaded library (same handle); ctypes calls release the GIL
+                for name, (restype, argtypes) in _SIGNATURES.items():
+                    fn = getattr(lib, name)
+                    fn.restype, fn.argtypes = restype, argtypes
+            except (OSError, AttributeError):  # not loadable, or a GDAL without the Arrow interface (< 3.8)
+                continue
+            value = lib.CPLGetConfigOption(_PROBE.encode(), None)
+            if value is not None and value.decode() == token:
+                return lib
         return None
-    return lib
+    finally:
+        pyogrio.set_gdal_config_options({_PROBE: None})
 
 
 def _options(values: dict[str, str]) -> Any:
@@ -121,7 +155,19 @@ def write_arrow_layer(path: Path, layer: str, schema: Any, batches: Iterable[Any
     lib = gdal_library()
     if lib is None:
         raise OSError("GDAL's C library was not found in this process")
+    # GDAL's messages go into the OSError raised, not to stderr (a worker thread has no handler of
+    # pyogrio's: GDAL's default one prints them); the handler stack is the calling thread's
+    lib.CPLPushErrorHandler(ctypes.cast(lib.CPLQuietErrorHandler, ctypes.c_void_p))
+    try:
+        _write_layer(lib, path, layer, schema, batches, geometry_name=geometry_name, geometry_type=geometry_type,
+                     crs=crs, layer_options=layer_options, driver=driver)
+    finally:
+        lib.CPLPopErrorHandler()
 
+
+def _write_layer(lib: ctypes.CDLL, path: Path, layer: str, schema: Any, batches: Iterable[Any], *,
+                 geometry_name: str, geometry_type: str, crs: str | None, layer_options: dict[str, str],
+                 driver: str) -> None:
     def fail(what: str) -> OSError:
         msg = lib.CPLGetLastErrorMsg()
         return OSError(f"{path}: {what}" + (f": {msg.decode(errors='replace')}" if msg else ""))

@@ -1,0 +1,58 @@
+"""GeoPackage layers through GDAL's C API (``orokit.io.gdal_arrow``): which GDAL, errors, a full disk."""
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+import threading
+
+import pyarrow as pa
+import pytest
+
+from orokit.io import gdal_arrow
+
+pytestmark = pytest.mark.skipif(gdal_arrow.gdal_library() is None, reason="GDAL's C library not found here")
+
+
+def test_the_library_is_pyogrios_when_another_gdal_is_loaded_first(tmp_path):
+    """rasterio's wheels bundle a GDAL of their own (another version, drivers and settings); when it
+    is mapped before pyogrio's (here: loaded after it), the writer still takes pyogrio's and writes."""
+    script = textwrap.dedent(f"""
+        import pyogrio
+        import rasterio
+        with rasterio.Env():
+            pass
+        from orokit.io import gdal_arrow
+        from orokit.io.divide_tree_io import read_divide_tree_gpkg, write_divide_tree_gpkg
+        from orokit.topology.divide_tree import DivideTree
+
+        lib = gdal_arrow.gdal_library()
+        pyogrio.set_gdal_config_options({{"OROKIT_TEST_OPTION": "set by pyogrio"}})
+        assert lib.CPLGetConfigOption(b"OROKIT_TEST_OPTION", None) == b"set by pyogrio", lib._name
+        tree = DivideTree.from_arrays([[500000, 4e6, 10], [500100, 4e6, 12]], [[500050, 4e6, 5]], [[0, 1, 0]],
+                                      crs="EPSG:32633")
+        assert read_divide_tree_gpkg(write_divide_tree_gpkg(tree, {str(tmp_path / "t.gpkg")!r})).equals(tree)
+    """)
+    res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
+def test_a_failure_in_a_worker_thread_names_the_file_and_prints_nothing(tmp_path, capfd):
+    """GDAL's message goes into the OSError (naming the file), not to stderr (GDAL's default
+    handler prints ``ERROR 1: ...`` in threads without pyogrio's handler)."""
+    path = tmp_path / "missing" / "t.gpkg"
+    schema = pa.schema([("a", pa.int64()), ("geometry", pa.binary())])
+    errors: list[BaseException] = []
+
+    def write() -> None:
+        try:
+            gdal_arrow.write_arrow_layer(path, "t", schema, [], geometry_name="geometry", geometry_type="Point",
+                                         crs=None, layer_options={})
+        except OSError as exc:
+            errors.append(exc)
+
+    thread = threading.Thread(target=write)
+    thread.start()
+    thread.join()
+    assert len(errors) == 1 and str(path) in str(errors[0]) and "cannot open or create" in str(errors[0])
+    assert "ERROR" not in capfd.readouterr().err
