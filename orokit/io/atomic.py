@@ -431,7 +431,8 @@ def staged_folder(final: PathLike, *, marker: str | None = None, stale: tuple[st
 
 # --- disk space ---------------------------------------------------------------------------
 
-_NO_SPACE = ("no space left on device", "disk quota exceeded", "free disk space available")
+#: how GDAL and SQLite (a GeoPackage: SQLITE_FULL) word a full disk
+_NO_SPACE = ("no space left on device", "disk quota exceeded", "free disk space available", "database or disk is full")
 
 
 def is_no_space_error(exc: BaseException) -> bool:

@@ -10,6 +10,7 @@ import pyarrow as pa
 import pytest
 
 from orokit.io import gdal_arrow
+from orokit.io.atomic import is_no_space_error
 
 pytestmark = pytest.mark.skipif(gdal_arrow.gdal_library() is None, reason="GDAL's C library not found here")
 
@@ -56,3 +57,16 @@ def test_a_failure_in_a_worker_thread_names_the_file_and_prints_nothing(tmp_path
     thread.join()
     assert len(errors) == 1 and str(path) in str(errors[0]) and "cannot open or create" in str(errors[0])
     assert "ERROR" not in capfd.readouterr().err
+
+
+@pytest.mark.parametrize("message", [
+    # the writers' errors when the disk filled during a GeoPackage (measured on a full tmpfs)
+    "/out/.t.gpkg.tmp-0123456789ab.gpkg: cannot commit the layer: sqlite3_exec(COMMIT) failed: database or disk is full",
+    "Error while writing batch to OGR layer: sqlite3_exec(COMMIT) failed: database or disk is full",
+])
+def test_a_full_disk_in_a_geopackage_is_a_full_disk(message):
+    assert is_no_space_error(OSError(message))
+    try:
+        raise RuntimeError("writing dividetree.gpkg failed") from OSError(message)
+    except RuntimeError as exc:
+        assert is_no_space_error(exc)
