@@ -115,7 +115,7 @@ def _remove(path: Path) -> None:
 
 
 @contextlib.contextmanager
-def atomic_path(final_path: PathLike, *, fsync: bool = True) -> Iterator[Path]:
+def atomic_path(final_path: PathLike, *, fsync: bool = True, parents: bool = True) -> Iterator[Path]:
     """Yield a temporary path; on success move it to ``final_path`` atomically.
 
     Parameters
@@ -124,6 +124,9 @@ def atomic_path(final_path: PathLike, *, fsync: bool = True) -> Iterator[Path]:
         Where the file should end up. Missing parent directories are created.
     fsync
         Flush the file (and then its directory) to disk before/after the rename.
+    parents
+        Create missing parent directories (False: a missing one is an error, e.g. a
+        temporary folder a finished run has removed must not be made again).
 
     Yields
     ------
@@ -153,7 +156,8 @@ def atomic_path(final_path: PathLike, *, fsync: bool = True) -> Iterator[Path]:
     'done'
     """
     final = Path(final_path)
-    final.parent.mkdir(parents=True, exist_ok=True)
+    if parents:
+        final.parent.mkdir(parents=True, exist_ok=True)
     tmp = temp_path_for(final)
     try:
         yield tmp

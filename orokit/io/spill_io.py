@@ -15,7 +15,8 @@ from typing import Any, cast
 import numpy as np
 
 from orokit._typing import PathLike
-from orokit.io.atomic import atomic_path
+from orokit.errors import OutputError
+from orokit.io.atomic import atomic_path, is_no_space_error
 
 __all__ = ["spill_folder", "write_spill", "read_spill"]
 
@@ -28,10 +29,25 @@ def spill_folder(prefix: str = "orokit-spill-") -> Iterator[Path]:
 
 
 def write_spill(path: PathLike, arrays: dict[str, np.ndarray]) -> None:
-    """Write ``arrays`` to ``path`` (an ``.npz``) atomically, without fsync (the file is temporary)."""
-    with atomic_path(path, fsync=False) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **cast("dict[str, Any]", arrays))
+    """Write ``arrays`` to ``path`` (an ``.npz``) atomically, without fsync (the file is temporary).
+
+    Raises
+    ------
+    OutputError
+        The disk of the spill folder is full (it is ``TMPDIR``'s, not the output's).
+    FileNotFoundError
+        The folder is gone: its run ended (a task the scheduler left running after an
+        error or Ctrl-C writes nothing, rather than making the folder again).
+    """
+    try:
+        with atomic_path(path, fsync=False, parents=False) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **cast("dict[str, Any]", arrays))
+    except OSError as exc:
+        if not is_no_space_error(exc):
+            raise
+        raise OutputError(f"no space left on {Path(path).parent} for the run's temporary spill files ({exc}); "
+                          "free some space there or set TMPDIR to a folder with room, and run again") from None
 
 
 def read_spill(path: PathLike, names: tuple[str, ...] | None = None) -> dict[str, np.ndarray]:

@@ -241,6 +241,42 @@ def test_analyze_disk_full_keeps_previous_analysis(tmp_path, dem_tif, dem_tif_b,
     assert _leftovers(out, tmp_path) == []
 
 
+def test_analyze_full_temporary_folder_is_named_not_the_output(tmp_path, dem_tif, monkeypatch):
+    """Chunked analyze spills settled isolation to TMPDIR: a full TMPDIR is reported there (the output's
+    disk has room), without a traceback, and nothing is left in either folder."""
+    import tempfile
+
+    import orokit.io.spill_io as spill_io
+
+    spills = tmp_path / "tmpdir"
+    spills.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(spills))
+
+    class _Full:  # a file on a full disk: every write fails
+        def __init__(self, path, mode):
+            self.fh = open(path, mode)
+
+        def write(self, data):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+        def __getattr__(self, name):
+            return getattr(self.fh, name)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.fh.close()
+
+    monkeypatch.setattr(spill_io, "open", _Full, raising=False)
+    out = tmp_path / "out"
+    res = _analyze(dem_tif, out, "--chunks", "16")
+    assert res.exit_code == 1, res.output
+    assert f"no space left on {spills}" in res.output and "TMPDIR" in res.output, res.output
+    assert "Traceback" not in res.output and not out.exists()
+    assert _leftovers(spills, tmp_path) == [] and list(spills.iterdir()) == []
+
+
 def test_render_disk_full_keeps_previous_raster(tmp_path, monkeypatch):
     import orokit.io.raster_io as raster_io
     from orokit.topology.divide_tree import DivideTree

@@ -95,3 +95,17 @@ def test_reused_checkpoint_chunks_spill_their_isolation(make_dem, tmp_path):
     b = orokit.analyze(dem, min_prominence_m=1.0, chunks=30, checkpoint=ck, scheduler="synchronous")  # all reused
     for c in ("isolation", "isolation_row", "isolation_col", "isolation_exact"):
         np.testing.assert_array_equal(a.peaks[c].to_numpy(), b.peaks[c].to_numpy(), err_msg=c)
+
+
+def test_a_spill_after_its_run_ended_writes_nothing(tmp_path):
+    """A chunk task the scheduler left running after an error or Ctrl-C must not make the removed spill
+    folder again (it would stay in TMPDIR)."""
+    from orokit.io.spill_io import read_spill, spill_folder, write_spill
+
+    with spill_folder() as folder:
+        write_spill(folder / "a.npz", {"key": np.arange(3)})
+        assert read_spill(folder / "a.npz")["key"].tolist() == [0, 1, 2]
+    assert not folder.exists()
+    with pytest.raises(FileNotFoundError):
+        write_spill(folder / "b.npz", {"key": np.arange(3)})
+    assert not folder.exists()
