@@ -95,6 +95,20 @@ def test_reused_checkpoint_chunks_spill_their_isolation(make_dem, tmp_path):
     b = orokit.analyze(dem, min_prominence_m=1.0, chunks=30, checkpoint=ck, scheduler="synchronous")  # all reused
     for c in ("isolation", "isolation_row", "isolation_col", "isolation_exact"):
         np.testing.assert_array_equal(a.peaks[c].to_numpy(), b.peaks[c].to_numpy(), err_msg=c)
+    # the tables above would be equal without any settled isolation (the search finds it again):
+    # the reused chunks' settled isolation itself is read back
+    metric = KernelMetric.from_grid(*GRIDS["projected"])
+    data = da.from_array(z, chunks=(17, 23))
+    ck = tmp_path / "ck2"
+    fresh = te.tiled_orometry(data, min_prominence_m=1.0, scheduler="synchronous", isolation_metric=metric,
+                              checkpoint=ck)
+    reused = te.tiled_orometry(data, min_prominence_m=1.0, scheduler="synchronous", isolation_metric=metric,
+                               checkpoint=ck)
+    cells = fresh.orometry.peak_cell
+    got, want = _by_key(reused.chunk_isolation, cells), _by_key(fresh.chunk_isolation, cells)
+    assert want["key"].size > 20
+    for f in want:
+        np.testing.assert_array_equal(got[f], want[f], err_msg=f)
 
 
 def test_a_spill_after_its_run_ended_writes_nothing(tmp_path):
