@@ -5,6 +5,7 @@ import contextlib
 import itertools
 import json
 import logging
+import threading
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -62,22 +63,34 @@ def _gdal_crs(crs) -> str | None:
     return f"EPSG:{epsg}" if epsg else crs.to_wkt("WKT1_GDAL")
 
 
+#: writers inside :func:`_sqlite_without_sync` (threads of one process) and the setting before the first
+_NO_SYNC_LOCK = threading.Lock()
+_no_sync: dict[str, Any] = {"users": 0, "before": None}
+
+
 @contextlib.contextmanager
 def _sqlite_without_sync() -> Iterator[None]:
     """GDAL's SQLite writes a GeoPackage without syncing each transaction to disk while the block runs.
 
     The file is a temporary one that :func:`~orokit.io.atomic.atomic_path` syncs once and
     renames when complete, so the per-transaction syncs only cost time (~30 % of the
-    GeoPackage's wall time at 100,890 peaks, measured). The previous setting is restored.
+    GeoPackage's wall time at 100,890 peaks, measured). The setting is process-wide: it is
+    restored when the last of the writers running at once (threads) leaves.
     """
     import pyogrio
 
-    before = pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS")
-    pyogrio.set_gdal_config_options({"OGR_SQLITE_SYNCHRONOUS": "OFF"})
+    with _NO_SYNC_LOCK:
+        if _no_sync["users"] == 0:
+            _no_sync["before"] = pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS")
+            pyogrio.set_gdal_config_options({"OGR_SQLITE_SYNCHRONOUS": "OFF"})
+        _no_sync["users"] += 1
     try:
         yield
     finally:
-        pyogrio.set_gdal_config_options({"OGR_SQLITE_SYNCHRONOUS": before})
+        with _NO_SYNC_LOCK:
+            _no_sync["users"] -= 1
+            if _no_sync["users"] == 0:
+                pyogrio.set_gdal_config_options({"OGR_SQLITE_SYNCHRONOUS": _no_sync["before"]})
 
 
 def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFrame | None = None,
@@ -205,7 +218,7 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
                     try:
                         points(tmp, tree.peaks, "peak_id", "peaks", peaks)
                     finally:
-                        second.result()  # the first failure is raised
+                        second.result()  # joined; its failure is raised (with this thread's as context)
                 _merge_layers(tmp, aux, ["saddles", "ridges"])
             finally:
                 aux.unlink(missing_ok=True)

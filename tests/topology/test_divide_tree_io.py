@@ -129,6 +129,23 @@ def test_gpkg_round_trip(small_txt, tmp_path):
     assert read_divide_tree_gpkg(tmp_path / "again.gpkg").equals(tree)
 
 
+def test_sqlite_sync_setting_is_restored_after_overlapping_writers():
+    """Two GeoPackages written at once by two threads (enter A, enter B, leave A, leave B): the
+    process-wide setting is the user's again once both are done, not OFF for good."""
+    import pyogrio
+
+    from orokit.io.divide_tree_gpkg import _sqlite_without_sync
+
+    assert pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS") is None
+    a, b = _sqlite_without_sync(), _sqlite_without_sync()
+    a.__enter__()
+    b.__enter__()
+    a.__exit__(None, None, None)
+    assert pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS") in (False, "OFF")  # B still writes
+    b.__exit__(None, None, None)
+    assert pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS") is None
+
+
 _LOCAL_TM = ('PROJCS["local TM",GEOGCS["WGS 84",DATUM["WGS_1984",SPHEROID["WGS 84",6378137,298.257223563]],'
              'PRIMEM["Greenwich",0],UNIT["degree",0.0174532925199433]],PROJECTION["Transverse_Mercator"],'
              'PARAMETER["latitude_of_origin",0],PARAMETER["central_meridian",87.3],PARAMETER["scale_factor",1],'
