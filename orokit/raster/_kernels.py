@@ -668,36 +668,9 @@ def update_basins(z: np.ndarray, ptr: np.ndarray, lab: np.ndarray, own: np.ndarr
                     queue = _grow(queue, nq)
                     queue[nq] = j
                     nq += 1
-    n0 = tid.size
-    new_top = np.empty(16, np.int64)
-    new_tid = np.empty(16, np.int64)
-    nn = 0
     for t in range(nq):
         lab[queue[t]] = -3  # unresolved
-    stack = np.empty(1024, np.int64)
-    for t in range(nq):
-        j = queue[t]
-        top = 0
-        while lab[j] == -3:
-            stack = _grow(stack, top)
-            stack[top] = j
-            top += 1
-            if ptr[j] == j:  # a new maximum
-                new_top = _grow(new_top, nn)
-                new_tid = _grow(new_tid, nn)
-                k = np.searchsorted(peak_cells, j)
-                new_top[nn] = j
-                new_tid[nn] = peak_ids[k] if k < peak_cells.size and peak_cells[k] == j else -1
-                lab[j] = n0 + nn
-                nn += 1
-                break
-            j = ptr[j]
-        v = lab[j]
-        o = tid[v] if v < n0 else new_tid[v - n0]
-        for s in range(top):
-            lab[stack[s]] = v
-            own[stack[s]] = o
-    return new_top[:nn].copy(), new_tid[:nn].copy()
+    return _resolve_basins(ptr, lab, own, tid, queue[:nq], peak_cells, peak_ids)
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -794,3 +767,62 @@ def pass_violations(owner: np.ndarray, z: np.ndarray, parent: np.ndarray, height
                     bv[nv] = bn
                     nv += 1
     return ia[:nv].copy(), ib[:nv].copy(), bv[:nv].copy(), total
+
+
+@njit(cache=True, nogil=True)
+def _resolve_basins(ptr: np.ndarray, lab: np.ndarray, own: np.ndarray, tid: np.ndarray, cells: np.ndarray,
+                    peak_cells: np.ndarray, peak_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Basin and owner of the ``cells`` whose ``lab`` is -3 (unresolved), by following their pointers
+    to a resolved cell or a new maximum (next basin id, its tree peak from ``peak_cells`` /
+    ``peak_ids``, -1 if none); returns the new maxima's cells and owners."""
+    n0 = tid.size
+    new_top = np.empty(16, np.int64)
+    new_tid = np.empty(16, np.int64)
+    nn = 0
+    stack = np.empty(1024, np.int64)
+    for t in range(cells.size):
+        j = cells[t]
+        if lab[j] != -3:
+            continue
+        top = 0
+        while lab[j] == -3:
+            stack = _grow(stack, top)
+            stack[top] = j
+            top += 1
+            if ptr[j] == j:  # a new maximum
+                new_top = _grow(new_top, nn)
+                new_tid = _grow(new_tid, nn)
+                k = np.searchsorted(peak_cells, j)
+                new_top[nn] = j
+                new_tid[nn] = peak_ids[k] if k < peak_cells.size and peak_cells[k] == j else -1
+                lab[j] = n0 + nn
+                nn += 1
+                break
+            j = ptr[j]
+        v = lab[j]
+        o = tid[v] if v < n0 else new_tid[v - n0]
+        for s in range(top):
+            lab[stack[s]] = v
+            own[stack[s]] = o
+    return new_top[:nn].copy(), new_tid[:nn].copy()
+
+
+@njit(cache=True, nogil=True)
+def relabel_basins(z: np.ndarray, ptr: np.ndarray, lab: np.ndarray, own: np.ndarray, tid: np.ndarray,
+                   cells: np.ndarray, peak_cells: np.ndarray, peak_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`update_basins` when the caller knows the cells that may change basin: new pointers for
+    the ``cells`` (flat) and their basins by following them; every other cell must keep its pointer
+    and its chain must stay outside ``cells`` (true after cutting whole basins down: a cell outside
+    them points to a higher cell of its own basin, still higher)."""
+    H, W = z.shape
+    for t in range(cells.size):
+        j = cells[t]
+        r = j // W
+        p = _ascent_pointer(z, r, j - r * W)
+        ptr[j] = p
+        if p < 0:
+            lab[j] = -1
+            own[j] = -2
+        else:
+            lab[j] = -3
+    return _resolve_basins(ptr, lab, own, tid, cells, peak_cells, peak_ids)

@@ -110,15 +110,28 @@ class _Basins:
         self.own = _kernels.basin_owner(self.lab, self.tid)
         self.ptr = _kernels.ascent_pointers(z)
 
+    def relabel(self, cells: np.ndarray) -> None:
+        """Relabel after whole basins (``cells``, flat; tree peak cells never among them) were lowered.
+
+        Any other cell pointing into them would belong to them, except a tree peak cell in a spurious
+        basin (kept out of the cut): those are relabelled too, and no other cell changes basin
+        (:func:`_kernels.relabel_basins`)."""
+        cells = np.concatenate([np.asarray(cells, np.int64), self.cells[self.own[self.cells] == -1]])
+        self._add(_kernels.relabel_basins(self.z, self.ptr, self.lab, self.own, self.tid, cells, self.cells,
+                                          self.pid))
+
+    def _add(self, new: tuple[np.ndarray, np.ndarray]) -> None:
+        top, tid = new
+        if top.size:
+            self.top = np.concatenate([self.top, top])
+            self.tid = np.concatenate([self.tid, tid])
+
     def update(self, changed: np.ndarray) -> None:
         """Relabel after the cells ``changed`` (flat indices) of the raster changed."""
         if changed.size == 0:
             return
-        top, tid = _kernels.update_basins(self.z, self.ptr, self.lab, self.own, self.tid,
-                                          np.ascontiguousarray(changed, np.int64), self.cells, self.pid)
-        if top.size:
-            self.top = np.concatenate([self.top, top])
-            self.tid = np.concatenate([self.tid, tid])
+        self._add(_kernels.update_basins(self.z, self.ptr, self.lab, self.own, self.tid,
+                                         np.ascontiguousarray(changed, np.int64), self.cells, self.pid))
 
 
 def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.ndarray, drop_m: float = 0.5,
@@ -193,11 +206,9 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
         if sp.any():
             cutting = sp & ~keep[np.maximum(lab, 0)].reshape(z.shape)
             if cutting.any():
-                before = z.copy()
                 cut = _kernels.reconstruct_masked(z, cutting, 1e-3, cut_slope * grid.cell_size_m, cut_depth_m)
                 stats["cut"] += cut
-                basins.update(np.flatnonzero(before.view(np.uint32) != z.view(np.uint32)))
-                del before
+                basins.relabel(np.flatnonzero(cutting))  # only the cut basins' cells can change basin
                 own, lab, top = owners()
                 sp, src, keep = spurious_hills(own, lab, top)
         if sp.any() and keep_hills_m > 0:

@@ -208,6 +208,13 @@ def test_basins_kept_up_to_date_equal_a_full_relabelling(seed):
         zf[pick] = np.minimum(zf[pick], np.floor(zf[pick] - rng.integers(0, 3, pick.size)))
         basins.update(np.flatnonzero(before.view(np.uint32) != zf.view(np.uint32)))
         _same_basins(basins, z, cells, pid)
+        # a cut: whole spurious basins (tree peak cells kept out) lowered, some of their cells only
+        cut = basins.own == -1
+        cut[cells] = False
+        hit = np.flatnonzero(cut & (rng.random(zf.size) < 0.7))
+        zf[hit] = np.floor(zf[hit] - rng.integers(0, 4, hit.size))
+        basins.relabel(np.flatnonzero(cut))
+        _same_basins(basins, z, cells, pid)
 
 
 def _full_relabelling(self, changed):
@@ -230,6 +237,7 @@ def test_enforcement_with_basins_kept_up_to_date_same_bytes(monkeypatch, params)
     p = RenderParams(lam=200.0, **params)
     fast = render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=3).values
     monkeypatch.setattr(_Basins, "update", _full_relabelling)
+    monkeypatch.setattr(_Basins, "relabel", _full_relabelling)
     ref = render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=3).values
     assert fast.tobytes() == ref.tobytes()
 
