@@ -1,7 +1,8 @@
 """Spill files: arrays a run sets aside on disk until it needs them again.
 
 A spill folder is a temporary folder of one run (removed when the run ends, also on
-error); each spill is an uncompressed ``.npz`` of arrays, written atomically, so a
+error), in ``parent`` when given (a checkpoint folder, or dask's ``temporary-directory``),
+otherwise in ``TMPDIR``; each spill is an uncompressed ``.npz`` of arrays, written atomically, so a
 file that exists is complete.
 """
 from __future__ import annotations
@@ -22,9 +23,12 @@ __all__ = ["spill_folder", "write_spill", "read_spill"]
 
 
 @contextmanager
-def spill_folder(prefix: str = "orokit-spill-") -> Iterator[Path]:
-    """A new temporary folder (in ``TMPDIR``) for the spills of one run, removed on exit."""
-    with tempfile.TemporaryDirectory(prefix=prefix) as folder:
+def spill_folder(prefix: str = "orokit-spill-", parent: PathLike | None = None) -> Iterator[Path]:
+    """A new temporary folder (in ``parent``, made if missing, else ``TMPDIR``) for the spills of
+    one run, removed on exit."""
+    if parent is not None:
+        Path(parent).mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=prefix, dir=parent) as folder:
         yield Path(folder)
 
 
@@ -34,7 +38,7 @@ def write_spill(path: PathLike, arrays: dict[str, np.ndarray]) -> None:
     Raises
     ------
     OutputError
-        The disk of the spill folder is full (it is ``TMPDIR``'s, not the output's).
+        The disk of the spill folder is full (``TMPDIR``'s or the given parent's, not the output's).
     FileNotFoundError
         The folder is gone: its run ended (a task the scheduler left running after an
         error or Ctrl-C writes nothing, rather than making the folder again).
@@ -47,7 +51,8 @@ def write_spill(path: PathLike, arrays: dict[str, np.ndarray]) -> None:
         if not is_no_space_error(exc):
             raise
         raise OutputError(f"no space left on {Path(path).parent} for the run's temporary spill files ({exc}); "
-                          "free some space there or set TMPDIR to a folder with room, and run again") from None
+                          "free some space there, or set TMPDIR (or dask's temporary-directory) to a folder with "
+                          "room, and run again") from None
 
 
 def read_spill(path: PathLike, names: tuple[str, ...] | None = None) -> dict[str, np.ndarray]:

@@ -159,6 +159,8 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
     """
     if not z.flags.c_contiguous:
         raise ValueError("cap_basins works in place on a C-contiguous array; pass np.ascontiguousarray(z)")
+    if z.dtype != np.float32:
+        raise ValueError(f"cap_basins works in place on float32 elevations (got {z.dtype}); pass z.astype(np.float32)")
     n = skel.n_peaks
     nodes = skel.node_xyz
     e = skel.edges if skel.edges is not None else np.empty((0, 3), np.int64)

@@ -260,6 +260,15 @@ def _checkpoint_dir(checkpoint, data, min_prominence_m: float) -> Path | None:
     return open_checkpoint(checkpoint, fingerprint)
 
 
+def _spill_parent(checkpoint) -> str | None:
+    """Where a run's spill folder goes: the checkpoint folder, dask's temporary-directory, or None (TMPDIR)."""
+    if checkpoint is not None:
+        return str(checkpoint)
+    import dask
+
+    return dask.config.get("temporary-directory", default=None) or None
+
+
 def _same_disk(scheduler: Any) -> bool:
     """True when every task of ``scheduler`` runs on this machine (threads, processes, or dask's
     default without an active distributed client), so tasks can leave files for the caller."""
@@ -290,12 +299,14 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
     On a scheduler whose tasks run on this machine, each chunk's settled isolation is
     spilled to a temporary file instead of travelling up the merges with the summaries
     (~50 bytes per candidate peak alive through the top merges and the finalize), and read
-    back, for the kept peaks only, after the finalize.
+    back, for the kept peaks only, after the finalize. The spill folder goes in the
+    ``checkpoint`` folder when one is given, else in dask's ``temporary-directory`` if set, else in
+    ``TMPDIR`` (on a RAM-backed ``TMPDIR`` the spills take memory that the RSS does not show).
     """
     with ExitStack() as stack:
         spill = None
         if isolation_metric is not None and _same_disk(scheduler):
-            spill = stack.enter_context(spill_folder())
+            spill = stack.enter_context(spill_folder(parent=_spill_parent(checkpoint)))
         return _tiled_orometry(data, min_prominence_m=min_prominence_m, outside=outside, scheduler=scheduler,
                                checkpoint=checkpoint, progress=progress, isolation_metric=isolation_metric,
                                spill=spill)

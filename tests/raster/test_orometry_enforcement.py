@@ -159,3 +159,12 @@ def test_descending_trench_is_bounded():
     assert (level[:, 15][level[:, 15] < 100] == pytest.approx(89.5))
     assert col[5] <= 89.5 and col.min() == pytest.approx(86.5)  # at most trench_depth below the saddle
     assert ((col < 100) == (level[:, 15] < 100)).all()  # same length
+
+
+def test_cap_basins_refuses_other_dtypes_with_a_clear_error():
+    """float64 elevations used to fail deep in numba's typing; now a ValueError names the fix."""
+    grid = Grid(0.0, 10.0, 1.0, 10, 10)
+    skel = SimpleNamespace(n_peaks=1, node_xyz=np.array([[5.5, 4.5, 9.0]]), edges=np.zeros((0, 3)))
+    z = np.zeros((10, 10))
+    with pytest.raises(ValueError, match="float32"):
+        cap_basins(z, grid, skel, floor=np.full(z.shape, -np.inf, np.float32))

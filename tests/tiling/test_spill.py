@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import tempfile
+from pathlib import Path
 
 import dask.array as da
 import numpy as np
@@ -123,3 +124,36 @@ def test_a_spill_after_its_run_ended_writes_nothing(tmp_path):
     with pytest.raises(FileNotFoundError):
         write_spill(folder / "b.npz", {"key": np.arange(3)})
     assert not folder.exists()
+
+
+@pytest.mark.parametrize("where", ["checkpoint", "dask-config"])
+def test_spills_go_to_the_checkpoint_or_dask_temporary_directory(where, tmp_path, monkeypatch):
+    """Not in TMPDIR when the user named a folder (TMPDIR is often RAM-backed): the checkpoint folder
+    first, else dask's temporary-directory; the spill folder is removed at the end either way."""
+    import dask
+
+    z = _grid()
+    metric = KernelMetric.from_grid(*GRIDS["projected"])
+    data = da.from_array(z, chunks=(17, 23))
+    tmpdir = tmp_path / "tmpdir"
+    tmpdir.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmpdir))
+    target = tmp_path / where
+    written = []
+    real_write = te.write_spill
+
+    def write(path, arrays):
+        written.append(path)
+        real_write(path, arrays)
+
+    monkeypatch.setattr(te, "write_spill", write)
+    if where == "checkpoint":
+        te.tiled_orometry(data, min_prominence_m=1.0, scheduler="synchronous", isolation_metric=metric,
+                          checkpoint=target)
+    else:
+        with dask.config.set({"temporary-directory": str(target)}):
+            te.tiled_orometry(data, min_prominence_m=1.0, scheduler="synchronous", isolation_metric=metric)
+    assert len(written) == 30
+    assert all(target in Path(p).parents for p in written)
+    assert list(tmpdir.iterdir()) == []
+    assert not any(p.name.startswith("orokit-spill-") for p in target.iterdir())
