@@ -403,6 +403,15 @@ def load_kernels(*, isolation: bool = True) -> None:
 
     z = np.random.default_rng(0).random((8, 8)).astype(np.float32)
     core = engine.orometry(z, min_prominence_m=0.0)
+    # the tree's kernels that the tables and the GeoPackage call (parents; the read-only
+    # columns of the tree's frames are another type for numba): loaded now, not while writing
+    from orokit.topology import _kernels
+
+    rank, ea, eb = np.arange(3, dtype=np.int64), np.array([2, 1], np.int64), np.array([1, 0], np.int64)
+    line_parent, _ = _kernels.line_parents(rank, ea, eb)
+    _kernels.first_ancestor_above(line_parent, np.zeros(3), rank)
+    ea.flags.writeable = eb.flags.writeable = False
+    _kernels.forest_components(3, ea, eb)
     if not isolation:
         return
     metric = KernelMetric.from_grid(Affine(1.0, 0.0, 0.0, 0.0, -1.0, 0.0), None)

@@ -110,6 +110,11 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
                 da = read_dem_array(str(dem.path), z_units=z_units, cell_size_m=cell_size_m, band=band)
             finally:
                 loading.result()
+        from orokit.tiling.memory import release_library_pages
+
+        # the kernels are loaded: LLVM's code (~65 MB resident at 15 M cells) is not needed until a
+        # kernel compiles again; its pages go back to the page cache before the engine's peak
+        release_library_pages("libllvmlite")
     else:
         _numba_without_blas_probe()
         da = dem.read_dem(z_units=z_units, cell_size_m=cell_size_m, chunks=chunks, band=band)
