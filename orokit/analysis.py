@@ -60,6 +60,7 @@ def analyze(
     seed: int | None = None,
     geometry: bool = True,
     blocks: bool = False,
+    release_dem: bool = False,
 ) -> AnalysisResult:
     """Peaks, key saddles, prominence, dominance, isolation and the Divide Tree.
 
@@ -105,6 +106,11 @@ def analyze(
         :func:`write_analysis` writes them: the same files, ~130 bytes per peak less held
         at once (what ``orokit analyze`` runs). ``peaks[name]`` gives one whole column,
         ``peaks.to_frame()`` the DataFrame.
+    release_dem : True: in memory, the pixels of a :class:`~orokit.io.dem.DemArray` are
+        released (:meth:`~orokit.io.dem.DemArray.release`) once no step needs them, after
+        the isolation search, so the tables are built without them (what ``orokit
+        analyze`` runs: 4 bytes per cell). Not with ``dem_error_m`` or ``depressions``,
+        which read the DEM again.
 
     Returns
     -------
@@ -195,6 +201,8 @@ def analyze(
         if not np.issubdtype(z.dtype, np.floating):
             z = z.astype(np.float64)
         z = np.ascontiguousarray(z)
+        # the pixels go once the isolation search is done (the caller asked; nothing after reads them)
+        release = release_dem and hasattr(dem, "release") and dem_error_m is None and not depressions
         from concurrent.futures import ThreadPoolExecutor
 
         from orokit.metrics.isolation import KernelMetric, finish_isolation, nearest_higher, search_pyramid
@@ -209,6 +217,7 @@ def analyze(
             core = engine.finalize_graph(**graph, min_prominence_m=min_prominence_m, outside=outside)
             del graph
             pyr = None if pyramid is None else pyramid.result()
+            del pyramid  # the future holds its result (the pyramid and z) as long as it lives
         t_core = time.perf_counter()
         _advance(bar)
         iso = None
@@ -218,8 +227,15 @@ def analyze(
             best, cand, edge = nearest_higher(z, rows, cols, metric, pyr)
             del pyr
             libraries.join()  # no import in this thread while that one imports
-            iso = finish_isolation(metric, rows, cols, best, cand, z.shape[1], edge)
+            width = z.shape[1]
+            if release:
+                del z
+                dem.release()
+            iso = finish_isolation(metric, rows, cols, best, cand, width, edge)
             del best, cand, edge
+        elif release:
+            del z
+            dem.release()
         libraries.join()
         t_iso = time.perf_counter()
         _advance(bar)

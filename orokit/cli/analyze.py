@@ -99,6 +99,11 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         from concurrent.futures import ThreadPoolExecutor
 
         from orokit.io.dem import read_dem_array
+        from orokit.tiling.memory import limit_malloc_arenas, release_library_pages
+
+        # two malloc arenas: GDAL's reader, numba's loader and the writers' threads otherwise each keep
+        # an arena of their own with its freed pages (~10-20 MB of the peak at 15 M cells)
+        limit_malloc_arenas(2)
 
         # in memory: plain numpy (no xarray/rioxarray/dask imports: faster start, less memory); a
         # second thread imports numba and loads the kernels while GDAL reads (wall time). The read
@@ -110,8 +115,6 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
                 da = read_dem_array(str(dem.path), z_units=z_units, cell_size_m=cell_size_m, band=band)
             finally:
                 loading.result()
-        from orokit.tiling.memory import release_library_pages
-
         # the kernels are loaded: LLVM's code (~65 MB resident at 15 M cells) is not needed until a
         # kernel compiles again; its pages go back to the page cache before the engine's peak
         release_library_pages("libllvmlite")
@@ -124,7 +127,7 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
                  progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint,
                  depressions=depressions, sea_level_m=sea_level_m, dem_error_m=dem_error_m, error_k=error_k,
                  error_corr_m=error_corr_m, samples=samples, seed=seed, geometry=False,
-                 blocks=True)
+                 blocks=True, release_dem=True)
     from orokit.io.analysis_io import write_analysis
 
     shape = da.shape

@@ -509,6 +509,13 @@ class DemArray:
     def data(self) -> NDArray[np.float32]:
         return self.values
 
+    def release(self) -> None:
+        """Drop the pixels: ``values`` becomes a read-only all-NaN view of the same shape and dtype
+        (no memory); the georeference and ``attrs`` stay. For a caller whose analysis no longer
+        needs them (:func:`orokit.analysis.analyze` with ``release_dem=True``)."""
+        empty = np.broadcast_to(np.array(np.nan, dtype=self.values.dtype), self.values.shape)
+        object.__setattr__(self, "values", empty)  # frozen: the fields keep their meaning, the pixels go
+
     @property
     def shape(self) -> tuple[int, int]:
         return self.values.shape

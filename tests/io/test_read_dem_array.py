@@ -134,3 +134,30 @@ def test_whole_raster_read_in_parallel_stripes_is_the_plain_read(tmp_path, monke
     np.testing.assert_array_equal(one, want)
     np.testing.assert_array_equal(many, want)
     assert len(warned_one) == 1 and warned_many == warned_one and " 2 cells hold void markers" in warned_one[0]
+
+
+@pytest.mark.parametrize("isolation", [True, False])
+def test_release_dem_gives_the_same_result_and_frees_the_pixels(tmp_path, isolation):
+    from orokit.analysis import analyze
+
+    rng = np.random.default_rng(3)
+    z = rng.normal(500.0, 80.0, (48, 61)).astype(np.float32)
+    path = _write(tmp_path / "z.tif", z, unit="m")
+    kept = analyze(read_dem_array(path), min_prominence_m=5.0, isolation=isolation, geometry=False)
+    dem = read_dem_array(path)
+    released = analyze(dem, min_prominence_m=5.0, isolation=isolation, geometry=False, release_dem=True)
+    assert released.peaks.drop(columns="geometry", errors="ignore").equals(
+        kept.peaks.drop(columns="geometry", errors="ignore"))
+    assert released.saddles.equals(kept.saddles)
+    assert dem.shape == z.shape and dem.values.dtype == np.float32 and np.isnan(dem.values).all()
+    assert dem.values.base is not None and dem.values.strides == (0, 0)  # no memory behind it
+    assert released.attrs["shape"] == list(z.shape)
+
+
+def test_release_dem_keeps_the_pixels_when_a_later_step_reads_them(tmp_path):
+    from orokit.analysis import analyze
+
+    z = np.random.default_rng(4).normal(500.0, 80.0, (30, 33)).astype(np.float32)
+    dem = read_dem_array(_write(tmp_path / "z.tif", z, unit="m"))
+    analyze(dem, min_prominence_m=5.0, geometry=False, release_dem=True, depressions=True)
+    np.testing.assert_array_equal(dem.values, z)
