@@ -13,14 +13,15 @@ import numpy as np
 from numba import njit, prange
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def poisson_disk(xmin: float, ymin: float, xmax: float, ymax: float, radius: float,
                  n_trials: int, seed: int) -> np.ndarray:
     """Dart-throwing blue noise: points of the box at mutual distance >= ``radius``.
 
     A background grid of cell ``radius / sqrt(2)`` holds at most one point per cell, so
     each dart checks a 5 x 5 neighbourhood. ``n_trials`` uniform darts are thrown
-    (numba: sequential acceptance cannot be vectorised).
+    (numba: sequential acceptance cannot be vectorised). Releases the GIL (numba's random
+    state is per thread and seeded here, so any thread gives the same points).
     """
     np.random.seed(seed)
     cell = radius / np.sqrt(2.0)

@@ -64,6 +64,7 @@ def sample_elevation(
     floor_slope: float = 0.05,
     floor_relief_ratio: float = 0.0,
     profile: Callable[[np.ndarray], np.ndarray] | None = None,
+    tree: cKDTree | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elevation of ``points`` from the nearest ridge point q and river point r.
 
@@ -80,11 +81,22 @@ def sample_elevation(
     share of the local ridge-to-river gradient, so below steep ridges the valley sides stay
     steep instead of a gentle ramp where the cones have fallen.
     ``ridge_floor`` (one value per ridge point) bounds how deep the cones dig
-    (:func:`flank_envelope`).
+    (:func:`flank_envelope`). ``tree``: a ``cKDTree`` of ``ridge_xy`` already built.
     Returns ``(h, d_ridge, d_river)``.
     """
-    tree = cKDTree(ridge_xy)
-    dT, iq = tree.query(points, workers=-1)  # both cores; same answers
+    tree = tree if tree is not None else cKDTree(ridge_xy)
+    near = None
+    if ridge_slope is not None:
+        # one k-nearest search serves the cones and the nearest ridge point (its first column);
+        # where the nearest two are equally far, the single-nearest search decides, as before
+        near = _nearest_k(tree, points, k_neighbours)
+        dT, iq = near[0][:, 0].copy(), near[1][:, 0].copy()
+        if near[0].shape[1] > 1:
+            tie = np.flatnonzero(near[0][:, 1] == near[0][:, 0])
+            if tie.size:
+                dT[tie], iq[tie] = tree.query(points[tie], workers=-1)
+    else:
+        dT, iq = tree.query(points, workers=-1)  # both cores; same answers
     dR, ir = cKDTree(river_xy).query(points, workers=-1)
     w = river_w[ir]
     hq, hr = ridge_z[iq], river_z[ir]
@@ -95,8 +107,8 @@ def sample_elevation(
     else:
         h = np.where(dR < w, hr, hr + (hq - hr) * np.asarray(profile(1.0 - alpha), dtype=np.float64))
     if ridge_slope is not None:
-        env = flank_envelope(points, ridge_xy, ridge_z, ridge_slope, ridge_floor=ridge_floor,
-                             k_neighbours=k_neighbours, tree=tree)
+        assert near is not None
+        env = _cone_envelope(*near, ridge_z, ridge_slope, ridge_floor)
         # the cones only cap; far from every ridge they would dig pits far below the rivers, so
         # the floor rises gently from the nearest river bed (valley sides, not flat plains)
         g = floor_slope
@@ -124,9 +136,19 @@ def flank_envelope(points: np.ndarray, ridge_xy: np.ndarray, ridge_z: np.ndarray
     [50.0, 20.0]
     """
     tree = tree if tree is not None else cKDTree(ridge_xy)
-    k = min(k_neighbours, ridge_xy.shape[0])
+    return _cone_envelope(*_nearest_k(tree, points, k_neighbours), ridge_z, ridge_slope, ridge_floor)
+
+
+def _nearest_k(tree: cKDTree, points: np.ndarray, k_neighbours: int) -> tuple[np.ndarray, np.ndarray]:
+    """Distances and indices ``(n, k)`` of the ``k_neighbours`` nearest points of ``tree`` (at most all)."""
+    k = min(k_neighbours, tree.n)
     dk, ik = tree.query(points, k=k, workers=-1)
-    dk, ik = dk.reshape(points.shape[0], -1), ik.reshape(points.shape[0], -1)
+    return dk.reshape(points.shape[0], -1), ik.reshape(points.shape[0], -1)
+
+
+def _cone_envelope(dk: np.ndarray, ik: np.ndarray, ridge_z: np.ndarray, ridge_slope: np.ndarray,
+                   ridge_floor: np.ndarray | None) -> np.ndarray:
+    """:func:`flank_envelope` of the nearest ridge points ``ik`` at distances ``dk`` (both ``(n, k)``)."""
     env = np.max(ridge_z[ik] - ridge_slope[ik] * dk, axis=1)
     if ridge_floor is not None:
         env = np.maximum(env, np.min(ridge_floor[ik], axis=1))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -216,6 +217,14 @@ def build_skeleton(
     t["refine"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
+    xmin, ymin, xmax, ymax = extent
+    pext = (xmin - lam, ymin - lam, xmax + lam, ymax + lam)
+    # the Poisson darts (a numba kernel that releases the GIL) are thrown on a second thread while
+    # the rivers are built: the rivers draw nothing from rng, so the darts' seed is the same draw as
+    # when they came after the rivers (the same samples), and rng is used again only after the join
+    pool = ThreadPoolExecutor(1, thread_name_prefix="orokit-darts")
+    darts = pool.submit(poisson_samples, pext, lam, rng=rng)
+    pool.shutdown(wait=False)
     # rivers run on the medial axis between the refined ridges (Voronoi of all ridge points)
     fine = ridge_lines.segments
     fine_ridges = RidgeSegments(ridge_lines.xy[fine[:, 0]], ridge_lines.xy[fine[:, 1]],
@@ -258,9 +267,7 @@ def build_skeleton(
     t["rivers"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    xmin, ymin, xmax, ymax = extent
-    pext = (xmin - lam, ymin - lam, xmax + lam, ymax + lam)
-    samples = poisson_samples(pext, lam, rng=rng)
+    samples = darts.result()
     # boundary ring so the TIN covers the padded extent
     bx = np.linspace(pext[0], pext[2], max(int(np.ceil((pext[2] - pext[0]) / lam)), 1) + 1)
     by = np.linspace(pext[1], pext[3], max(int(np.ceil((pext[3] - pext[1]) / lam)), 1) + 1)
@@ -291,7 +298,7 @@ def build_skeleton(
     h, dT, dR = sample_elevation(pts, rxy, rz, vxy, vz, vw, ridge_slope=rs,
                                  ridge_floor=rfloor, profile=_hillslope(params),
                                  k_neighbours=params.flank_neighbours,
-                                 floor_relief_ratio=params.floor_relief_ratio)
+                                 floor_relief_ratio=params.floor_relief_ratio, tree=rtree)
     if floor is not None:
         h = np.maximum(h, floor(pts))  # no ground below the tree's own floor (below every nearby saddle)
     far = (np.minimum(dT, dR) >= 0.5 * lam)

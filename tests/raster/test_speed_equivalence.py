@@ -373,3 +373,74 @@ def test_pass_violations_equal_the_numpy_version(seed):
     viol = (np.minimum(za, zb) > b + 1e-3) & np.isfinite(b)
     assert total == ra.size and viol.any()
     assert np.array_equal(ia, ra[viol]) and np.array_equal(ib, rb[viol]) and np.array_equal(bn, b[viol])
+
+
+def _sample_elevation_reference(points, ridge_xy, ridge_z, river_xy, river_z, river_w, ridge_slope, ridge_floor,
+                                k_neighbours, floor_slope=0.05):
+    """The version replaced in :func:`sample_elevation`: a nearest-ridge search, then a separate
+    k-nearest search inside :func:`flank_envelope` (linear profile, floor_relief_ratio 0)."""
+    from scipy.spatial import cKDTree
+
+    from orokit.raster.interpolate import flank_envelope
+
+    tree = cKDTree(ridge_xy)
+    dT, iq = tree.query(points, workers=-1)
+    dR, ir = cKDTree(river_xy).query(points, workers=-1)
+    w = river_w[ir]
+    hq, hr = ridge_z[iq], river_z[ir]
+    denom = np.maximum(dR + dT - w, 1e-9)
+    alpha = np.clip(dT / denom, 0.0, 1.0)
+    h = np.where(dR < w, hr, (1.0 - alpha) * hq + alpha * hr)
+    env = flank_envelope(points, ridge_xy, ridge_z, ridge_slope, ridge_floor=ridge_floor,
+                         k_neighbours=k_neighbours, tree=tree)
+    floor = np.minimum(hr + floor_slope * np.maximum(dR - w, 0.0), h)
+    return np.maximum(np.minimum(h, env), floor), dT, dR
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("k", [1, 3, 16])
+def test_sample_elevation_one_search_equals_two(seed, k):
+    """The nearest ridge point taken from the cones' k-nearest search (the single-nearest search
+    only where the nearest two are equally far) gives the same bytes as the two searches,
+    also on a lattice of ridge points where many samples are equally far from two of them."""
+    from scipy.spatial import cKDTree
+
+    from orokit.raster.interpolate import sample_elevation
+
+    rng = np.random.default_rng(seed)
+    if seed % 2:  # ties: samples on the lattice's cell centres and edges
+        g = np.arange(0.0, 1000.0, 100.0)
+        ridge_xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+        pts = np.concatenate([ridge_xy + 50.0, ridge_xy + [50.0, 0.0], rng.uniform(0, 1000, (200, 2))])
+    else:
+        ridge_xy = rng.uniform(0, 1000, (120, 2))
+        pts = rng.uniform(-100, 1100, (500, 2))
+    n = ridge_xy.shape[0]
+    ridge_z = rng.uniform(100, 900, n)
+    slope, floor = rng.uniform(0.2, 1.0, n), ridge_z - rng.uniform(50, 400, n)
+    river_xy = rng.uniform(0, 1000, (60, 2))
+    river_z, river_w = rng.uniform(0, 100, 60), rng.uniform(0, 40, 60)
+    want = _sample_elevation_reference(pts, ridge_xy, ridge_z, river_xy, river_z, river_w, slope, floor, k)
+    for tree in (None, cKDTree(ridge_xy)):
+        got = sample_elevation(pts, ridge_xy, ridge_z, river_xy, river_z, river_w, ridge_slope=slope,
+                               ridge_floor=floor, k_neighbours=k, tree=tree)
+        for g_, w_ in zip(got, want):
+            assert g_.tobytes() == w_.tobytes()
+
+
+def test_poisson_samples_same_points_on_another_thread():
+    """The darts released from the GIL on a second thread (as ``build_skeleton`` throws them) give
+    the same points as on the calling thread, and leave the caller's generator in the same state."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from orokit.raster.interpolate import poisson_samples
+
+    ext = (0.0, 0.0, 3000.0, 2000.0)
+    rng_a, rng_b = np.random.default_rng(3), np.random.default_rng(3)
+    want = poisson_samples(ext, 90.0, rng=rng_a)
+    with ThreadPoolExecutor(2) as pool:
+        got = pool.submit(poisson_samples, ext, 90.0, rng=rng_b).result()
+        again = pool.submit(poisson_samples, ext, 90.0, rng=np.random.default_rng(3)).result()
+    assert want.shape[0] > 100 and got.tobytes() == want.tobytes() == again.tobytes()
+    assert rng_a.random() == rng_b.random()
+
