@@ -11,6 +11,7 @@ import json
 import logging
 import time
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -267,34 +268,45 @@ def render_elevation(
     mask = np.ones(z.shape, bool)
     row, col, ok = grid.cell_of(nodes[:, :2])
     mask[row[ok], col[ok]] = False
-    dist = _node_distance(mask, grid.cell_size_m)
-    uplift = falloff(dist / np.float32(params.uplift_radius))
     detail = {}
     # the detail draws from its own stream: turning it on leaves the texture and noise of the render as they were
     detail_rng = np.random.default_rng([seed, 1])
+    c, beta = 0.0, 3.0
     if params.detail_gain > 0:
         # the skeleton's own power law, fitted where the TIN resolves the tree's relief
         # (none on a grid narrower than the fit band: its few wavenumbers there give no law)
         c, beta = (power_law_fit(z, grid.cell_size_m, fit_m=params.detail_fit_m)
                    if min(grid.ny, grid.nx) * grid.cell_size_m >= params.detail_fit_m[1] else (0.0, 3.0))
         detail = {"detail_beta": round(beta, 3), "detail_log10_c": round(float(np.log10(c)), 3) if c > 0 else None}
+    detail_noise = None
+    if params.detail_replace and params.detail_gain > 0 and c > 0:
+        # the replacing detail's noise depends on the fitted law alone: drawn and shaped on a second
+        # thread (numpy's draws and the FFTs release the GIL) while the distances, the weights and
+        # the low-pass run here; the same draws from detail_rng, the same bytes
+        pool = ThreadPoolExecutor(1, thread_name_prefix="orokit-detail")
+        detail_noise = pool.submit(
+            power_law_noise, z.shape, grid.cell_size_m, c=c * params.detail_gain ** 2, beta=beta,
+            largest_m=params.detail_largest_m, steepen=params.detail_steepen, steepen_below_m=params.detail_fit_m[0],
+            min_beta=params.detail_min_beta, sharp=True, rng=detail_rng)
+        pool.shutdown(wait=False)
+    dist = _node_distance(mask, grid.cell_size_m)
+    noise_amp = params.noise_ratio * params.min_prominence_m
+    # the compensating uplift is only used by the erosion and the multi-fractal noise
+    uplift = falloff(dist / np.float32(params.uplift_radius)) if erosion or noise_amp > 0 else None
     if params.smooth_m > 0:
         # round the TIN's planar facets and creases below the meshing scale; peaks and saddles kept
         keep = falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
         zs = ndimage.gaussian_filter(z, params.smooth_m / grid.cell_size_m, mode="nearest")
         z += (zs - z) * (1.0 - keep)
         del zs, keep
-    if params.detail_replace and params.detail_gain > 0 and c > 0:
+    if detail_noise is not None:
         # the TIN carries nothing below its meshing distance but facets: its wavelengths below
         # detail_largest_m are replaced by the power law continued there (peaks and saddles kept)
         act, weight = _detail_weights(z, grid.cell_size_m,
                                       falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m))),
                                       params.detail_largest_m, params.detail_slope_power, params.detail_flat_deg)
         z += (lowpass(z, grid.cell_size_m, params.detail_largest_m) - z) * act
-        d = power_law_noise(z.shape, grid.cell_size_m, c=c * params.detail_gain ** 2, beta=beta,
-                            largest_m=params.detail_largest_m, steepen=params.detail_steepen,
-                            steepen_below_m=params.detail_fit_m[0], min_beta=params.detail_min_beta, sharp=True,
-                            rng=detail_rng) * weight
+        d = detail_noise.result() * weight
         detail["detail_rms_m"] = round(float(d.std()), 3)
         z += d
         del act, weight, d
@@ -324,8 +336,8 @@ def render_elevation(
                             beta=params.texture_beta, largest_m=params.texture_largest_m, rng=rng) * weight
         del fade, weight
     del dist, mask
-    noise_amp = params.noise_ratio * params.min_prominence_m
     if noise_amp > 0:
+        assert uplift is not None
         zmin, zmax = float(z.min()), float(z.max())
         rough = (z - zmin) / max(zmax - zmin, 1e-6)
         z += fractal_noise(z.shape, grid.cell_size_m, amplitude=noise_amp, roughness=rough, rng=rng) * (1.0 - uplift)
@@ -336,6 +348,7 @@ def render_elevation(
     timings["noise"] = time.perf_counter() - t0
 
     if erosion:
+        assert uplift is not None
         t0 = time.perf_counter()
         z = erode_multiscale(z, grid.cell_size_m, uplift, scales_m=params.erosion_scales,
                              steps=params.erosion_steps, k_dt=params.erosion_k_dt,

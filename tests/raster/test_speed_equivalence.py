@@ -444,3 +444,38 @@ def test_poisson_samples_same_points_on_another_thread():
     assert want.shape[0] > 100 and got.tobytes() == want.tobytes() == again.tobytes()
     assert rng_a.random() == rng_b.random()
 
+
+class _InlineExecutor:
+    """A ``ThreadPoolExecutor`` stand-in that runs each job at once on the calling thread."""
+
+    def __init__(self, *args, **kwargs):
+        pass
+
+    def submit(self, fn, /, *args, **kwargs):
+        from concurrent.futures import Future
+
+        fut: Future = Future()
+        fut.set_result(fn(*args, **kwargs))
+        return fut
+
+    def shutdown(self, wait=True):
+        pass
+
+
+@pytest.mark.parametrize("params", [{}, {"detail_replace": False}, {"detail_gain": 0.0, "noise_ratio": 0.3}])
+def test_render_jobs_on_threads_same_bytes(monkeypatch, params):
+    """The darts and the detail's noise on second threads give the bytes of the same jobs run in line
+    (the skeleton too: same samples, rivers and TIN)."""
+    from helpers.trees import small_tree
+    from orokit.raster import render, skeleton
+    from orokit.raster.params import RenderParams
+
+    p = RenderParams(lam=200.0, **params)
+    fast, fs = render.render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=5,
+                                       return_skeleton=True)
+    monkeypatch.setattr(render, "ThreadPoolExecutor", _InlineExecutor)
+    monkeypatch.setattr(skeleton, "ThreadPoolExecutor", _InlineExecutor)
+    ref, rs = render.render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=5,
+                                      return_skeleton=True)
+    assert fast.values.tobytes() == ref.values.tobytes()
+    assert fs.tin.xy.tobytes() == rs.tin.xy.tobytes() and fs.tin.z.tobytes() == rs.tin.z.tobytes()
