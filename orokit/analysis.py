@@ -206,6 +206,7 @@ def analyze(
         from concurrent.futures import ThreadPoolExecutor
 
         from orokit.metrics.isolation import KernelMetric, finish_isolation, nearest_higher, search_pyramid
+        from orokit.tiling.memory import release_free_heap
 
         graph = engine.saddle_graph(z)
         # the engine's peak memory is past: the libraries of the tables and files load in a second
@@ -218,6 +219,7 @@ def analyze(
             del graph
             pyr = None if pyramid is None else pyramid.result()
             del pyramid  # the future holds its result (the pyramid and z) as long as it lives
+        release_free_heap()  # the saddle graph's arrays, freed inside the heap, before the isolation's
         t_core = time.perf_counter()
         _advance(bar)
         iso = None
