@@ -108,20 +108,36 @@ def _detail_weights(z: np.ndarray, res: float, near: np.ndarray, smooth_m: float
     flat test when ``flat_deg`` is 0). ``weight``: ``act`` times the slope smoothed over ``smooth_m``
     (Gaussian sigma ``smooth_m / 2``) to ``power``, normalised to an RMS of 1 (1 when ``power`` is 0).
     """
+    return _detail_act(near, *_detail_slope(z, res, smooth_m, power, flat_deg))
+
+
+def _detail_slope(z: np.ndarray, res: float, smooth_m: float, power: float,
+                  flat_deg: float) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The parts of :func:`_detail_weights` that need the slope of ``z`` only: the flat test (None
+    when ``flat_deg`` is 0) and the normalised smoothed slope (None when ``power`` is 0)."""
     gy, gx = np.gradient(np.asarray(z, np.float32), np.float32(res))
     s = np.hypot(gx, gy)
     del gy, gx
-    act = 1.0 - near
+    flat = None
     if flat_deg > 0:
         t = np.float32(np.tan(np.radians(flat_deg)))
-        act *= np.clip((ndimage.minimum_filter(s, size=3, mode="nearest") - t) / t, 0.0, 1.0)
+        flat = np.clip((ndimage.minimum_filter(s, size=3, mode="nearest") - t) / t, 0.0, 1.0)
     if power == 0:
-        return act, act.copy()
+        return flat, None
     w = ndimage.gaussian_filter(s, max(0.5 * smooth_m / res, 0.5), mode="nearest")
     if power != 1:
         w **= np.float32(power)
     m = float(np.sqrt(np.mean(w * w, dtype=np.float64)))
-    w = w * np.float32(1.0 / m) if m > 0 else np.ones(z.shape, np.float32)
+    return flat, (w * np.float32(1.0 / m) if m > 0 else np.ones(z.shape, np.float32))
+
+
+def _detail_act(near: np.ndarray, flat: np.ndarray | None, w: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(act, weight)`` of :func:`_detail_weights` from the fade ``near`` and :func:`_detail_slope`'s parts."""
+    act = 1.0 - near
+    if flat is not None:
+        act *= flat
+    if w is None:
+        return act, act.copy()
     return act, (w * act).astype(np.float32, copy=False)
 
 
@@ -268,6 +284,11 @@ def render_elevation(
     mask = np.ones(z.shape, bool)
     row, col, ok = grid.cell_of(nodes[:, :2])
     mask[row[ok], col[ok]] = False
+    # the distance to the nodes (a distance transform that releases the GIL) runs on a second thread
+    # while the power law is fitted and, with the replacing detail, the slope weights and the low-pass
+    # of the skeleton run here; dist_job.result() is the same array wherever it is first needed
+    pool = ThreadPoolExecutor(2, thread_name_prefix="orokit-noise")
+    dist_job = pool.submit(_node_distance, mask, grid.cell_size_m)
     detail = {}
     # the detail draws from its own stream: turning it on leaves the texture and noise of the render as they were
     detail_rng = np.random.default_rng([seed, 1])
@@ -281,31 +302,33 @@ def render_elevation(
     detail_noise = None
     if params.detail_replace and params.detail_gain > 0 and c > 0:
         # the replacing detail's noise depends on the fitted law alone: drawn and shaped on a second
-        # thread (numpy's draws and the FFTs release the GIL) while the distances, the weights and
-        # the low-pass run here; the same draws from detail_rng, the same bytes
-        pool = ThreadPoolExecutor(1, thread_name_prefix="orokit-detail")
+        # thread (numpy's draws and the FFTs release the GIL) while the weights and the low-pass run
+        # here; the same draws from detail_rng, the same bytes
         detail_noise = pool.submit(
             power_law_noise, z.shape, grid.cell_size_m, c=c * params.detail_gain ** 2, beta=beta,
             largest_m=params.detail_largest_m, steepen=params.detail_steepen, steepen_below_m=params.detail_fit_m[0],
             min_beta=params.detail_min_beta, sharp=True, rng=detail_rng)
-        pool.shutdown(wait=False)
-    dist = _node_distance(mask, grid.cell_size_m)
+    pool.shutdown(wait=False)
     noise_amp = params.noise_ratio * params.min_prominence_m
     # the compensating uplift is only used by the erosion and the multi-fractal noise
-    uplift = falloff(dist / np.float32(params.uplift_radius)) if erosion or noise_amp > 0 else None
+    uplift = falloff(dist_job.result() / np.float32(params.uplift_radius)) if erosion or noise_amp > 0 else None
     if params.smooth_m > 0:
         # round the TIN's planar facets and creases below the meshing scale; peaks and saddles kept
-        keep = falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
+        keep = falloff(dist_job.result() / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
         zs = ndimage.gaussian_filter(z, params.smooth_m / grid.cell_size_m, mode="nearest")
         z += (zs - z) * (1.0 - keep)
         del zs, keep
     if detail_noise is not None:
         # the TIN carries nothing below its meshing distance but facets: its wavelengths below
         # detail_largest_m are replaced by the power law continued there (peaks and saddles kept)
-        act, weight = _detail_weights(z, grid.cell_size_m,
-                                      falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m))),
-                                      params.detail_largest_m, params.detail_slope_power, params.detail_flat_deg)
-        z += (lowpass(z, grid.cell_size_m, params.detail_largest_m) - z) * act
+        flat, w = _detail_slope(z, grid.cell_size_m, params.detail_largest_m, params.detail_slope_power,
+                                params.detail_flat_deg)
+        low = lowpass(z, grid.cell_size_m, params.detail_largest_m)
+        act, weight = _detail_act(
+            falloff(dist_job.result() / np.float32(max(params.texture_clearance_m, grid.cell_size_m))), flat, w)
+        del flat, w
+        z += (low - z) * act
+        del low
         d = detail_noise.result() * weight
         detail["detail_rms_m"] = round(float(d.std()), 3)
         z += d
@@ -314,7 +337,8 @@ def render_elevation(
         # sub-lambda relief: the power law continued below detail_largest_m, minus what the
         # (smoothed) skeleton has there already, where the skeleton is steep, away from peaks and saddles
         fade, weight = _detail_weights(z, grid.cell_size_m,
-                                       falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m))),
+                                       falloff(dist_job.result()
+                                               / np.float32(max(params.texture_clearance_m, grid.cell_size_m))),
                                        params.detail_largest_m, params.detail_slope_power, params.detail_flat_deg)
         d = power_law_noise(z.shape, grid.cell_size_m, c=c * params.detail_gain ** 2, beta=beta,
                             largest_m=params.detail_largest_m, minus=z, steepen=params.detail_steepen,
@@ -330,12 +354,13 @@ def render_elevation(
     if texture_rms * params.texture_gain > 0:
         # texture where the skeleton is steep (real valley floors and glaciers are smooth),
         # faded near peaks and saddles; mean amplitude = gain x the type's texture RMS
-        fade = 1.0 - falloff(dist / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
+        fade = 1.0 - falloff(dist_job.result() / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
         weight = _slope_weight(z, grid.cell_size_m, params.texture_largest_m, params.texture_slope_power) * fade
         z += spectral_noise(z.shape, grid.cell_size_m, rms=params.texture_gain * texture_rms,
                             beta=params.texture_beta, largest_m=params.texture_largest_m, rng=rng) * weight
         del fade, weight
-    del dist, mask
+    dist_job.result()  # raises what the distance transform raised
+    del dist_job, mask
     if noise_amp > 0:
         assert uplift is not None
         zmin, zmax = float(z.min()), float(z.max())
