@@ -64,6 +64,42 @@ def poisson_disk(xmin: float, ymin: float, xmax: float, ymax: float, radius: flo
     return out[:n].copy()
 
 
+@njit(cache=True, nogil=True)
+def flood_from_outlets(start: np.ndarray, dst: np.ndarray, elen: np.ndarray, bnd: np.ndarray, outlets: np.ndarray,
+                       base_elevation: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Priority flood of a graph (CSR ``start`` / ``dst``, edge lengths ``elen``) from the ``outlets``,
+    lowest ``(max bound on the way, flow distance, node)`` first: receivers, flow distances and the
+    nodes in the order reached. Every heap entry is a distinct node, so the entries pop in one total
+    order, the order of Python's ``heapq`` on the same tuples (numba: a loop over ~10^5 nodes)."""
+    n = bnd.size
+    receiver = np.full(n, -1, np.int64)
+    fd = np.zeros(n)
+    seen = np.zeros(n, np.bool_)
+    order = np.empty(n, np.int64)
+    heap = [(0.0, 0.0, np.int64(0))]
+    heap.pop()
+    for t in range(outlets.size):
+        o = outlets[t]
+        b = bnd[o]
+        heapq.heappush(heap, (base_elevation if base_elevation < b else b, 0.0, o))
+        seen[o] = True
+    no = 0
+    while len(heap) > 0:
+        key, dist, v = heapq.heappop(heap)
+        order[no] = v
+        no += 1
+        for k in range(start[v], start[v + 1]):
+            w = dst[k]
+            if seen[w]:
+                continue
+            seen[w] = True
+            receiver[w] = v
+            fd[w] = dist + elen[k]
+            b = bnd[w]
+            heapq.heappush(heap, (b if b > key else key, dist + elen[k], w))
+    return receiver, fd, order[:no].copy()
+
+
 @njit(cache=True)
 def rasterize_triangles(vx: np.ndarray, vy: np.ndarray, vz: np.ndarray, tri: np.ndarray,
                         x0: float, y0: float, res: float, ny: int, nx: int) -> np.ndarray:
@@ -708,11 +744,13 @@ def _bottleneck(parent: np.ndarray, height: np.ndarray, depth: np.ndarray, u: in
 
 @njit(cache=True, nogil=True)
 def pass_violations(owner: np.ndarray, z: np.ndarray, parent: np.ndarray, height: np.ndarray, depth: np.ndarray,
-                    n: int, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+                    n: int, tol: float, d0: int = 0, d1: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """The pairs of :func:`border_pairs` (same order) whose lower cell is more than ``tol`` above the
     finite bottleneck (:func:`bottlenecks`) between their two owners: flat indices ``(a, b)``, the
     bottleneck of each, and the number of pairs looked at. One pass; each owner pair's bottleneck is
-    computed once (a hash table on ``lo * n + hi``)."""
+    computed once (a hash table on ``lo * n + hi``). ``d0, d1``: only the neighbour directions
+    ``d0 <= d < d1`` (E, SW, S, SE), so two calls on directions ``[0, k)`` and ``[k, 4)`` give the
+    whole answer in two concatenated parts (both releasing the GIL)."""
     ny, nx = owner.shape
     size = 1 << 12
     keys = np.full(size, -1, np.int64)
@@ -723,7 +761,7 @@ def pass_violations(owner: np.ndarray, z: np.ndarray, parent: np.ndarray, height
     bv = np.empty(64, np.float64)
     nv = 0
     total = 0
-    for d in range(4):
+    for d in range(d0, d1):
         dr = 0 if d == 0 else 1
         dc = 1 if d == 0 else d - 2  # E, then SW, S, SE
         for i in range(ny - dr):

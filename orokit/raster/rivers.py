@@ -153,10 +153,16 @@ def _segment_params(p0, p1, q0, q1):
 
 
 def _flood_from_outlets(start: np.ndarray, src: np.ndarray, dst: np.ndarray, xy: np.ndarray, bnd: np.ndarray,
-                        outlet: np.ndarray, base_elevation: float) -> tuple[np.ndarray, np.ndarray, list[int]]:
+                        outlet: np.ndarray, base_elevation: float) -> tuple[np.ndarray, np.ndarray, list[int] | np.ndarray]:
     """Priority flood over the river graph (CSR ``start``/``dst``, entries sorted by ``src``) from
     the outlets, lowest bound first: every reached node's receiver, flow distance to its outlet,
-    and the nodes in the order they were reached."""
+    and the nodes in the order they were reached (:func:`_kernels.flood_from_outlets`; the loop
+    below where a bound is NaN, whose comparisons in Python's tuples the kernel does not follow)."""
+    elen = np.hypot(xy[dst, 0] - xy[src, 0], xy[dst, 1] - xy[src, 1])
+    if not np.isnan(bnd).any():
+        return _kernels.flood_from_outlets(start.astype(np.int64), dst.astype(np.int64), elen,
+                                           np.asarray(bnd, np.float64), np.flatnonzero(outlet).astype(np.int64),
+                                           float(base_elevation))
     n = xy.shape[0]
     receiver = np.full(n, -1, np.int64)
     seen = np.zeros(n, bool)
@@ -166,7 +172,7 @@ def _flood_from_outlets(start: np.ndarray, src: np.ndarray, dst: np.ndarray, xy:
         seen[o] = True
     # plain lists and the edge lengths computed at once (the same np.hypot values as edge by
     # edge) keep the Python loop fast
-    elen = np.hypot(xy[dst, 0] - xy[src, 0], xy[dst, 1] - xy[src, 1]).tolist()
+    elen_l = elen.tolist()
     start_l, dst_l, bnd_l, seen_l = start.tolist(), dst.tolist(), bnd.tolist(), seen.tolist()
     rec_l, fd_l = receiver.tolist(), [0.0] * n
     order: list[int] = []
@@ -179,7 +185,7 @@ def _flood_from_outlets(start: np.ndarray, src: np.ndarray, dst: np.ndarray, xy:
                 continue
             seen_l[w] = True
             rec_l[w] = v
-            d = elen[k]
+            d = elen_l[k]
             fd_l[w] = dist + d
             heapq.heappush(heap, (max(key, bnd_l[w]), dist + d, w))
     return np.asarray(rec_l, dtype=np.int64), np.asarray(fd_l, dtype=np.float64), order
