@@ -53,33 +53,38 @@ def _madvise():
     return fn
 
 
-def _library_mappings(name: str) -> list[tuple[int, int, int]]:
-    """(start, end, resident bytes) of the mappings of files named ``*name*`` that hold no private page.
+def _library_mappings(name: str, smaps: str) -> list[tuple[int, int, int]]:
+    """(start, end, resident bytes) of the read-only mappings of files named ``*name*`` holding no private page.
 
-    A mapping with a private (copy-on-write) page, e.g. relocated data, is left out:
-    dropping it would lose what was written. Linux only (``/proc/self/smaps``); elsewhere [].
+    ``smaps``: the text of ``/proc/self/smaps``. A writable mapping is left out (a thread
+    could write a page between this read and the drop, and the write would be lost), and
+    so is one with a private (copy-on-write) page, e.g. relocated data: dropping it would
+    lose what was written.
+
+    >>> text = "1000-3000 r-xp 0 08:01 7 /lib/libx.so\\nRss: 8 kB\\nAnonymous: 0 kB\\nPrivate_Dirty: 0 kB\\n"
+    >>> _library_mappings("libx", text)
+    [(4096, 12288, 8192)]
+    >>> _library_mappings("libx", text.replace("r-xp", "rw-p"))
+    []
     """
-    try:
-        with open("/proc/self/smaps") as f:
-            text = f.read()
-    except OSError:
-        return []
     found: list[tuple[int, int, int]] = []
     current: list[int] | None = None  # start, end, rss, private pages
-    for line in text.splitlines():
-        field = line.split(None, 1)[0]
-        if not field.endswith(":"):  # a mapping's header: "start-end perms offset dev inode [path]"
+    for line in smaps.splitlines():
+        parts = line.split(None, 5)
+        if not parts:
+            continue
+        if not parts[0].endswith(":"):  # a mapping's header: "start-end perms offset dev inode [path]"
             if current is not None and current[2] and not current[3]:
                 found.append((current[0], current[1], current[2]))
-            parts = line.split()
             file = parts[5].rsplit("/", 1)[-1] if len(parts) > 5 else ""
             start, end = parts[0].split("-")
-            current = [int(start, 16), int(end, 16), 0, 0] if name in file else None
-        elif current is not None:
-            if field == "Rss:":
-                current[2] = int(line.split()[1]) * 1024
-            elif field in ("Anonymous:", "Private_Dirty:"):
-                current[3] += int(line.split()[1])
+            current = ([int(start, 16), int(end, 16), 0, 0]
+                       if name in file and len(parts) > 1 and "w" not in parts[1] else None)
+        elif current is not None and len(parts) > 1:
+            if parts[0] == "Rss:":
+                current[2] = int(parts[1]) * 1024
+            elif parts[0] in ("Anonymous:", "Private_Dirty:"):
+                current[3] += int(parts[1])
     if current is not None and current[2] and not current[3]:
         found.append((current[0], current[1], current[2]))
     return found
@@ -90,8 +95,8 @@ def release_library_pages(name: str) -> int:
 
     For a library whose work is done (numba's LLVM once the kernels are loaded: ~65 MB of
     code at 15 M cells): the pages stay in the page cache and come back on their next use,
-    so nothing changes but the process's resident set. Pages the process wrote are kept.
-    Linux only (elsewhere 0).
+    so nothing changes but the process's resident set. Only read-only mappings are dropped
+    (code, constants), never a page the process wrote. Linux only (elsewhere 0).
 
     >>> release_library_pages("no-such-library") == 0
     True
@@ -99,8 +104,10 @@ def release_library_pages(name: str) -> int:
     madvise = _madvise()
     if madvise is None:
         return 0
+    from orokit.io.procfs import read_self_smaps
+
     dropped = 0
-    for start, end, rss in _library_mappings(name):
+    for start, end, rss in _library_mappings(name, read_self_smaps()):
         if madvise(start, end - start, _MADV_DONTNEED) == 0:
             dropped += rss
     return dropped
