@@ -155,6 +155,7 @@ def analyze(
         raise UnitsError(f"DEM elevations must be in metres (read it with read_dem(z_units=...)); attrs units={units!r}")
     transform, crs = _georef(dem)
     tiled = chunks is not None or dem.chunks is not None
+    store = None  # the chunked engine's peak table: its own columns wait on disk until written
     bar = _progress(progress and not tiled, ["peaks, saddles and Divide Tree", "isolation", "tables"])
     if tiled:
         from orokit.tiling.engine import get_compute, tiled_orometry
@@ -192,6 +193,15 @@ def analyze(
                                           chunk_stats=tiled_core.chunk_stats, known=tiled_core.chunk_isolation,
                                           release_known=True)
                 del tiled_core  # the settled isolation (~90 bytes per candidate peak) is in iso now
+                if blocks and core.n_kept:
+                    from orokit.io.spill_io import SpilledColumns
+                    from orokit.tiling.engine import spill_parent
+
+                    store = SpilledColumns(parent=spill_parent(checkpoint))
+                    if iso is not None:  # its columns to the store, the table freed before the tables are made
+                        for name, dtype in engine.ISOLATION_ARRAYS:
+                            store.put(name, iso[name].to_numpy(dtype))
+                        iso = None
                 t_iso = time.perf_counter()
         finally:
             if client is not None:
@@ -242,7 +252,7 @@ def analyze(
         t_iso = time.perf_counter()
         _advance(bar)
     result = engine.build_result(core, transform=transform, crs=crs, isolation=iso, geometry=geometry,
-                                blocks=blocks)
+                                blocks=blocks, store=store)
     del iso
     t_end = time.perf_counter()
     _advance(bar)

@@ -93,6 +93,11 @@ def _sqlite_without_sync() -> Iterator[None]:
                 pyogrio.set_gdal_config_options({"OGR_SQLITE_SYNCHRONOUS": _no_sync["before"]})
 
 
+def _ids(start: int, stop: int) -> np.ndarray:
+    """Row ids ``start..stop - 1`` of a layer's batch."""
+    return np.arange(start, stop, dtype=np.int64)
+
+
 def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFrame | None = None,
                            layers: dict | None = None, parallel: bool = False) -> Path:
     """Write ``tree`` as a GeoPackage with layers ``peaks``, ``saddles`` and ``ridges``.
@@ -145,9 +150,12 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
         """One layer from whole columns (no copies), in one write streamed by batches of
         ``WRITE_BATCH_ROWS`` rows; ``wkb(start, stop)`` makes the geometries of a batch, so no
         geometry column of the whole layer is ever held (the ridges': ~90 bytes per ridge);
+        a column given as a function ``f(start, stop)`` is made for each batch (ids, gathers);
         ``more(start, stop)``: further columns made for the batch (a dict, after ``columns``)."""
 
         def rows(v, start: int, stop: int):
+            if callable(v):
+                return v(start, stop)
             return v.iloc[start:stop] if isinstance(v, pd.Series) else v[start:stop]
 
         def batches():
@@ -181,7 +189,8 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
     def points(dst: Path, frame: pd.DataFrame, id_name: str, layer: str, extra: Any = None) -> None:
         """A point layer of ``frame``'s columns, then the ``added`` columns of ``extra`` (a table
         with the same rows: a DataFrame or TableBlocks, whose rows are taken batch by batch)."""
-        columns: dict[str, Any] = {id_name: np.arange(len(frame), dtype=np.int64)}
+        # the ids made per batch: no column of the whole layer (8 bytes per row)
+        columns: dict[str, Any] = {id_name: _ids}
         columns.update((c, frame[c]) for c in frame.columns)
         more = None
         if extra is not None:
@@ -197,7 +206,8 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
         px, py = tree.peaks["x"].to_numpy(np.float64), tree.peaks["y"].to_numpy(np.float64)
         sx, sy = tree.saddles["x"].to_numpy(np.float64), tree.saddles["y"].to_numpy(np.float64)
         ridges: dict[str, Any] = {c: tree.edges[c] for c in tree.edges.columns}
-        ridges["saddle_elevation"] = tree.saddles["elevation"].to_numpy(np.float64)[s]
+        sz = tree.saddles["elevation"].to_numpy(np.float64)
+        ridges["saddle_elevation"] = lambda i, j: sz[s[i:j]]  # per batch: no gathered column of every ridge
 
         def lines(i: int, j: int):
             ai, bi, si = a[i:j], b[i:j], s[i:j]

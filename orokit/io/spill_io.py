@@ -19,7 +19,7 @@ from orokit._typing import PathLike
 from orokit.errors import OutputError
 from orokit.io.atomic import atomic_path, is_no_space_error
 
-__all__ = ["spill_folder", "write_spill", "read_spill"]
+__all__ = ["spill_folder", "write_spill", "read_spill", "SpilledColumns"]
 
 
 @contextmanager
@@ -59,3 +59,78 @@ def read_spill(path: PathLike, names: tuple[str, ...] | None = None) -> dict[str
     """The arrays written by :func:`write_spill` (never unpickled): all, or only ``names``."""
     with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
         return {k: data[k] for k in (data.files if names is None else names)}
+
+
+class SpilledColumns:
+    """Whole columns set aside in a temporary folder and read back by ranges of rows.
+
+    A table's columns that are read only block by block (the peak table's while its files are
+    written) wait on disk instead of in memory. ``put(name, values)`` writes one 1-D array
+    (raw bytes, no header); ``rows(name, start, stop)`` reads ``values[start:stop]`` into a new
+    array (plain reads, no memory map: nothing stays resident). The folder (in ``parent`` when
+    given, made if missing, else ``TMPDIR``) is removed by :meth:`close`, when the object is
+    garbage-collected, or at exit. Safe to read from several threads.
+    """
+
+    def __init__(self, parent: PathLike | None = None, prefix: str = "orokit-columns-") -> None:
+        import shutil
+        import weakref
+
+        if parent is not None:
+            Path(parent).mkdir(parents=True, exist_ok=True)
+        self.folder = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
+        self._columns: dict[str, tuple[Path, np.dtype, int]] = {}
+        self._finalizer = weakref.finalize(self, shutil.rmtree, str(self.folder), True)
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._columns
+
+    def __len__(self) -> int:
+        return len(self._columns)
+
+    def put(self, name: str, values: np.ndarray) -> None:
+        """Set aside the 1-D array ``values`` as column ``name`` (replacing one of that name).
+
+        Raises
+        ------
+        OutputError
+            The disk of the folder is full.
+        """
+        values = np.ascontiguousarray(values)
+        if values.ndim != 1 or values.dtype.hasobject:
+            raise ValueError(f"column {name!r}: a 1-D array of numbers is needed, got {values.dtype} {values.shape}")
+        path = self.folder / f"{len(self._columns):04d}.bin"
+        if name in self._columns:
+            path = self._columns[name][0]
+        try:
+            with open(path, "wb") as fh:
+                values.tofile(fh)
+        except OSError as exc:
+            if not is_no_space_error(exc):
+                raise
+            raise OutputError(f"no space left on {self.folder.parent} for the run's temporary column files ({exc}); "
+                              "free some space there, or set TMPDIR (or dask's temporary-directory) to a folder "
+                              "with room, and run again") from None
+        self._columns[name] = (path, values.dtype, int(values.size))
+
+    def size(self, name: str) -> int:
+        """Number of values of column ``name``."""
+        return self._columns[name][2]
+
+    def rows(self, name: str, start: int, stop: int) -> np.ndarray:
+        """Values ``start:stop`` of column ``name`` (clipped to the column), as a new array."""
+        path, dtype, n = self._columns[name]
+        start, stop = max(0, int(start)), min(n, int(stop))
+        count = max(0, stop - start)
+        if not count:
+            return np.empty(0, dtype)
+        return np.fromfile(path, dtype=dtype, count=count, offset=start * dtype.itemsize)
+
+    def column(self, name: str) -> np.ndarray:
+        """The whole column ``name``."""
+        return self.rows(name, 0, self.size(name))
+
+    def close(self) -> None:
+        """Remove the folder and its files (the columns can no longer be read)."""
+        self._finalizer()
+        self._columns.clear()

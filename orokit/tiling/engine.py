@@ -244,7 +244,9 @@ def _finalize_task(root: _Part, min_prominence_m: float, outside: str, nby: int,
     s.ekey = s.ekey[order]
     s.nexit = s.nexit[:0]  # not used by the finalize
     del order
-    return finalize_summary(s, min_prominence_m=min_prominence_m, outside=outside), root[1], stats
+    iso = root[1]
+    del root  # the root summary is released by the finalize as it goes (dask holds its tuple till the end)
+    return finalize_summary(s, min_prominence_m=min_prominence_m, outside=outside, consume=True), iso, stats
 
 
 def _checkpoint_dir(checkpoint, data, min_prominence_m: float) -> Path | None:
@@ -260,7 +262,7 @@ def _checkpoint_dir(checkpoint, data, min_prominence_m: float) -> Path | None:
     return open_checkpoint(checkpoint, fingerprint)
 
 
-def _spill_parent(checkpoint) -> str | None:
+def spill_parent(checkpoint) -> str | None:
     """Where a run's spill folder goes: the checkpoint folder, dask's temporary-directory, or None (TMPDIR)."""
     if checkpoint is not None:
         return str(checkpoint)
@@ -306,7 +308,7 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
     with ExitStack() as stack:
         spill = None
         if isolation_metric is not None and _same_disk(scheduler):
-            spill = stack.enter_context(spill_folder(parent=_spill_parent(checkpoint)))
+            spill = stack.enter_context(spill_folder(parent=spill_parent(checkpoint)))
         return _tiled_orometry(data, min_prominence_m=min_prominence_m, outside=outside, scheduler=scheduler,
                                checkpoint=checkpoint, progress=progress, isolation_metric=isolation_metric,
                                spill=spill)

@@ -199,6 +199,8 @@ def finalize_graph(
     Nodes are candidate maxima (``node_ismax``) and possibly other cells; edges carry
     the saddle cell (``ekey``, flat index) and its elevation. Used by the in-memory
     engine (nodes = basins) and by the tiled engine (nodes = merged tile summaries).
+    Each array is let go once used (a caller that holds no other reference, as the tiled
+    engine's finalize, frees it then: ~100 bytes per node of a 6.5 M-node root).
     """
     n = node_key.size
     # canonical order: saddle from high to low, then the basin pair (monkey saddles list
@@ -209,6 +211,9 @@ def finalize_graph(
     del order
     bmax = np.full(n, -np.inf) if outside == "sea" else node_bmax
     in_tree, key_edge, parent, touched = _kernels.kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, bmax)
+    # the final prune reads no border or minimum values (empty arrays of their types: same compiled kernel)
+    no_bmax, no_nmin = np.empty(0, bmax.dtype), np.empty(0, node_nmin.dtype)
+    del bmax, node_bmax
     is_root = key_edge < 0
     prom = node_z.copy()
     prom[~is_root] = node_z[~is_root] - ez[key_edge[~is_root]]
@@ -218,17 +223,19 @@ def finalize_graph(
     del ta, tb, in_tree  # the finalize of a 4 G-cell mosaic's root holds ~6.5 M nodes: free what is done
     dmin = np.full(n, np.inf)
     np.minimum.at(dmin, dom, node_nmin)
+    del node_nmin
     flat_root = is_root & (dmin[dom] >= node_z)
     keep = np.where(is_root, (min_prominence_m <= 0) | (node_z >= min_prominence_m), prom >= min_prominence_m)
     keep &= is_root | (prom > 0)
     keep &= ~flat_root & node_ismax
+    del flat_root
     # a kept peak needs its parent: keep the root of every domain with a kept peak
     # (the root's prominence "= elevation" can be below the threshold when saddles
     # lie below zero)
     dom_has = np.zeros(dmin.size, bool)
     dom_has[dom[keep & ~is_root]] = True
     keep |= is_root & node_ismax & dom_has[dom]
-    del dom, dmin, dom_has, flat_root
+    del dom, dmin, dom_has, node_ismax
     # the kept peaks' columns first (the prune does not change ``keep``), so the sweep's per-node
     # arrays are freed before the prune's own state exists (~26 bytes per node at a 6.5 M-node root)
     new_id = np.full(n, -1, np.int64)
@@ -249,22 +256,35 @@ def finalize_graph(
     kept_prom = prom[kept]
     del key_edge, parent, touched, prom, is_root, nonroot
     # every edge: of several edges at one saddle, the prune picks the same one in both engines
-    oa, ob, oe, _, _, _ = _kernels.prune_edges(n, ea, eb, ez, ekey, keep, bmax, node_nmin, node_z, node_key, False)
-    tkey, tz = ekey, ez
+    oa, ob, oe, _, _, _ = _kernels.prune_edges(n, ea, eb, ez, ekey, keep, no_bmax, no_nmin, node_z, node_key, False)
+    del ea, eb, keep
+    # the output one array at a time, each source let go once taken
+    ridge_saddle_cell = ekey[oe]
+    del ekey
+    ridge_saddle_z = ez[oe]
+    del ez, oe
+    ridge_a = new_id[oa]
+    del oa
+    ridge_b = new_id[ob]
+    del ob, new_id
+    peak_cell = node_key[kept]
+    del node_key
+    peak_z = node_z[kept]
+    del node_z, kept
     return Orometry(
         shape=(int(shape[0]), int(shape[1])),
         n_maxima=int(n_maxima),
-        peak_cell=node_key[kept],
-        peak_z=node_z[kept],
+        peak_cell=peak_cell,
+        peak_z=peak_z,
         prominence=kept_prom,
         key_saddle_cell=ks,
         key_saddle_z=ksz,
         parent=par,
         prominence_exact=exact,
-        ridge_a=new_id[oa],
-        ridge_b=new_id[ob],
-        ridge_saddle_cell=tkey[oe],
-        ridge_saddle_z=tz[oe],
+        ridge_a=ridge_a,
+        ridge_b=ridge_b,
+        ridge_saddle_cell=ridge_saddle_cell,
+        ridge_saddle_z=ridge_saddle_z,
     )
 
 
@@ -292,8 +312,16 @@ def saddle_order(ea: np.ndarray, eb: np.ndarray, ez: np.ndarray, ekey: np.ndarra
     return order
 
 
+#: the isolation table's columns as the peak rows read them (name, dtype)
+ISOLATION_ARRAYS = (("isolation", np.float64), ("isolation_row", np.int64), ("isolation_col", np.int64),
+                    ("isolation_exact", np.bool_))
+
+#: the engine's per-peak columns that only the peak rows read after the parents (moved to a store)
+_ROW_ONLY = ("key_saddle_z", "parent", "prominence_exact")
+
+
 def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | None,
-                 geometry: bool = True, blocks: bool = False) -> AnalysisResult:
+                 geometry: bool = True, blocks: bool = False, store: Any = None) -> AnalysisResult:
     """Peaks/saddles tables and the DivideTree from the raw engine output.
 
     ``geometry=False``: plain DataFrames without point geometries (``x``/``y`` hold the
@@ -301,6 +329,14 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     ``blocks=True``: the peaks table is a :class:`~orokit.topology.tables.TableBlocks`
     whose rows are made from the engine's arrays by blocks when written (no geometry;
     the same rows and files; ~130 bytes per peak less held at once).
+    ``store`` (with ``blocks``): a column store (``put(name, values)``, ``rows(name, start, stop)``,
+    ``name in store``; :class:`orokit.io.spill_io.SpilledColumns`) where the peak table's own
+    columns wait while the files are written, each block reading its rows back (~74 bytes per
+    peak less held): ``core``'s key-saddle elevations, island parents and exactness flags at the
+    start, its prominences and key saddle cells and the line and prominence parents once the
+    parents are found, are moved there (``core`` keeps empty arrays for them: it is consumed).
+    The isolation's columns (:data:`ISOLATION_ARRAYS`) are read from the store when it holds
+    them (the caller moved them; ``isolation`` is then None).
     """
     import pandas as pd  # here, not at import: the engine's peak memory is reached without it
 
@@ -313,6 +349,11 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
 
     n = core.n_kept
     elev = core.peak_z.astype(np.float64, copy=False)
+    moved = store is not None and blocks and n > 0
+    if moved:  # columns only the rows read: to the store before the tables' arrays exist
+        for f in _ROW_ONLY:
+            store.put(f, getattr(core, f))
+            setattr(core, f, getattr(core, f)[:0])
 
     # saddles of the pruned tree, in raster order (a monkey saddle serves several ridges)
     sc_sorted, first = np.unique(core.ridge_saddle_cell, return_index=True)
@@ -339,6 +380,13 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
         line = parents["line_parent"].to_numpy(np.int64)
         prom_parent = parents["prominence_parent"].to_numpy(np.int64)
         del parents
+        if moved:  # the rest of the rows' own columns, before the places of peaks and saddles are made
+            for f in ("prominence", "key_saddle_cell"):
+                store.put(f, getattr(core, f))
+                setattr(core, f, getattr(core, f)[:0])
+            store.put("line_parent", line)
+            store.put("prominence_parent", prom_parent)
+            line = prom_parent = None
     rows, cols = core.peak_row, core.peak_col
     x, y = xy(rows, cols)
     s_r, s_c = sc_sorted // W, sc_sorted % W
@@ -352,7 +400,8 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
         crs,
         {"units": "m"},
     )
-    make = _peak_rows(core, rows, cols, x, y, elev, line, prom_parent, isolation, transform, crs)
+    make = _peak_rows(core, rows, cols, x, y, elev, line, prom_parent, isolation, transform, crs,
+                      store if moved else None)
     if blocks:
         shared = {"row": rows, "col": cols, "x": x, "y": y, "elevation": elev}
         peaks: Any = TableBlocks(n, make, index_name="peak_id", shared=shared)
@@ -374,10 +423,12 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
 
 def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray, y: np.ndarray, elev: np.ndarray,
                line: np.ndarray | None, prom_parent: np.ndarray | None, isolation: pd.DataFrame | None,
-               transform, crs):
+               transform, crs, store: Any = None):
     """``make(start, stop)``: rows ``start:stop`` of the peaks table (:data:`PEAK_COLUMNS`, index
     ``peak_id``) from whole arrays held once (the engine's, the isolation's, the places and the
     parents); every other column is made for the rows asked. Thread-safe (writers run in two threads).
+    ``store``: the engine's row-only columns, the parents and the isolation (when there) are read
+    from it by rows (see :func:`build_result`).
     """
     import threading
 
@@ -387,13 +438,22 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
     n = core.n_kept
     # the engine's columns the rows need, not ``core``: its ridge arrays and cells (24 bytes per peak)
     # are free once the tables exist, while the blocks live until the files are written
-    c_prom, c_ksc, c_ksz = core.prominence, core.key_saddle_cell, core.key_saddle_z
-    c_parent, c_exact = core.parent, core.prominence_exact
-    iso = None
+    held: dict[str, Any] = {}
+    if store is None:
+        held = {"prominence": core.prominence, "key_saddle_cell": core.key_saddle_cell,
+                "key_saddle_z": core.key_saddle_z, "parent": core.parent,
+                "prominence_exact": core.prominence_exact, "line_parent": line, "prominence_parent": prom_parent}
+    has_parents = line is not None or store is not None
+
+    def col(name: str, sl: slice) -> np.ndarray:
+        return held[name][sl] if store is None else store.rows(name, sl.start, sl.stop)
+
+    iso: Any = None
     if isolation is not None and n:
         # the isolation table's own columns, no copies (the caller drops it)
-        iso = (isolation["isolation"].to_numpy(np.float64), isolation["isolation_row"].to_numpy(np.int64),
-               isolation["isolation_col"].to_numpy(np.int64), isolation["isolation_exact"].to_numpy(bool))
+        iso = tuple(isolation[c].to_numpy(t) for c, t in ISOLATION_ARRAYS)
+    elif store is not None and n and ISOLATION_ARRAYS[0][0] in store:
+        iso = store
     local = threading.local()  # one pyproj Transformer per thread (they are not shared between threads)
 
     def xy(r, c):
@@ -417,25 +477,28 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
             return np.where(has, rows[idx] if n else 0, -1), np.where(has, cols[idx] if n else 0, -1)
 
         e = elev[sl]
-        prom = c_prom[sl]
-        ksc = c_ksc[sl]
+        prom = col("prominence", sl)
+        ksc = col("key_saddle_cell", sl)
         has_saddle = ksc >= 0
         ks = np.where(has_saddle, ksc, 0)
         k_rows = np.where(has_saddle, ks // W, -1)
         k_cols = np.where(has_saddle, ks % W, -1)
         kx, ky = xy(k_rows, k_cols)
         del ks
-        ln = none_id() if line is None else line[sl]
-        pp = none_id() if prom_parent is None else prom_parent[sl]
+        ln = col("line_parent", sl) if has_parents else none_id()
+        pp = col("prominence_parent", sl) if has_parents else none_id()
         iso_d, iso_r, iso_c, iso_x, iso_y = nan(), none_id(), none_id(), nan(), nan()
         iso_exact = np.zeros(m, bool)
         if iso is not None:
-            iso_d, iso_r, iso_c, iso_exact = (a[sl] for a in iso)
+            if iso is store:
+                iso_d, iso_r, iso_c, iso_exact = (store.rows(c, start, stop) for c, _ in ISOLATION_ARRAYS)
+            else:
+                iso_d, iso_r, iso_c, iso_exact = (a[sl] for a in iso)
             ix, iy = xy(iso_r, iso_c)
             found = iso_r >= 0
             iso_x, iso_y = np.where(found, ix, np.nan), np.where(found, iy, np.nan)
             del ix, iy, found
-        parent = c_parent[sl].astype(np.int64, copy=False)
+        parent = col("parent", sl).astype(np.int64, copy=False)
         island_rc, line_rc, prom_rc = cell_of(parent), cell_of(ln), cell_of(pp)
         px, py = x[sl], y[sl]
         lon, lat = nan(), nan()
@@ -458,7 +521,7 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
             "saddle_col": k_cols,
             "saddle_x": np.where(has_saddle, kx, np.nan),
             "saddle_y": np.where(has_saddle, ky, np.nan),
-            "saddle_elevation": c_ksz[sl].astype(np.float64, copy=False),
+            "saddle_elevation": col("key_saddle_z", sl).astype(np.float64, copy=False),
             "island_parent": parent,
             "island_parent_row": island_rc[0],
             "island_parent_col": island_rc[1],
@@ -474,7 +537,7 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
             "isolation_col": iso_c,
             "isolation_x": iso_x,
             "isolation_y": iso_y,
-            "prominence_exact": c_exact[sl].astype(bool, copy=False),
+            "prominence_exact": col("prominence_exact", sl).astype(bool, copy=False),
             "isolation_exact": iso_exact,
         }
         assert list(columns) == PEAK_COLUMNS

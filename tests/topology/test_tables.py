@@ -256,3 +256,49 @@ def test_table_blocks_do_not_keep_the_engine_output_alive(result):
     whole = lean.peaks.to_frame()
     assert len(whole) > 7
     np.testing.assert_array_equal(whole["prominence"].to_numpy(), result.peaks["prominence"].to_numpy())
+
+
+@pytest.mark.parametrize("batch", [None, 3])
+def test_tables_whose_own_columns_wait_in_a_store_write_the_same_files(result, tmp_path, monkeypatch, batch):
+    """``build_result(blocks=True, store=...)`` (the chunked ``orokit analyze``): the peak table's own
+    columns (engine, parents, isolation) go to a column store and each block reads its rows back; the
+    same rows and the same files as the frames, and the engine output keeps none of those columns."""
+    import orokit.io.divide_tree_gpkg as gp
+    from orokit.analysis import write_analysis
+    from orokit.io.spill_io import SpilledColumns
+    from orokit.metrics.isolation import KernelMetric, finish_isolation, nearest_higher
+    from orokit.topology import engine
+
+    dem = _dem()
+    z = np.ascontiguousarray(dem.values)
+    transform, crs = dem.rio.transform(), dem.rio.crs
+    core = engine.orometry(z, min_prominence_m=5.0)
+    metric = KernelMetric.from_grid(transform, crs)
+    rows, cols = core.peak_row.astype(np.int64), core.peak_col.astype(np.int64)
+    best, cand, edge = nearest_higher(z, rows, cols, metric)
+    iso = finish_isolation(metric, rows, cols, best, cand, z.shape[1], edge)
+    store = SpilledColumns(parent=tmp_path / "spill")
+    for name, dtype in engine.ISOLATION_ARRAYS:
+        store.put(name, iso[name].to_numpy(dtype))
+    lean = engine.build_result(core, transform=transform, crs=crs, isolation=None, geometry=False, blocks=True,
+                               store=store)
+    for f in ("prominence", "key_saddle_cell", "key_saddle_z", "parent", "prominence_exact"):
+        assert getattr(core, f).size == 0, f  # moved to the store
+    assert len(store) == 11 and "line_parent" in store
+    whole = result.peaks.drop(columns="geometry")
+    n = len(whole)
+    assert lean.peaks.to_frame().equals(whole)
+    assert lean.peaks.block(n - 2, n + 5).equals(whole.iloc[n - 2:])
+    assert lean.peaks["isolation"].notna().sum() > 5
+    if batch:
+        monkeypatch.setattr(gp, "WRITE_BATCH_ROWS", batch)
+    lean.attrs = dict(result.attrs)
+    write_analysis(lean, tmp_path / "store")
+    write_analysis(result, tmp_path / "frames")
+    assert_same_analysis_files(tmp_path / "store", tmp_path / "frames")
+    folder = store.folder
+    del store, lean
+    import gc
+
+    gc.collect()
+    assert not folder.exists()  # removed with the result that read from it
