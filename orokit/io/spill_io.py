@@ -19,17 +19,38 @@ from orokit._typing import PathLike
 from orokit.errors import OutputError
 from orokit.io.atomic import atomic_path, is_no_space_error
 
-__all__ = ["spill_folder", "write_spill", "read_spill", "SpilledColumns"]
+__all__ = ["spill_folder", "remove_folder", "write_spill", "read_spill", "SpilledColumns"]
 
 
 @contextmanager
 def spill_folder(prefix: str = "orokit-spill-", parent: PathLike | None = None) -> Iterator[Path]:
     """A new temporary folder (in ``parent``, made if missing, else ``TMPDIR``) for the spills of
-    one run, removed on exit."""
+    one run, removed on exit (see :func:`remove_folder`)."""
     if parent is not None:
         Path(parent).mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix=prefix, dir=parent) as folder:
-        yield Path(folder)
+    folder = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
+    try:
+        yield folder
+    finally:
+        remove_folder(folder)
+
+
+def remove_folder(folder: PathLike, attempts: int = 20) -> None:
+    """Remove ``folder`` and its files; never raises (it runs while the run's error is raised).
+
+    After an error, dask's local schedulers let the tasks already running finish: one may add a
+    file between the removal's listing and its ``rmdir`` ("directory not empty", which replaced the
+    run's own error); the removal is then tried again (``attempts`` times, 50 ms apart), and a
+    later write finds no folder (:func:`write_spill` does not make it again).
+    """
+    import shutil
+    import time
+
+    for i in range(attempts):
+        shutil.rmtree(folder, ignore_errors=True)
+        if not Path(folder).exists():
+            return
+        time.sleep(0.05)
 
 
 def write_spill(path: PathLike, arrays: dict[str, np.ndarray]) -> None:
@@ -73,14 +94,13 @@ class SpilledColumns:
     """
 
     def __init__(self, parent: PathLike | None = None, prefix: str = "orokit-columns-") -> None:
-        import shutil
         import weakref
 
         if parent is not None:
             Path(parent).mkdir(parents=True, exist_ok=True)
         self.folder = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
         self._columns: dict[str, tuple[Path, np.dtype, int]] = {}
-        self._finalizer = weakref.finalize(self, shutil.rmtree, str(self.folder), True)
+        self._finalizer = weakref.finalize(self, remove_folder, str(self.folder))
 
     def __contains__(self, name: str) -> bool:
         return name in self._columns

@@ -157,3 +157,34 @@ def test_spills_go_to_the_checkpoint_or_dask_temporary_directory(where, tmp_path
     assert all(target in Path(p).parents for p in written)
     assert list(tmpdir.iterdir()) == []
     assert not any(p.name.startswith("orokit-spill-") for p in target.iterdir())
+
+
+def test_a_late_spill_during_the_removal_does_not_hide_the_run_error(tmp_path, monkeypatch):
+    """After an error, a chunk task dask left running may add a file while the spill folder is being
+    removed (after the listing, before the rmdir): the run's own error is raised, and the folder goes."""
+    import errno
+    import shutil
+
+    from orokit.io.spill_io import spill_folder
+
+    real = shutil.rmtree
+    calls = []
+
+    def racing(path, *args, **kwargs):
+        calls.append(path)
+        if len(calls) > 1:
+            return real(path, *args, **kwargs)
+        for p in Path(path).iterdir():
+            p.unlink()
+        (Path(path) / "late.npz.tmp").write_bytes(b"x")  # a late task's write, before the rmdir
+        err = OSError(errno.ENOTEMPTY, "Directory not empty", str(path))
+        if kwargs.get("ignore_errors"):
+            return None
+        raise err
+
+    monkeypatch.setattr(shutil, "rmtree", racing)
+    with pytest.raises(ValueError, match="the run's error"):
+        with spill_folder(parent=tmp_path) as folder:
+            (folder / "a.npz").write_bytes(b"a")
+            raise ValueError("the run's error")
+    assert len(calls) >= 2 and not folder.exists()
