@@ -36,6 +36,9 @@ class RenderParams:
         (:func:`orokit.raster.rivers.saddle_floor`): low-relief trees keep their beds nearer their saddles; None =
         the constant ratio. 800 m and 0.5 since session 11 (with ``flank_slope_min`` 0.25): the dune fields'
         interdune corridors no longer sink to ``s - R`` as a network of channels below the plain.
+    saddle_floor_spread : the floor lies at most this times the spread of the ``saddle_floor_k`` nearest
+        saddles (median - lowest) below the lowest (:func:`orokit.raster.rivers.saddle_floor`): where the
+        saddles lie at one level (domes on a plain) the ground between the hills stays near it; None = off.
     valley_slope_exponent : the valley floor narrows on steep river beds,
         ``w * min(1, (S / river_slope)^-valley_slope_exponent)`` (S the bed slope;
         :func:`orokit.raster.interpolate.valley_width`); 0 = off.
@@ -163,6 +166,7 @@ class RenderParams:
     saddle_floor_k: int = 16
     saddle_floor_relief_m: float | None = 800.0
     saddle_floor_min_ratio: float = 0.5
+    saddle_floor_spread: float | None = None
     floor_relief_ratio: float = 0.0
     min_prominence_m: float = 30.0
     noise_ratio: float = 0.0
@@ -224,6 +228,8 @@ class RenderParams:
             raise InputError(f"flank_slope_relief_m must be > 0 metres or None, got {self.flank_slope_relief_m!r}")
         if self.saddle_floor_relief_m is not None and not float(self.saddle_floor_relief_m) > 0.0:
             raise InputError(f"saddle_floor_relief_m must be > 0 metres or None, got {self.saddle_floor_relief_m!r}")
+        if self.saddle_floor_spread is not None and not float(self.saddle_floor_spread) >= 0.0:
+            raise InputError(f"saddle_floor_spread must be >= 0 or None, got {self.saddle_floor_spread!r}")
         if self.flank_slope_gradient is not None and not float(self.flank_slope_gradient) > 0.0:
             raise InputError(f"flank_slope_gradient must be > 0 or None, got {self.flank_slope_gradient!r}")
         if self.flank_slope_relief_m is not None and self.flank_slope_gradient is not None:

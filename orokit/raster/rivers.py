@@ -106,7 +106,8 @@ def local_relief(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
 
 
 def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *, ratio: float,
-                 k: int = 16, relief_m: float | None = None, min_ratio: float = 0.0) -> np.ndarray:
+                 k: int = 16, relief_m: float | None = None, min_ratio: float = 0.0,
+                 spread_ratio: float | None = None) -> np.ndarray:
     """Lowest ground the Divide Tree allows at ``xy``: ``s - ratio * (p - s)``, with ``s`` the lowest of the
     ``k`` nearest saddles and ``p`` the highest of the ``k`` nearest peaks (:func:`local_relief`).
 
@@ -120,6 +121,10 @@ def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
     relief_m))`` (never above ``ratio``): low-relief trees (dune fields, plains) keep their beds closer under
     their saddles, high ranges keep the full depth.
 
+    With ``spread_ratio`` the floor lies at most ``spread_ratio`` times the spread of those saddles (their
+    median minus their lowest) below the lowest: where the saddles all lie at one level (a field of domes on
+    a plain) the ground between the hills stays near that level, whatever the hills' height.
+
     >>> peaks = np.array([[0.0, 0.0, 150.0], [2000.0, 0.0, 120.0]])
     >>> saddles = np.array([[1000.0, 0.0, 100.0]])
     >>> saddle_floor(np.array([[1000.0, 500.0]]), peaks, saddles, ratio=0.5, k=4).tolist()
@@ -127,6 +132,9 @@ def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
     >>> saddle_floor(np.array([[1000.0, 500.0]]), peaks, saddles, ratio=1.0, k=4, relief_m=200.0,
     ...              min_ratio=0.1).tolist()
     [87.5]
+    >>> saddles = np.array([[1000.0, 0.0, 100.0], [1000.0, 900.0, 104.0], [1000.0, -900.0, 110.0]])
+    >>> saddle_floor(np.array([[1000.0, 500.0]]), peaks, saddles, ratio=1.0, k=4, spread_ratio=3.0).tolist()
+    [88.0]
     """
     xy = np.asarray(xy, float).reshape(-1, 2)
     if saddle_xyz.shape[0] == 0 or peak_xyz.shape[0] == 0 or xy.shape[0] == 0:
@@ -134,11 +142,22 @@ def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
     s, p, _ = local_relief(xy, peak_xyz, saddle_xyz, k=k)
     r = np.maximum(p - s, 0.0)
     if relief_m is None:
-        return s - float(ratio) * r
-    if not float(relief_m) > 0.0:
-        raise ValueError(f"relief_m must be > 0, got {relief_m!r}")
-    rat = np.clip(float(ratio) * np.minimum(r / float(relief_m), 1.0), min(float(min_ratio), float(ratio)), float(ratio))
-    return s - rat * r
+        depth = float(ratio) * r
+    else:
+        if not float(relief_m) > 0.0:
+            raise ValueError(f"relief_m must be > 0, got {relief_m!r}")
+        rat = np.clip(float(ratio) * np.minimum(r / float(relief_m), 1.0), min(float(min_ratio), float(ratio)),
+                      float(ratio))
+        depth = rat * r
+    if spread_ratio is not None:
+        if not float(spread_ratio) >= 0.0:
+            raise ValueError(f"spread_ratio must be >= 0, got {spread_ratio!r}")
+        from scipy.spatial import cKDTree
+
+        _, js = cKDTree(saddle_xyz[:, :2]).query(xy, k=min(int(k), saddle_xyz.shape[0]), workers=-1)
+        spread = np.median(saddle_xyz[js.reshape(xy.shape[0], -1), 2], axis=1) - s
+        depth = np.minimum(depth, float(spread_ratio) * spread)
+    return s - depth
 
 
 def _segment_params(p0, p1, q0, q1):

@@ -140,3 +140,49 @@ def test_render_with_a_relief_following_floor_keeps_the_orometry():
     res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
     comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
     assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+
+
+@pytest.mark.parametrize("k", [1, 5, 16])
+def test_saddle_floor_spread_against_brute_force(k):
+    """With ``spread_ratio`` the floor's depth below the lowest of the k nearest saddles is at most
+    ``spread_ratio`` x (their median - their lowest), by a full distance matrix; 0 puts the floor at that
+    lowest saddle, a large ratio leaves the floor as it was."""
+    peaks, saddles, q = _random_nodes(5)
+    ds = np.hypot(*(q[:, None, :] - saddles[None, :, :2]).transpose(2, 0, 1))
+    near = np.take_along_axis(np.broadcast_to(saddles[:, 2], ds.shape), np.argsort(ds, axis=1)[:, :k], 1)
+    s, spread = near.min(1), np.median(near, 1) - near.min(1)
+    for ratio, relief_m, lo in ((1.0, None, 0.0), (1.0, 300.0, 0.5), (0.3, None, 0.0)):
+        plain = saddle_floor(q, peaks, saddles, ratio=ratio, k=k, relief_m=relief_m, min_ratio=lo)
+        for c in (0.0, 1.0, 3.0):
+            got = saddle_floor(q, peaks, saddles, ratio=ratio, k=k, relief_m=relief_m, min_ratio=lo, spread_ratio=c)
+            np.testing.assert_allclose(got, s - np.minimum(s - plain, c * spread))
+            assert (got >= plain - 1e-9).all() and (got <= s + 1e-9).all()
+        if k > 1:  # one saddle has no spread: the floor sits at it
+            np.testing.assert_allclose(saddle_floor(q, peaks, saddles, ratio=ratio, k=k, relief_m=relief_m,
+                                                    min_ratio=lo, spread_ratio=1e9), plain)
+    if k > 2:
+        assert (spread > 0).any()  # the test can fail: the bound binds somewhere
+        assert (saddle_floor(q, peaks, saddles, ratio=1.0, k=k, spread_ratio=1.0)
+                > saddle_floor(q, peaks, saddles, ratio=1.0, k=k) + 1.0).any()
+    with pytest.raises(ValueError, match="spread_ratio"):
+        saddle_floor(q, peaks, saddles, ratio=1.0, spread_ratio=-1.0)
+    with pytest.raises(InputError, match="saddle_floor_spread"):
+        RenderParams(saddle_floor_spread=-1.0)
+
+
+def test_render_with_a_spread_bounded_floor_keeps_the_orometry():
+    """The small tree with the floor bounded by its saddles' spread: the beds lie on or above that floor
+    (ridge crossings aside), which is never below the plain floor; every peak recovered, none extra."""
+    assert RenderParams().saddle_floor_spread is None
+    tree = small_tree()
+    params = RenderParams(lam=200.0, saddle_floor_ratio=1.0, saddle_floor_spread=0.5)
+    dem, skel = render_elevation(tree, cell_size_m=50.0, erosion=False, params=params, return_skeleton=True, rng=7)
+    peaks = tree.peaks[["x", "y", "elevation"]].to_numpy(float)
+    saddles = tree.saddles[["x", "y", "elevation"]].to_numpy(float)
+    rv = skel.river_network
+    f = saddle_floor(rv.xy, peaks, saddles, ratio=1.0, spread_ratio=0.5)
+    assert (f >= saddle_floor(rv.xy, peaks, saddles, ratio=1.0) - 1e-9).all()
+    assert (rv.elevation >= np.minimum(f, 900.0 - 5.0) - 1e-6).all()
+    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
