@@ -139,7 +139,19 @@ def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
     xy = np.asarray(xy, float).reshape(-1, 2)
     if saddle_xyz.shape[0] == 0 or peak_xyz.shape[0] == 0 or xy.shape[0] == 0:
         return np.full(xy.shape[0], -np.inf)
-    s, p, _ = local_relief(xy, peak_xyz, saddle_xyz, k=k)
+    if spread_ratio is not None and not float(spread_ratio) >= 0.0:
+        raise ValueError(f"spread_ratio must be >= 0, got {spread_ratio!r}")
+    if spread_ratio is None:
+        s, p, _ = local_relief(xy, peak_xyz, saddle_xyz, k=k)
+    else:  # the same k nearest saddles and peaks as local_relief, with the saddles' median
+        from scipy.spatial import cKDTree
+
+        n = xy.shape[0]
+        _, js = cKDTree(saddle_xyz[:, :2]).query(xy, k=min(int(k), saddle_xyz.shape[0]), workers=-1)
+        _, jp = cKDTree(peak_xyz[:, :2]).query(xy, k=min(int(k), peak_xyz.shape[0]), workers=-1)
+        sz = saddle_xyz[js.reshape(n, -1), 2]
+        s, p = sz.min(axis=1), peak_xyz[jp.reshape(n, -1), 2].max(axis=1)
+        spread = np.median(sz, axis=1) - s
     r = np.maximum(p - s, 0.0)
     if relief_m is None:
         depth = float(ratio) * r
@@ -150,12 +162,6 @@ def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
                       float(ratio))
         depth = rat * r
     if spread_ratio is not None:
-        if not float(spread_ratio) >= 0.0:
-            raise ValueError(f"spread_ratio must be >= 0, got {spread_ratio!r}")
-        from scipy.spatial import cKDTree
-
-        _, js = cKDTree(saddle_xyz[:, :2]).query(xy, k=min(int(k), saddle_xyz.shape[0]), workers=-1)
-        spread = np.median(saddle_xyz[js.reshape(xy.shape[0], -1), 2], axis=1) - s
         depth = np.minimum(depth, float(spread_ratio) * spread)
     return s - depth
 
