@@ -7,6 +7,7 @@ file that exists is complete.
 """
 from __future__ import annotations
 
+import logging
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -18,6 +19,8 @@ import numpy as np
 from orokit._typing import PathLike
 from orokit.errors import OutputError
 from orokit.io.atomic import atomic_path, is_no_space_error
+
+logger = logging.getLogger(__name__)
 
 __all__ = ["spill_folder", "remove_folder", "write_spill", "read_spill", "SpilledColumns"]
 
@@ -41,16 +44,19 @@ def remove_folder(folder: PathLike, attempts: int = 20) -> None:
     After an error, dask's local schedulers let the tasks already running finish: one may add a
     file between the removal's listing and its ``rmdir`` ("directory not empty", which replaced the
     run's own error); the removal is then tried again (``attempts`` times, 50 ms apart), and a
-    later write finds no folder (:func:`write_spill` does not make it again).
+    later write finds no folder (:func:`write_spill` does not make it again). A folder still
+    there after the last attempt is named in a logged warning (it is never left silently).
     """
     import shutil
     import time
 
-    for i in range(attempts):
+    for _ in range(attempts):
         shutil.rmtree(folder, ignore_errors=True)
         if not Path(folder).exists():
             return
         time.sleep(0.05)
+    logger.warning("could not remove the temporary folder %s (%d attempts); delete it by hand to free its space",
+                   folder, attempts)
 
 
 def write_spill(path: PathLike, arrays: dict[str, np.ndarray]) -> None:

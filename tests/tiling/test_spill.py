@@ -188,3 +188,18 @@ def test_a_late_spill_during_the_removal_does_not_hide_the_run_error(tmp_path, m
             (folder / "a.npz").write_bytes(b"a")
             raise ValueError("the run's error")
     assert len(calls) >= 2 and not folder.exists()
+
+
+def test_a_folder_that_cannot_be_removed_is_named_in_a_warning(tmp_path, monkeypatch, caplog):
+    """The removal never raises, but a spill folder it could not remove is not left silently."""
+    import logging
+    import shutil
+
+    from orokit.io.spill_io import spill_folder
+
+    monkeypatch.setattr(shutil, "rmtree", lambda *args, **kwargs: None)  # e.g. a file held open elsewhere
+    with caplog.at_level(logging.WARNING, logger="orokit.io.spill_io"):
+        with spill_folder(parent=tmp_path) as folder:
+            (folder / "a.npz").write_bytes(b"a")
+    assert folder.exists()
+    assert any(str(folder) in r.getMessage() and r.levelno == logging.WARNING for r in caplog.records)
