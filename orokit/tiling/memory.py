@@ -122,10 +122,8 @@ def limit_malloc_arenas(n: int) -> bool:
 
     glibc gives threads that allocate at once arenas of their own (up to 8 per core), each
     keeping its freed pages; in ``orokit analyze`` at 15 M cells (GDAL's reader, numba's
-    loader, the writers' threads) that was ~15-20 MB of the peak (measured).
-
-    >>> isinstance(limit_malloc_arenas(8), bool)
-    True
+    loader, the writers' threads) that was ~15-20 MB of the peak (measured). It holds for the
+    whole process: for a program's entry point (``orokit analyze``), never a library call.
     """
     name = ctypes.util.find_library("c")
     try:

@@ -80,3 +80,43 @@ def test_only_read_only_mappings_are_listed_whatever_the_path(tmp_path):
 
 def test_unknown_library():
     assert release_library_pages("no-such-library-here") == 0
+
+
+ARENAS = """
+import ctypes, sys, threading
+import numpy as np
+from orokit.tiling.memory import limit_malloc_arenas
+
+if sys.argv[1] == "limit":
+    assert limit_malloc_arenas(2)
+keep, meet = [], threading.Barrier(6)
+
+def work():
+    keep.append(np.ones(1000))  # from this thread's arena (below the mmap threshold)
+    meet.wait()  # all six alive at once: none reuses an arena another one left
+
+threads = [threading.Thread(target=work) for _ in range(6)]
+for t in threads:
+    t.start()
+for t in threads:
+    t.join()
+ctypes.CDLL(None).malloc_stats()  # one "Arena N:" block per arena, on stderr
+"""
+
+
+def _glibc() -> bool:
+    import ctypes
+
+    return sys.platform.startswith("linux") and hasattr(ctypes.CDLL(None), "gnu_get_libc_version")
+
+
+@pytest.mark.skipif(not _glibc(), reason="mallopt(M_ARENA_MAX) and malloc_stats are glibc's")
+def test_malloc_arenas_are_limited_in_the_process_that_asks():
+    """Six threads allocating at once get arenas of their own; after limit_malloc_arenas(2), two in all
+    (run in child processes: the setting holds for a whole process, so never in the test's own)."""
+    def arenas(mode: str) -> int:
+        out = subprocess.run([sys.executable, "-c", ARENAS, mode], capture_output=True, text=True, check=True)
+        return sum(line.startswith("Arena ") for line in out.stderr.splitlines())
+
+    assert arenas("default") > 2
+    assert arenas("limit") == 2
