@@ -511,9 +511,11 @@ class DemArray:
 
     def release(self) -> None:
         """Drop the pixels: ``values`` becomes a read-only all-NaN view of the same shape and dtype
-        (no memory); the georeference and ``attrs`` stay. For a caller whose analysis no longer
-        needs them (:func:`orokit.analysis.analyze` with ``release_dem=True``)."""
-        empty = np.broadcast_to(np.array(np.nan, dtype=self.values.dtype), self.values.shape)
+        (float32 for integer pixels, which have no NaN; no memory); the georeference and ``attrs``
+        stay. For a caller whose analysis no longer needs them (:func:`orokit.analysis.analyze`
+        with ``release_dem=True``)."""
+        dtype = self.values.dtype if np.issubdtype(self.values.dtype, np.floating) else np.dtype(np.float32)
+        empty = np.broadcast_to(np.array(np.nan, dtype=dtype), self.values.shape)
         object.__setattr__(self, "values", empty)  # frozen: the fields keep their meaning, the pixels go
 
     @property

@@ -161,3 +161,20 @@ def test_release_dem_keeps_the_pixels_when_a_later_step_reads_them(tmp_path):
     dem = read_dem_array(_write(tmp_path / "z.tif", z, unit="m"))
     analyze(dem, min_prominence_m=5.0, geometry=False, release_dem=True, depressions=True)
     np.testing.assert_array_equal(dem.values, z)
+
+
+def test_release_dem_of_integer_pixels():
+    """A DemArray of integer pixels (analyze reads them as float64) is released too: it raised
+    'cannot convert float NaN to integer' once the engine and the isolation had run."""
+    from affine import Affine
+
+    from orokit.analysis import analyze
+    from orokit.io.dem import DemArray
+
+    z = np.random.default_rng(5).integers(0, 400, (40, 37)).astype(np.int16)
+    kept = analyze(DemArray(z, Affine(30.0, 0, 0, 0, -30.0, 0), None, {"units": "m"}), min_prominence_m=20.0,
+                   geometry=False)
+    dem = DemArray(z.copy(), Affine(30.0, 0, 0, 0, -30.0, 0), None, {"units": "m"})
+    released = analyze(dem, min_prominence_m=20.0, geometry=False, release_dem=True)
+    assert len(kept.peaks) > 3 and released.peaks.equals(kept.peaks) and released.saddles.equals(kept.saddles)
+    assert dem.shape == z.shape and np.isnan(dem.values).all() and dem.values.strides == (0, 0)
