@@ -575,11 +575,23 @@ def _read_dem(
             raise InputError(f"DEM file not found: {path}. Check the path (or fetch it: orokit data fetch NAME).")
         if p.is_dir():
             # a directory of tiles: mosaic them by geotransform in a VRT (read lazily with chunks=)
+            import atexit
+            import shutil
             import tempfile
 
             from orokit.io.mosaic import build_vrt
 
-            path = os.fspath(build_vrt(p, Path(tempfile.mkdtemp(prefix="orokit-mosaic-")) / f"{p.name}.vrt"))
+            folder = tempfile.mkdtemp(prefix="orokit-mosaic-")
+            # a lazy DEM reads the VRT as long as it lives, at most until the process ends: removed then
+            # (by this process only: a forked child that exits leaves it to its parent)
+            pid = os.getpid()
+
+            def remove_mosaic() -> None:
+                if os.getpid() == pid:
+                    shutil.rmtree(folder, ignore_errors=True)
+
+            atexit.register(remove_mosaic)
+            path = os.fspath(build_vrt(p, Path(folder) / f"{p.name}.vrt"))
             p = Path(path)
         if p.stat().st_size == 0:
             raise InputError(f"DEM file {path} is empty (0 bytes); download or export it again.")

@@ -178,3 +178,25 @@ def test_release_dem_of_integer_pixels():
     released = analyze(dem, min_prominence_m=20.0, geometry=False, release_dem=True)
     assert len(kept.peaks) > 3 and released.peaks.equals(kept.peaks) and released.saddles.equals(kept.saddles)
     assert dem.shape == z.shape and np.isnan(dem.values).all() and dem.values.strides == (0, 0)
+
+
+def test_the_mosaic_vrt_of_a_tile_folder_goes_when_the_process_ends(tmp_path):
+    """Reading a folder of tiles builds a VRT in TMPDIR/orokit-mosaic-*: it stays while the process may
+    read it lazily and was left behind for good (40 such folders in /tmp after one day's test runs)."""
+    import os
+    import subprocess
+    import sys
+
+    tiles, tmp = tmp_path / "tiles", tmp_path / "tmp"
+    tiles.mkdir()
+    tmp.mkdir()
+    z = np.random.default_rng(6).normal(500.0, 50.0, (20, 30)).astype(np.float32)
+    _write(tiles / "a.tif", z, unit="m")
+    code = ("import glob, os, sys; from orokit.io.dem import read_dem, read_dem_array; "
+            "a = read_dem_array(sys.argv[1]); d = read_dem(sys.argv[1], chunks=8); "
+            "assert a.shape == (20, 30) and float(d[3:5, 4:6].sum()) == float(a.values[3:5, 4:6].sum()); "
+            "print(len(glob.glob(os.path.join(sys.argv[2], 'orokit-mosaic-*'))))")
+    out = subprocess.run([sys.executable, "-c", code, str(tiles), str(tmp)], capture_output=True, text=True,
+                         check=True, env={**os.environ, "TMPDIR": str(tmp)})
+    assert out.stdout.split() == ["2"]  # there while the process runs
+    assert list(tmp.iterdir()) == []  # gone after
