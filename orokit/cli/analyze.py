@@ -1,7 +1,6 @@
 """``orokit analyze``: peaks, prominence, isolation and the Divide Tree of one DEM."""
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 from typing import Literal
@@ -99,15 +98,9 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
     if chunks is None and dem.dataset is None:
         from concurrent.futures import ThreadPoolExecutor
 
+        from orokit.cli.main import owns_process
         from orokit.io.dem import read_dem_array
-        from orokit.tiling.memory import limit_malloc_arenas, release_library_pages
-
-        # two malloc arenas: GDAL's reader, numba's loader and the writers' threads otherwise each keep
-        # an arena of their own with its freed pages (~10-20 MB of the peak at 15 M cells)
-        limit_malloc_arenas(2)
-        # Arrow's buffers (the tables' CSV/Parquet, the GeoPackage's batches) from malloc, not mimalloc,
-        # whose segments stayed resident (~20 MB of the writing's peak at 15 M cells); a user's choice stays
-        os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
+        from orokit.tiling.memory import release_library_pages
 
         # in memory: plain numpy (no xarray/rioxarray/dask imports: faster start, less memory); a
         # second thread imports numba and loads the kernels while GDAL reads (wall time). The read
@@ -120,8 +113,10 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
             finally:
                 loading.result()
         # the kernels are loaded: LLVM's code (~65 MB resident at 15 M cells) is not needed until a
-        # kernel compiles again; its pages go back to the page cache before the engine's peak
-        release_library_pages("libllvmlite")
+        # kernel compiles again; its pages go back to the page cache before the engine's peak. Only in
+        # orokit's own process: a caller's (a CliRunner test, a script) may be compiling meanwhile
+        if owns_process():
+            release_library_pages("libllvmlite")
     else:
         _numba_without_blas_probe()
         da = dem.read_dem(z_units=z_units, cell_size_m=cell_size_m, chunks=chunks, band=band)

@@ -1,13 +1,11 @@
 """Divide Tree files as GeoPackage layers (``peaks``, ``saddles``, ``ridges``)."""
 from __future__ import annotations
 
-import contextlib
 import itertools
 import json
 import logging
-import threading
 import warnings
-from collections.abc import Iterator
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
@@ -63,34 +61,18 @@ def _gdal_crs(crs) -> str | None:
     return f"EPSG:{epsg}" if epsg else crs.to_wkt("WKT1_GDAL")
 
 
-#: writers inside :func:`_sqlite_without_sync` (threads of one process) and the setting before the first
-_NO_SYNC_LOCK = threading.Lock()
-_no_sync: dict[str, Any] = {"users": 0, "before": None}
+def _sqlite_without_sync() -> AbstractContextManager[bool]:
+    """GDAL's SQLite does not sync each transaction to disk in this thread while the block runs.
 
-
-@contextlib.contextmanager
-def _sqlite_without_sync() -> Iterator[None]:
-    """GDAL's SQLite writes a GeoPackage without syncing each transaction to disk while the block runs.
-
-    The file is a temporary one that :func:`~orokit.io.atomic.atomic_path` syncs once and
-    renames when complete, so the per-transaction syncs only cost time (~30 % of the
-    GeoPackage's wall time at 100,890 peaks, measured). The setting is process-wide: it is
-    restored when the last of the writers running at once (threads) leaves.
+    For a temporary GeoPackage that :func:`~orokit.io.atomic.atomic_path` syncs once and
+    renames when complete: the per-transaction syncs only cost time (~30 % of the
+    GeoPackage's wall time at 100,890 peaks, measured in session 10; 74 syncs -> 2 for a
+    25,308-peak file, session 13). Thread-local (:func:`~orokit.io.gdal_arrow.thread_config_option`):
+    the process's setting, and other threads' writers, are left as they were.
     """
-    import pyogrio
+    from orokit.io.gdal_arrow import thread_config_option
 
-    with _NO_SYNC_LOCK:
-        if _no_sync["users"] == 0:
-            _no_sync["before"] = pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS")
-            pyogrio.set_gdal_config_options({"OGR_SQLITE_SYNCHRONOUS": "OFF"})
-        _no_sync["users"] += 1
-    try:
-        yield
-    finally:
-        with _NO_SYNC_LOCK:
-            _no_sync["users"] -= 1
-            if _no_sync["users"] == 0:
-                pyogrio.set_gdal_config_options({"OGR_SQLITE_SYNCHRONOUS": _no_sync["before"]})
+    return thread_config_option("OGR_SQLITE_SYNCHRONOUS", "OFF")
 
 
 def _ids(start: int, stop: int) -> np.ndarray:
@@ -201,6 +183,10 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
         write(dst, columns, lambda i, j: point_wkb(x[i:j], y[i:j]), len(frame), layer, "Point", more)
 
     def saddles_and_ridges(dst: Path) -> None:
+        with _sqlite_without_sync():  # this thread's setting (the parallel writer's is its own)
+            _saddles_and_ridges(dst)
+
+    def _saddles_and_ridges(dst: Path) -> None:
         points(dst, tree.saddles, "saddle_id", "saddles")
         a, b, s = tree._edge_arrays()
         px, py = tree.peaks["x"].to_numpy(np.float64), tree.peaks["y"].to_numpy(np.float64)

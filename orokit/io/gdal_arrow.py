@@ -10,14 +10,15 @@ found (another platform or build): callers then use pyogrio.
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import functools
 import threading
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
-__all__ = ["gdal_library", "write_arrow_layer"]
+__all__ = ["gdal_library", "thread_config_option", "write_arrow_layer"]
 
 
 class _ArrowSchema(ctypes.Structure):
@@ -73,6 +74,8 @@ _SIGNATURES: dict[str, tuple[Any, list[Any]]] = {
     "CPLErrorReset": (None, []),
     "CPLGetLastErrorMsg": (ctypes.c_char_p, []),
     "CPLGetConfigOption": (ctypes.c_char_p, [ctypes.c_char_p, ctypes.c_char_p]),
+    "CPLGetThreadLocalConfigOption": (ctypes.c_char_p, [ctypes.c_char_p, ctypes.c_char_p]),
+    "CPLSetThreadLocalConfigOption": (None, [ctypes.c_char_p, ctypes.c_char_p]),
     "CPLPushErrorHandler": (None, [ctypes.c_void_p]),
     "CPLPopErrorHandler": (None, []),
 }
@@ -131,6 +134,28 @@ def _find_library() -> ctypes.CDLL | None:
         return None
     finally:
         pyogrio.set_gdal_config_options({_PROBE: None})
+
+
+@contextlib.contextmanager
+def thread_config_option(name: str, value: str) -> Iterator[bool]:
+    """GDAL's configuration option ``name`` is ``value`` for the calling thread only while the block runs.
+
+    Set on the GDAL library pyogrio uses (:func:`gdal_library`) with
+    ``CPLSetThreadLocalConfigOption``, so GDAL calls made by other threads (a caller's own
+    writers) keep their settings; the thread's previous value is restored after. Yields
+    False, setting nothing, when that library is not found.
+    """
+    lib = gdal_library()
+    if lib is None:
+        yield False
+        return
+    key = name.encode()
+    before = lib.CPLGetThreadLocalConfigOption(key, None)  # a copy (bytes), or None when unset
+    lib.CPLSetThreadLocalConfigOption(key, value.encode())
+    try:
+        yield True
+    finally:
+        lib.CPLSetThreadLocalConfigOption(key, before)
 
 
 def _options(values: dict[str, str]) -> Any:

@@ -129,21 +129,36 @@ def test_gpkg_round_trip(small_txt, tmp_path):
     assert read_divide_tree_gpkg(tmp_path / "again.gpkg").equals(tree)
 
 
-def test_sqlite_sync_setting_is_restored_after_overlapping_writers():
-    """Two GeoPackages written at once by two threads (enter A, enter B, leave A, leave B): the
-    process-wide setting is the user's again once both are done, not OFF for good."""
+@pytest.mark.parametrize("parallel", [False, True])
+def test_sqlite_sync_is_off_in_the_writing_threads_only(small_txt, tmp_path, monkeypatch, parallel):
+    """While the GeoPackage is written, its writing threads run SQLite without per-transaction
+    syncs, but the process's GDAL setting is untouched: a caller's thread writing meanwhile keeps
+    its own (before session 13 it was set process-wide for the whole write)."""
+    import threading
+
     import pyogrio
 
-    from orokit.io.divide_tree_gpkg import _sqlite_without_sync
+    import orokit.io.wkb as wkb
 
-    assert pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS") is None
-    a, b = _sqlite_without_sync(), _sqlite_without_sync()
-    a.__enter__()
-    b.__enter__()
-    a.__exit__(None, None, None)
-    assert pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS") in (False, "OFF")  # B still writes
-    b.__exit__(None, None, None)
-    assert pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS") is None
+    seen: list[tuple[object, object]] = []
+    point_wkb = wkb.point_wkb
+
+    def spy(x, y):  # called in each writing thread, inside the write
+        other: list[object] = []
+        probe = threading.Thread(target=lambda: other.append(pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS")))
+        probe.start()
+        probe.join()
+        seen.append((pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS"), other[0]))
+        return point_wkb(x, y)
+
+    monkeypatch.setattr(wkb, "point_wkb", spy)
+    tree = read_divide_tree_txt(small_txt, height=10)
+    path = write_divide_tree_gpkg(tree, tmp_path / "tree.gpkg", parallel=parallel)
+    assert read_divide_tree_gpkg(path).equals(tree)
+    assert len(seen) >= 3  # peaks, saddles, runoffs
+    assert all(mine in (False, "OFF") for mine, _ in seen)  # pyogrio reads "OFF" as False
+    assert all(theirs is None for _, theirs in seen)
+    assert pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS") is None  # restored in this thread
 
 
 _LOCAL_TM = ('PROJCS["local TM",GEOGCS["WGS 84",DATUM["WGS_1984",SPHEROID["WGS 84",6378137,298.257223563]],'

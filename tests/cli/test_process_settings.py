@@ -1,0 +1,76 @@
+"""Process-wide settings of ``orokit analyze`` (two malloc arenas, Arrow's memory pool, LLVM's pages
+dropped) belong to the ``orokit`` program's own process (the console script ``main()``), never to the
+process of a caller that runs the click command (a ``CliRunner`` test, a script)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rasterio
+from click.testing import CliRunner
+from rasterio.transform import Affine
+
+import orokit.tiling.memory as memory
+from orokit.cli.main import cli
+
+
+def _dem(path: Path) -> Path:
+    z = np.random.default_rng(3).integers(0, 80, (60, 50)).astype(np.float32)
+    with rasterio.open(path, "w", driver="GTiff", width=50, height=60, count=1, dtype="float32", crs="EPSG:32633",
+                       transform=Affine(30, 0, 500000, 0, -30, 4000000), nodata=np.nan) as ds:
+        ds.write(z, 1)
+        ds.set_band_unit(1, "m")
+    return path
+
+
+def test_cli_runner_call_leaves_the_callers_process_alone(tmp_path, monkeypatch):
+    calls: list[str] = []
+    monkeypatch.setattr(memory, "limit_malloc_arenas", lambda n: calls.append(f"arenas {n}") or True)
+    monkeypatch.setattr(memory, "release_library_pages", lambda name: calls.append(f"drop {name}") or 0)
+    monkeypatch.delenv("ARROW_DEFAULT_MEMORY_POOL", raising=False)
+    res = CliRunner().invoke(cli, ["-q", "analyze", str(_dem(tmp_path / "dem.tif")), "-o", str(tmp_path / "out"),
+                                   "--no-progress", "--min-prominence", "5"])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "out" / "peaks.csv").exists()
+    assert calls == []
+    assert "ARROW_DEFAULT_MEMORY_POOL" not in os.environ
+
+
+#: the console script's process, with the settings' functions recorded (they would act the same)
+SCRIPT = """
+import os, sys
+import orokit.tiling.memory as memory
+calls = []
+memory.limit_malloc_arenas = lambda n: calls.append(f"arenas {n}") or True
+memory.release_library_pages = lambda name: calls.append(f"drop {name}") or 0
+import atexit
+atexit.register(lambda: print(calls, os.environ.get("ARROW_DEFAULT_MEMORY_POOL")))
+from orokit.cli.main import main
+sys.argv = ["orokit", *sys.argv[1:]]
+main()
+"""
+
+
+def _console(*args: str, env: dict | None = None) -> str:
+    base = {k: v for k, v in os.environ.items() if k != "ARROW_DEFAULT_MEMORY_POOL"}
+    res = subprocess.run([sys.executable, "-c", SCRIPT, *args], capture_output=True, text=True, timeout=300,
+                         env={**base, **(env or {})})
+    assert res.returncode == 0, res.stderr
+    return res.stdout.splitlines()[-1]
+
+
+def test_console_script_applies_them_to_analyze(tmp_path):
+    dem = str(_dem(tmp_path / "dem.tif"))
+    args = ["-q", "analyze", dem, "--no-progress", "--min-prominence", "5", "-o"]
+    assert _console(*args, str(tmp_path / "a")) == "['arenas 2', 'drop libllvmlite'] system"
+    # a user's choice of Arrow's pool stays
+    assert _console(*args, str(tmp_path / "b"), env={"ARROW_DEFAULT_MEMORY_POOL": "jemalloc"}).endswith("jemalloc")
+
+
+@pytest.mark.parametrize("args", [["--version"], ["data", "list"]])
+def test_console_script_other_commands_keep_the_defaults(args):
+    assert _console(*args) == "[] None"
