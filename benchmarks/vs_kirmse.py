@@ -10,13 +10,16 @@
 3. After one untimed run of each (numba's cache, page cache), times, as whole processes
    with ``/usr/bin/time -v`` and alternating, ``--reps`` times:
    Kirmse ``prominence -t 1`` + ``merge_divide_trees -f -t 1`` (sum of both, RSS = max),
-   ``orokit -q analyze DEM -o OUT --no-progress --no-isolation`` and the same with isolation.
+   ``orokit -q analyze DEM -o OUT --no-progress --no-isolation`` and the same with isolation
+   (with ``--one-core``, also the first on one core: orokit's own 2-core ratio from the same,
+   alternating runs). Each run also records the seconds its threads waited for a core
+   (run-queue delay): other processes on the machine show there, not in the CPU time.
 4. Checks that the peak sets are identical (cells, elevations and prominences).
 
 Prints the median times, both ratios (Kirmse / orokit; > 1 = orokit faster), both peak
 RSS, and records ``reports/benchmarks/vs_kirmse.json`` with the machine load.
 
-Run:  .venv/bin/python benchmarks/vs_kirmse.py [--tiles 6 12] [--reps 3] [--dem himalaya-everest]
+Run:  .venv/bin/python benchmarks/vs_kirmse.py [--tiles 6 12] [--reps 3] [--dem himalaya-everest] [--one-core]
 """
 from __future__ import annotations
 
@@ -220,8 +223,46 @@ def parse_time_v(stderr: str) -> dict:
             "rss_mb": int(_TIME_RE["rss"].findall(stderr)[-1]) / 1024.0}
 
 
+def _thread_schedstats(pid: int) -> dict[str, tuple[int, int]]:
+    """(ns run, ns waited for a core while runnable) of every thread of process ``pid`` (Linux; else {})."""
+    out = {}
+    try:
+        tids = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return out
+    for tid in tids:
+        try:
+            with open(f"/proc/{pid}/task/{tid}/schedstat") as f:
+                run, wait = f.read().split()[:2]
+            out[tid] = (int(run), int(wait))
+        except (OSError, ValueError):
+            pass
+    return out
+
+
+def _child_pid(pid: int) -> int | None:
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as f:
+            kids = f.read().split()
+    except OSError:
+        return None
+    return int(kids[0]) if kids else None
+
+
+#: seconds between two samples of the timed process's threads (~1 % of a core)
+SAMPLE_S = 0.05
+
+
 def timed(cmd: list[str], env: dict | None = None) -> dict:
-    """Run ``cmd`` under ``/usr/bin/time -v``; returns :func:`parse_time_v` of it."""
+    """Run ``cmd`` under ``/usr/bin/time -v``; returns :func:`parse_time_v` of it and ``wait_s``.
+
+    ``wait_s``: the seconds the process's threads were ready to run but waited for a core
+    (run-queue delay, ``/proc/PID/task/*/schedstat``, sampled every ``SAMPLE_S``; a thread's last
+    interval before it ends is missed). On a quiet machine it is near 0; other processes
+    taking a core show up in it, and lengthen a 2-core run more than a 1-core one.
+    """
+    import time
+
     if "*" in cmd[-1]:
         import glob
 
@@ -229,20 +270,30 @@ def timed(cmd: list[str], env: dict | None = None) -> dict:
         if len(found) != 1:
             raise RuntimeError(f"expected one file matching {cmd[-1]}, found {found}")
         cmd = cmd[:-1] + found
-    res = subprocess.run(["/usr/bin/time", "-v", *cmd], capture_output=True, text=True, env=env)
-    if res.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed ({res.returncode}):\n{res.stderr[-2000:]}")
-    return parse_time_v(res.stderr)
+    proc = subprocess.Popen(["/usr/bin/time", "-v", *cmd], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+    seen: dict[str, tuple[int, int]] = {}
+    child = None
+    while proc.poll() is None:
+        child = child or _child_pid(proc.pid)
+        if child is not None:
+            seen.update(_thread_schedstats(child))
+        time.sleep(SAMPLE_S)
+    _, stderr = proc.communicate()
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}):\n{stderr[-2000:]}")
+    return {**parse_time_v(stderr), "wait_s": sum(w for _, w in seen.values()) / 1e9}
 
 
 def run_kirmse(bin_dir: Path, tiles: Path, out: Path, s: int, *, eps_ft: float = EPS_FT) -> dict:
-    """Kirmse's two processes into a fresh ``out``: summed wall and CPU seconds, max RSS."""
+    """Kirmse's two processes into a fresh ``out``: summed wall, CPU and wait seconds, max RSS."""
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
     parts = [timed(cmd) for cmd in kirmse_commands(bin_dir, tiles, out, s, eps_ft)]
     return {"seconds": sum(p["seconds"] for p in parts), "cpu_s": sum(p["cpu_s"] for p in parts),
-            "rss_mb": max(p["rss_mb"] for p in parts), "parts_s": [p["seconds"] for p in parts]}
+            "wait_s": sum(p["wait_s"] for p in parts), "rss_mb": max(p["rss_mb"] for p in parts),
+            "parts_s": [p["seconds"] for p in parts]}
 
 
 def orokit_command(tif: Path, out: Path, *, isolation: bool, eps_ft: float = EPS_FT) -> list[str]:
@@ -270,6 +321,9 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=None,  # also pins orokit to that many cores (taskset)
                     help="NUMBA_NUM_THREADS for orokit, and orokit pinned to that many cores (taskset; default: all "
                          "cores, unpinned)")
+    ap.add_argument("--one-core", action="store_true",
+                    help="also run orokit (no isolation) on one core (NUMBA_NUM_THREADS=1, taskset -c 0) in every "
+                         "repetition, alternating with the others: prints its own 2-core ratio (issue 13: >= 1.6x)")
     ap.add_argument("--no-record", action="store_true", help="do not write reports/benchmarks/vs_kirmse.json")
     args = ap.parse_args()
 
@@ -301,6 +355,8 @@ def main() -> None:
             s = write_kirmse_tile(z_ft, folder / "tiles")
             tif = write_geotiff_m(z_ft, folder / "mosaic.tif")
             runs: dict[str, list[dict]] = {"kirmse": [], "orokit": [], "orokit_isolation": []}
+            if args.one_core:
+                runs["orokit_one_core"] = []
             # untimed: fills numba's cache after a code change (a first run compiles the kernels) and the
             # page cache of both inputs, so the timed repetitions all start alike
             run_kirmse(bin_dir, folder / "tiles", folder / "kirmse", s)
@@ -312,6 +368,9 @@ def main() -> None:
                 runs["orokit"].append(run_orokit(tif, folder / "orokit", isolation=False, env=env, cores=args.threads))
                 runs["orokit_isolation"].append(run_orokit(tif, folder / "orokit_iso", isolation=True, env=env,
                                                            cores=args.threads))
+                if args.one_core:
+                    runs["orokit_one_core"].append(run_orokit(tif, folder / "orokit_1", isolation=False,
+                                                              env={**env, "NUMBA_NUM_THREADS": "1"}, cores=1))
             loads.append(os.getloadavg()[0])
             cmp = compare_peaks(parse_kirmse_results(folder / "kirmse" / "results.txt", s, z_ft.shape),
                                 orokit_peaks_ft(folder / "orokit"), z_ft)
@@ -329,6 +388,13 @@ def main() -> None:
                   f"{row['ratio_with_isolation']:>8.2f}x {rss['kirmse']:>6.0f}/{rss['orokit']:.0f}/"
                   f"{rss['orokit_isolation']:.0f} {cmp['orokit_peaks']:>8d} {cmp['identical']}"
                   f"  (load {min(loads):.1f}-{max(loads):.1f})")
+            wait = {k: statistics.median(r["wait_s"] for r in v) for k, v in runs.items()}
+            row["median_wait_s"] = wait
+            print("        run-queue wait s (median): " + ", ".join(f"{k} {v:.2f}" for k, v in wait.items()))
+            if args.one_core:
+                row["ratio_two_cores"] = med["orokit_one_core"] / med["orokit"]
+                print(f"        orokit one core {med['orokit_one_core']:.2f} s / {med['orokit']:.2f} s: "
+                      f"{row['ratio_two_cores']:.2f}x (issue 13: >= 1.6x at 60 M cells)")
             if not cmp["identical"]:
                 print(f"   peak sets differ: {cmp}")
             if not args.no_record:  # after every mosaic: a long run interrupted keeps what it measured

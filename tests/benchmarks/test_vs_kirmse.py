@@ -94,6 +94,34 @@ def test_parse_time_v():
     assert vk.parse_time_v(text) == {"seconds": 62.5, "cpu_s": 1.75, "rss_mb": 200.0}
 
 
+@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="Linux /proc")
+def test_timed_samples_the_threads_of_the_timed_process():
+    """``timed`` follows /usr/bin/time to its child and reads every thread's scheduler counters."""
+    import subprocess
+    import sys
+    import time
+
+    own = vk._thread_schedstats(os.getpid())
+    assert own[str(os.getpid())][0] > 0 and all(run >= 0 and wait >= 0 for run, wait in own.values())
+    parent = subprocess.Popen([sys.executable, "-c", "import subprocess; subprocess.run(['sleep', '3'])"])
+    try:
+        for _ in range(200):
+            child = vk._child_pid(parent.pid)
+            if child is not None:
+                break
+            time.sleep(0.02)
+        assert child is not None
+        with open(f"/proc/{child}/comm") as f:
+            assert f.read().strip() == "sleep"
+    finally:
+        parent.kill()
+        parent.wait()
+    if not os.path.exists("/usr/bin/time"):
+        pytest.skip("/usr/bin/time is needed")
+    res = vk.timed([sys.executable, "-c", "import time; t = time.time()\nwhile time.time() - t < 0.3: pass"])
+    assert set(res) == {"seconds", "cpu_s", "rss_mb", "wait_s"} and res["wait_s"] >= 0
+
+
 @pytest.mark.slow
 @pytest.mark.realdata
 def test_parents_agree_with_kirmse_compute_parents(real_data, kirmse_bin, tmp_path):
