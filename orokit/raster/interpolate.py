@@ -9,7 +9,8 @@ from scipy.spatial import cKDTree
 from orokit._typing import SeedLike
 from orokit.raster import _kernels
 
-__all__ = ["poisson_samples", "valley_width", "sample_elevation", "flank_envelope", "field_elevation"]
+__all__ = ["dart_seed", "poisson_darts", "poisson_samples", "valley_width", "sample_elevation", "flank_envelope",
+           "field_elevation"]
 
 
 def poisson_samples(extent: tuple[float, float, float, float], radius: float, *, rng: SeedLike = None) -> np.ndarray:
@@ -19,12 +20,22 @@ def poisson_samples(extent: tuple[float, float, float, float], radius: float, *,
     near-maximal Poisson-disk set; ``scipy.stats.qmc.PoissonDisk`` gives the same
     distribution but takes ~40 s for the 10^5 points of a 90 km domain.
     """
+    return poisson_darts(extent, radius, seed=dart_seed(rng))
+
+
+def dart_seed(rng: SeedLike = None) -> int:
+    """The int seed of :func:`poisson_samples`' darts: one draw from ``rng``."""
+    return int(np.random.default_rng(rng).integers(0, 2**31 - 1))
+
+
+def poisson_darts(extent: tuple[float, float, float, float], radius: float, *, seed: int) -> np.ndarray:
+    """:func:`poisson_samples` from the darts' int seed (:func:`dart_seed`): draws nothing from a
+    Generator, so it can run on any thread while the caller keeps using its own."""
     xmin, ymin, xmax, ymax = extent
-    rng = np.random.default_rng(rng)
     n_expected = (xmax - xmin) * (ymax - ymin) / (radius * radius)
     n_trials = int(max(30 * n_expected, 100))
-    seed = int(rng.integers(0, 2**31 - 1))
-    return _kernels.poisson_disk(float(xmin), float(ymin), float(xmax), float(ymax), float(radius), n_trials, seed)
+    return _kernels.poisson_disk(float(xmin), float(ymin), float(xmax), float(ymax), float(radius), n_trials,
+                                 int(seed))
 
 
 def valley_width(drainage_area_m2: np.ndarray, *, coef: float = 0.15, exponent: float = 0.4,

@@ -12,7 +12,7 @@ from scipy.spatial import cKDTree
 
 from orokit._typing import SeedLike
 from orokit.errors import DivideTreeError
-from orokit.raster.interpolate import flank_envelope, poisson_samples, sample_elevation, valley_width
+from orokit.raster.interpolate import dart_seed, flank_envelope, poisson_darts, sample_elevation, valley_width
 from orokit.raster.params import RenderParams
 from orokit.raster.profiles import hillslope_profile, ridge_profile, threshold_profile
 from orokit.raster.refine import Polylines, densify, refine_segments
@@ -220,10 +220,11 @@ def build_skeleton(
     xmin, ymin, xmax, ymax = extent
     pext = (xmin - lam, ymin - lam, xmax + lam, ymax + lam)
     # the Poisson darts (a numba kernel that releases the GIL) are thrown on a second thread while
-    # the rivers are built: the rivers draw nothing from rng, so the darts' seed is the same draw as
-    # when they came after the rivers (the same samples), and rng is used again only after the join
+    # the rivers are built: their seed is drawn here, before the rivers (which draw nothing from rng),
+    # so it is the same draw as when the darts came after the rivers (the same samples), and only this
+    # thread ever draws from rng
     pool = ThreadPoolExecutor(1, thread_name_prefix="orokit-darts")
-    darts = pool.submit(poisson_samples, pext, lam, rng=rng)
+    darts = pool.submit(poisson_darts, pext, lam, seed=dart_seed(rng))
     pool.shutdown(wait=False)
     # rivers run on the medial axis between the refined ridges (Voronoi of all ridge points)
     fine = ridge_lines.segments

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import threading
 
+import numpy as np
 import pytest
 
 from helpers.trees import small_tree
@@ -16,7 +17,7 @@ def _fail(*args, **kwargs):
     raise _JobFailed(threading.current_thread().name)
 
 
-@pytest.mark.parametrize("module, job", [("skeleton", "poisson_samples"), ("render", "power_law_noise"),
+@pytest.mark.parametrize("module, job", [("skeleton", "poisson_darts"), ("render", "power_law_noise"),
                                          ("render", "_node_distance")])
 def test_an_error_in_a_job_on_a_second_thread_is_raised_by_the_render(monkeypatch, module, job):
     from orokit.raster import render, skeleton
@@ -32,3 +33,26 @@ def test_an_error_in_a_job_on_a_second_thread_is_raised_by_the_render(monkeypatc
         if t.name.startswith("orokit-") and t.name not in before:
             t.join(timeout=60)
             assert not t.is_alive()
+
+
+class _ThreadSpy(np.random.Generator):
+    """A Generator that records the name of every thread that touches it."""
+
+    threads: set[str] = set()
+
+    def __getattribute__(self, name):
+        _ThreadSpy.threads.add(threading.current_thread().name)
+        return super().__getattribute__(name)
+
+
+def test_the_skeleton_draws_from_its_generator_on_the_calling_thread_only():
+    """The darts run on a second thread, but their seed is drawn by the caller: no draw from the render's
+    Generator can interleave with another thread's, so no output can depend on the threads' timing."""
+    from orokit.raster.params import RenderParams
+    from orokit.raster.skeleton import build_skeleton
+
+    _ThreadSpy.threads = set()
+    tree = small_tree()
+    build_skeleton(tree, extent=(0.0, 0.0, 8000.0, 8000.0), params=RenderParams(lam=200.0),
+                   rng=_ThreadSpy(np.random.PCG64(5)))
+    assert _ThreadSpy.threads == {threading.current_thread().name}
