@@ -186,6 +186,13 @@ def analyze(
                                             isolation_metric=metric)
                 core = tiled_core.orometry
                 t_core = time.perf_counter()
+                if blocks and core.n_kept:
+                    from orokit.io.spill_io import SpilledColumns
+                    from orokit.tiling.engine import spill_parent
+
+                    # what the search does not read (~65 bytes per peak) waits on disk until the tables
+                    store = SpilledColumns(parent=spill_parent(checkpoint))
+                    engine.spill_orometry(core, store)
                 iso = None
                 if isolation and core.n_kept:
                     iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform,
@@ -193,15 +200,10 @@ def analyze(
                                           chunk_stats=tiled_core.chunk_stats, known=tiled_core.chunk_isolation,
                                           release_known=True)
                 del tiled_core  # the settled isolation (~90 bytes per candidate peak) is in iso now
-                if blocks and core.n_kept:
-                    from orokit.io.spill_io import SpilledColumns
-                    from orokit.tiling.engine import spill_parent
-
-                    store = SpilledColumns(parent=spill_parent(checkpoint))
-                    if iso is not None:  # its columns to the store, the table freed before the tables are made
-                        for name, dtype in engine.ISOLATION_ARRAYS:
-                            store.put(name, iso[name].to_numpy(dtype))
-                        iso = None
+                if store is not None and iso is not None:  # to the store, freed before the tables are made
+                    for name, dtype in engine.ISOLATION_ARRAYS:
+                        store.put(name, iso[name].to_numpy(dtype))
+                    iso = None
                 t_iso = time.perf_counter()
         finally:
             if client is not None:

@@ -316,8 +316,25 @@ def saddle_order(ea: np.ndarray, eb: np.ndarray, ez: np.ndarray, ekey: np.ndarra
 ISOLATION_ARRAYS = (("isolation", np.float64), ("isolation_row", np.int64), ("isolation_col", np.int64),
                     ("isolation_exact", np.bool_))
 
-#: the engine's per-peak columns that only the peak rows read after the parents (moved to a store)
-_ROW_ONLY = ("key_saddle_z", "parent", "prominence_exact")
+#: the engine output's columns that the isolation search does not read: they can wait in a column store
+#: (:func:`spill_orometry`) from the end of the chunk pass until the tables read them back
+SPILLED_OROMETRY = ("prominence", "key_saddle_cell", "key_saddle_z", "parent", "prominence_exact",
+                    "ridge_a", "ridge_b", "ridge_saddle_cell", "ridge_saddle_z")
+
+
+def spill_orometry(core: Orometry, store: Any) -> None:
+    """Move ``core``'s :data:`SPILLED_OROMETRY` columns to the column ``store`` (``core`` keeps empty
+    arrays of their types; a column already in the store is not written again).
+
+    What the chunked ``orokit analyze`` holds of the engine output during the isolation search is then
+    the peaks' cells and elevations (16 bytes per peak instead of ~81); :func:`build_result` reads the
+    rest back when it makes the tables.
+    """
+    for f in SPILLED_OROMETRY:
+        values = getattr(core, f)
+        if f not in store:
+            store.put(f, values)
+        setattr(core, f, values[:0])
 
 
 def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | None,
@@ -330,13 +347,13 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     whose rows are made from the engine's arrays by blocks when written (no geometry;
     the same rows and files; ~130 bytes per peak less held at once).
     ``store`` (with ``blocks``): a column store (``put(name, values)``, ``rows(name, start, stop)``,
-    ``name in store``; :class:`orokit.io.spill_io.SpilledColumns`) where the peak table's own
-    columns wait while the files are written, each block reading its rows back (~74 bytes per
-    peak less held): ``core``'s key-saddle elevations, island parents and exactness flags at the
-    start, its prominences and key saddle cells and the line and prominence parents once the
-    parents are found, are moved there (``core`` keeps empty arrays for them: it is consumed).
-    The isolation's columns (:data:`ISOLATION_ARRAYS`) are read from the store when it holds
-    them (the caller moved them; ``isolation`` is then None).
+    ``column(name)``, ``name in store``; :class:`orokit.io.spill_io.SpilledColumns`) where the peak
+    table's own columns wait while the files are written, each block reading its rows back: ``core``'s
+    :data:`SPILLED_OROMETRY` columns are moved there first (:func:`spill_orometry`; ``core`` is consumed,
+    a caller may have moved them before), read back one at a time when the saddles, ridges and parents
+    are made and let go once used; the line and prominence parents go there too. The isolation's columns
+    (:data:`ISOLATION_ARRAYS`) are read from the store when it holds them (the caller moved them;
+    ``isolation`` is then None).
     """
     import pandas as pd  # here, not at import: the engine's peak memory is reached without it
 
@@ -350,20 +367,26 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     n = core.n_kept
     elev = core.peak_z.astype(np.float64, copy=False)
     moved = store is not None and blocks and n > 0
-    if moved:  # columns only the rows read: to the store before the tables' arrays exist
-        for f in _ROW_ONLY:
-            store.put(f, getattr(core, f))
-            setattr(core, f, getattr(core, f)[:0])
+    if moved:  # the columns only the rows read wait in the store; the others come back one at a time
+        spill_orometry(core, store)
+
+    def take(name: str) -> np.ndarray:
+        return store.column(name) if moved else getattr(core, name)
 
     # saddles of the pruned tree, in raster order (a monkey saddle serves several ridges)
-    sc_sorted, first = np.unique(core.ridge_saddle_cell, return_index=True)
-    sad_z = core.ridge_saddle_z[first].astype(np.float64)
-    ridge_sid = np.searchsorted(sc_sorted, core.ridge_saddle_cell)
+    ridge_cell = take("ridge_saddle_cell")
+    sc_sorted, first = np.unique(ridge_cell, return_index=True)
+    ridge_sid = np.searchsorted(sc_sorted, ridge_cell)
+    del ridge_cell
+    sad_z = take("ridge_saddle_z")[first].astype(np.float64)
+    del first
+    key_saddle = take("key_saddle_cell")
     key_of = np.full(sc_sorted.size, -1, np.int64)
-    kp = np.flatnonzero(core.key_saddle_cell >= 0)
-    key_of[np.searchsorted(sc_sorted, core.key_saddle_cell[kp])] = kp
-    del first, kp
-    edges = pd.DataFrame({"peak_a": core.ridge_a, "peak_b": core.ridge_b, "saddle": ridge_sid}, copy=False)
+    kp = np.flatnonzero(key_saddle >= 0)
+    key_of[np.searchsorted(sc_sorted, key_saddle[kp])] = kp
+    del kp
+    edges = pd.DataFrame({"peak_a": take("ridge_a"), "peak_b": take("ridge_b"), "saddle": ridge_sid}, copy=False)
+    del ridge_sid
     line = prom_parent = None
     if n:
         # the parents read only the elevations and the ridges: found on a tree of those alone, before
@@ -373,20 +396,20 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
         # the engine's prominences and roots are the pruned tree's (pruning keeps every kept peak's
         # prominence; a root is the highest peak of its domain): no second Kruskal sweep over the tree
         # for them (~100 bytes per peak of sorted edge copies and sweep state at the tables' peak)
-        known = pd.DataFrame({"prominence": core.prominence, "key_saddle": core.key_saddle_cell}, copy=False)
+        known = pd.DataFrame({"prominence": take("prominence"), "key_saddle": key_saddle}, copy=False)
+        del key_saddle
         parents = bare.parents(known)
         del known
         del bare
         line = parents["line_parent"].to_numpy(np.int64)
         prom_parent = parents["prominence_parent"].to_numpy(np.int64)
         del parents
-        if moved:  # the rest of the rows' own columns, before the places of peaks and saddles are made
-            for f in ("prominence", "key_saddle_cell"):
-                store.put(f, getattr(core, f))
-                setattr(core, f, getattr(core, f)[:0])
+        if moved:  # the parents wait with the rest of the rows' own columns
             store.put("line_parent", line)
             store.put("prominence_parent", prom_parent)
             line = prom_parent = None
+    else:
+        del key_saddle
     rows, cols = core.peak_row, core.peak_col
     x, y = xy(rows, cols)
     s_r, s_c = sc_sorted // W, sc_sorted % W

@@ -75,12 +75,28 @@ def test_spilled_settled_isolation_equals_the_carried_one(grid, tmp_path, monkey
         np.testing.assert_array_equal(got[f], want[f], err_msg=f)
 
 
-def test_chunked_analysis_with_spill_writes_the_in_memory_files(make_dem, tmp_path):
-    """Many chunks, isolation on, a void: the tables' files are the in-memory run's, byte for byte."""
+def test_chunked_analysis_with_spill_writes_the_in_memory_files(make_dem, tmp_path, monkeypatch):
+    """Many chunks, isolation on, a void: the tables' files are the in-memory run's, byte for byte;
+    while the isolation search runs, the engine output's columns it does not read are on disk."""
+    import gc
+
+    import orokit.tiling.isolation as ti
+    from orokit.topology.engine import SPILLED_OROMETRY, Orometry
+
     z = _grid()
     dem = make_dem(z, res=(30.0, 30.0))
     a = orokit.analyze(dem, min_prominence_m=1.0, geometry=False)
+    held = []
+    real_isolation = ti.tiled_isolation
+
+    def isolation(*args, **kwargs):
+        cores = [o for o in gc.get_objects() if isinstance(o, Orometry)]
+        held.append(sum(getattr(c, f).size for c in cores for f in SPILLED_OROMETRY))
+        return real_isolation(*args, **kwargs)
+
+    monkeypatch.setattr(ti, "tiled_isolation", isolation)
     b = orokit.analyze(dem, min_prominence_m=1.0, chunks=(13, 16), geometry=False, blocks=True, scheduler="threads")
+    assert held == [0]  # prominences, key saddles, parents, flags and ridges wait in the column store
     assert b.attrs["engine"] == "tiled" and b.peaks["isolation"].notna().sum() > 50
     b.attrs = dict(a.attrs)  # the same metadata (engine, timings)
     orokit.write_analysis(a, tmp_path / "a")
