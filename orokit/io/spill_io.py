@@ -3,7 +3,9 @@
 A spill folder is a temporary folder of one run (removed when the run ends, also on
 error), in ``parent`` when given (a checkpoint folder, or dask's ``temporary-directory``),
 otherwise in ``TMPDIR``; each spill is an uncompressed ``.npz`` of arrays, written atomically, so a
-file that exists is complete.
+file that exists is complete. A folder's name holds the process id and host of its run
+(``orokit-spill-PID@HOST-XXXXXXXX``), so a later run can remove the folders of a run that was killed
+(:func:`remove_stale_folders`).
 """
 from __future__ import annotations
 
@@ -22,16 +24,74 @@ from orokit.io.atomic import atomic_path, is_no_space_error
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["spill_folder", "remove_folder", "write_spill", "read_spill", "SpilledColumns"]
+__all__ = ["spill_folder", "remove_folder", "remove_stale_folders", "write_spill", "read_spill", "SpilledColumns"]
+
+#: name prefixes of the temporary folders of a run (spills of the chunk tasks, the peak table's columns)
+SPILL_PREFIX, COLUMNS_PREFIX = "orokit-spill-", "orokit-columns-"
+
+
+def _owner() -> str:
+    """``PID@HOST-``: the part of a folder name after its prefix that names the run's process."""
+    import os
+    import socket
+
+    return f"{os.getpid()}@{socket.gethostname()}-"
+
+
+def _make_folder(prefix: str, parent: PathLike | None) -> Path:
+    if parent is not None:
+        Path(parent).mkdir(parents=True, exist_ok=True)
+    return Path(tempfile.mkdtemp(prefix=prefix + _owner(), dir=parent))
+
+
+def _alive(pid: int) -> bool:
+    import os
+
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def remove_stale_folders(parent: PathLike) -> list[Path]:
+    """Remove the spill and column folders in ``parent`` whose run has ended without removing them
+    (a killed process: SIGKILL, out of memory, power loss); returns the folders removed.
+
+    A folder is stale when its name's process id is not running on this host, or when its name holds
+    no process id (made before names held one). A folder of another host, or of a process that is
+    running, is left alone; nothing else in ``parent`` (a checkpoint's chunk files) is touched.
+    """
+    import socket
+
+    root = Path(parent)
+    if not root.is_dir():
+        return []
+    host = socket.gethostname()
+    removed = []
+    for folder in sorted(root.iterdir()):
+        prefix = next((p for p in (SPILL_PREFIX, COLUMNS_PREFIX) if folder.name.startswith(p)), None)
+        if prefix is None or not folder.is_dir():
+            continue
+        owner, sep, _ = folder.name[len(prefix):].rpartition("-")
+        pid, at, where = owner.partition("@")
+        if sep and at and pid.isdigit():
+            if where != host or _alive(int(pid)):
+                continue
+        remove_folder(folder)
+        removed.append(folder)
+    if removed:
+        logger.info("removed %d temporary folders left in %s by runs that were killed", len(removed), root)
+    return removed
 
 
 @contextmanager
-def spill_folder(prefix: str = "orokit-spill-", parent: PathLike | None = None) -> Iterator[Path]:
+def spill_folder(prefix: str = SPILL_PREFIX, parent: PathLike | None = None) -> Iterator[Path]:
     """A new temporary folder (in ``parent``, made if missing, else ``TMPDIR``) for the spills of
     one run, removed on exit (see :func:`remove_folder`)."""
-    if parent is not None:
-        Path(parent).mkdir(parents=True, exist_ok=True)
-    folder = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
+    folder = _make_folder(prefix, parent)
     try:
         yield folder
     finally:
@@ -99,12 +159,10 @@ class SpilledColumns:
     garbage-collected, or at exit. Safe to read from several threads.
     """
 
-    def __init__(self, parent: PathLike | None = None, prefix: str = "orokit-columns-") -> None:
+    def __init__(self, parent: PathLike | None = None, prefix: str = COLUMNS_PREFIX) -> None:
         import weakref
 
-        if parent is not None:
-            Path(parent).mkdir(parents=True, exist_ok=True)
-        self.folder = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
+        self.folder = _make_folder(prefix, parent)
         self._columns: dict[str, tuple[Path, np.dtype, int]] = {}
         self._finalizer = weakref.finalize(self, remove_folder, str(self.folder))
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from orokit.errors import TilingError
 from orokit.io.checkpoint_io import chunk_path, discard_chunk, open_checkpoint, read_chunk, write_chunk
-from orokit.io.spill_io import read_spill, spill_folder, write_spill
+from orokit.io.spill_io import read_spill, remove_stale_folders, spill_folder, write_spill
 from orokit.tiling.isolation import block_stats, chunk_isolation
 from orokit.tiling.memory import release_free_heap
 from orokit.tiling.summary import ChunkSummary, chunk_summary, finalize_summary, merge_summaries
@@ -304,7 +304,11 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
     back, for the kept peaks only, after the finalize. The spill folder goes in the
     ``checkpoint`` folder when one is given, else in dask's ``temporary-directory`` if set, else in
     ``TMPDIR`` (on a RAM-backed ``TMPDIR`` the spills take memory that the RSS does not show).
+    The spill and column folders that a killed run left in the ``checkpoint`` folder are removed
+    first (:func:`~orokit.io.spill_io.remove_stale_folders`); its finished chunks are reused.
     """
+    if checkpoint is not None:  # a killed run's temporary folders (its finished chunks are reused)
+        remove_stale_folders(checkpoint)
     with ExitStack() as stack:
         spill = None
         if isolation_metric is not None and _same_disk(scheduler):

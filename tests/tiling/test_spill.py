@@ -219,3 +219,89 @@ def test_a_folder_that_cannot_be_removed_is_named_in_a_warning(tmp_path, monkeyp
             (folder / "a.npz").write_bytes(b"a")
     assert folder.exists()
     assert any(str(folder) in r.getMessage() and r.levelno == logging.WARNING for r in caplog.records)
+
+
+_KILLED_RUN = """
+import os, signal, sys
+import orokit, orokit.tiling.engine as te, orokit.tiling.isolation as ti
+tif, ck, where = sys.argv[1:]
+if where == "merge":  # in the chunk pass: some chunks finished, the spill folder full
+    real, count = te._merge_task, []
+    def merge(*a, **k):
+        count.append(1)
+        if len(count) == 6:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real(*a, **k)
+    te._merge_task = merge
+else:  # in the isolation search: every chunk finished, the column store written
+    ti.tiled_isolation = lambda *a, **k: os.kill(os.getpid(), signal.SIGKILL)
+orokit.analyze(tif, min_prominence_m=1.0, chunks=(13, 16), geometry=False, blocks=True, checkpoint=ck,
+               scheduler="synchronous")
+"""
+
+
+@pytest.mark.parametrize("where", ["merge", "isolation"])
+def test_a_rerun_after_a_killed_checkpoint_run_removes_its_folders_and_keeps_its_chunks(where, make_dem, tmp_path):
+    """A run killed (SIGKILL) in the chunk pass or the isolation search leaves its spill and column folders in
+    the checkpoint folder; the rerun removes them, reuses the finished chunks (their files untouched) and
+    writes the files of a run without a checkpoint."""
+    import gc
+    import os
+    import subprocess
+    import sys
+
+    z = _grid()
+    tif = tmp_path / "d.tif"
+    make_dem(z, res=(30.0, 30.0)).rio.to_raster(tif)
+    ck = tmp_path / "ck"
+    child = subprocess.run([sys.executable, "-c", _KILLED_RUN, str(tif), str(ck), where], capture_output=True)
+    assert child.returncode == -9, child.stderr.decode()[-2000:]
+    left = sorted(p.name.split("-")[1] for p in ck.iterdir() if p.name.startswith("orokit-"))
+    assert left == (["spill"] if where == "merge" else ["columns"])
+    chunks = {p: p.stat().st_mtime_ns for p in ck.glob("chunk_*.npz")}
+    assert len(chunks) >= (6 if where == "merge" else 7 * 7)
+    b = orokit.analyze(str(tif), min_prominence_m=1.0, chunks=(13, 16), geometry=False, blocks=True, checkpoint=ck,
+                       scheduler="synchronous")
+    mine = f"{os.getpid()}@"  # the rerun's own column store, alive with its result
+    assert [p.name.split("-")[1] for p in ck.iterdir() if p.name.startswith("orokit-")] == ["columns"]
+    assert all(mine in p.name for p in ck.iterdir() if p.name.startswith("orokit-"))
+    assert all(p.stat().st_mtime_ns == t for p, t in chunks.items())  # reused, not written again
+    a = orokit.analyze(str(tif), min_prominence_m=1.0, chunks=(13, 16), geometry=False, blocks=True,
+                       scheduler="synchronous")
+    b.attrs = dict(a.attrs)
+    orokit.write_analysis(a, tmp_path / "a")
+    orokit.write_analysis(b, tmp_path / "b")
+    assert_same_table_files(tmp_path / "a", tmp_path / "b")
+    del b
+    gc.collect()
+    assert not [p for p in ck.iterdir() if p.name.startswith("orokit-")]
+
+
+def test_only_the_folders_of_ended_runs_on_this_host_are_stale(tmp_path):
+    import os
+    import socket
+    import subprocess
+    import sys
+
+    from orokit.io.spill_io import SpilledColumns, remove_stale_folders, spill_folder
+
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead = int(ended.stdout)
+    host = socket.gethostname()
+    names = {f"orokit-spill-{dead}@{host}-abc": False, f"orokit-columns-{dead}@{host}-x_1": False,
+             "orokit-spill-k2j4h_9q": False,  # named before names held the process
+             f"orokit-spill-{dead}@other.host-abc": True, f"orokit-columns-{os.getpid()}@{host}-abc": True,
+             "orokit-mosaic-abc": True, "chunk_00000_00000.npz": True}
+    for name in names:
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "0000.bin").write_bytes(b"1")
+    (tmp_path / "orokit-spill-file").write_bytes(b"1")  # a file, not a folder
+    removed = remove_stale_folders(tmp_path)
+    assert sorted(p.name for p in removed) == sorted(n for n, kept in names.items() if not kept)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([*(n for n, k in names.items() if k), "orokit-spill-file"])
+    with spill_folder(parent=tmp_path) as live:  # this run's own folders are named by its process
+        store = SpilledColumns(parent=tmp_path)
+        assert live.name.startswith(f"orokit-spill-{os.getpid()}@{host}-")
+        assert store.folder.name.startswith(f"orokit-columns-{os.getpid()}@{host}-")
+        assert remove_stale_folders(tmp_path) == [] and live.exists() and store.folder.exists()
+    assert remove_stale_folders(tmp_path / "missing") == []
