@@ -249,6 +249,16 @@ def _child_pid(pid: int) -> int | None:
     return int(kids[0]) if kids else None
 
 
+def _steal_ticks() -> int:
+    """Clock ticks the hypervisor gave the machine's CPUs to others (``/proc/stat`` steal; 0 elsewhere)."""
+    try:
+        with open("/proc/stat") as f:
+            fields = f.readline().split()
+        return int(fields[8]) if fields[0] == "cpu" and len(fields) > 8 else 0
+    except (OSError, ValueError):
+        return 0
+
+
 #: seconds between two samples of the timed process's threads (~1 % of a core)
 SAMPLE_S = 0.05
 
@@ -260,6 +270,8 @@ def timed(cmd: list[str], env: dict | None = None) -> dict:
     (run-queue delay, ``/proc/PID/task/*/schedstat``, sampled every ``SAMPLE_S``; a thread's last
     interval before it ends is missed). On a quiet machine it is near 0; other processes
     taking a core show up in it, and lengthen a 2-core run more than a 1-core one.
+    ``steal_s``: CPU seconds the hypervisor took from this machine's cores meanwhile (all cores;
+    invisible to the wait above: a virtual machine's neighbours).
     """
     import time
 
@@ -270,6 +282,7 @@ def timed(cmd: list[str], env: dict | None = None) -> dict:
         if len(found) != 1:
             raise RuntimeError(f"expected one file matching {cmd[-1]}, found {found}")
         cmd = cmd[:-1] + found
+    steal0 = _steal_ticks()
     proc = subprocess.Popen(["/usr/bin/time", "-v", *cmd], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=env)
     seen: dict[str, tuple[int, int]] = {}
@@ -282,7 +295,8 @@ def timed(cmd: list[str], env: dict | None = None) -> dict:
     _, stderr = proc.communicate()
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}):\n{stderr[-2000:]}")
-    return {**parse_time_v(stderr), "wait_s": sum(w for _, w in seen.values()) / 1e9}
+    return {**parse_time_v(stderr), "wait_s": sum(w for _, w in seen.values()) / 1e9,
+            "steal_s": (_steal_ticks() - steal0) / os.sysconf("SC_CLK_TCK")}
 
 
 def run_kirmse(bin_dir: Path, tiles: Path, out: Path, s: int, *, eps_ft: float = EPS_FT) -> dict:
@@ -292,7 +306,8 @@ def run_kirmse(bin_dir: Path, tiles: Path, out: Path, s: int, *, eps_ft: float =
     out.mkdir(parents=True)
     parts = [timed(cmd) for cmd in kirmse_commands(bin_dir, tiles, out, s, eps_ft)]
     return {"seconds": sum(p["seconds"] for p in parts), "cpu_s": sum(p["cpu_s"] for p in parts),
-            "wait_s": sum(p["wait_s"] for p in parts), "rss_mb": max(p["rss_mb"] for p in parts),
+            "wait_s": sum(p["wait_s"] for p in parts), "steal_s": sum(p["steal_s"] for p in parts),
+            "rss_mb": max(p["rss_mb"] for p in parts),
             "parts_s": [p["seconds"] for p in parts]}
 
 
@@ -389,8 +404,10 @@ def main() -> None:
                   f"{rss['orokit_isolation']:.0f} {cmp['orokit_peaks']:>8d} {cmp['identical']}"
                   f"  (load {min(loads):.1f}-{max(loads):.1f})")
             wait = {k: statistics.median(r["wait_s"] for r in v) for k, v in runs.items()}
-            row["median_wait_s"] = wait
+            steal = {k: statistics.median(r["steal_s"] for r in v) for k, v in runs.items()}
+            row["median_wait_s"], row["median_steal_s"] = wait, steal
             print("        run-queue wait s (median): " + ", ".join(f"{k} {v:.2f}" for k, v in wait.items()))
+            print("        hypervisor steal s (median): " + ", ".join(f"{k} {v:.2f}" for k, v in steal.items()))
             if args.one_core:
                 row["ratio_two_cores"] = med["orokit_one_core"] / med["orokit"]
                 print(f"        orokit one core {med['orokit_one_core']:.2f} s / {med['orokit']:.2f} s: "
