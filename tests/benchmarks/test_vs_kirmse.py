@@ -105,14 +105,16 @@ def test_timed_samples_the_threads_of_the_timed_process():
     assert own[str(os.getpid())][0] > 0 and all(run >= 0 and wait >= 0 for run, wait in own.values())
     parent = subprocess.Popen([sys.executable, "-c", "import subprocess; subprocess.run(['sleep', '3'])"])
     try:
-        for _ in range(200):
+        comm = None
+        for _ in range(1000):  # the child is found between its fork and its exec too: until it runs sleep
             child = vk._child_pid(parent.pid)
             if child is not None:
-                break
-            time.sleep(0.02)
-        assert child is not None
-        with open(f"/proc/{child}/comm") as f:
-            assert f.read().strip() == "sleep"
+                with open(f"/proc/{child}/comm") as f:
+                    comm = f.read().strip()
+                if comm == "sleep":
+                    break
+            time.sleep(0.01)
+        assert comm == "sleep"
     finally:
         parent.kill()
         parent.wait()
