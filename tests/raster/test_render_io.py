@@ -178,3 +178,40 @@ def test_render_like_takes_the_cell_size_and_extent_of_the_like_raster(tmp_path,
     assert back.rio.crs == like.rio.crs
     r = CliRunner().invoke(cli, ["render", str(gpkg), "-o", str(tmp_path / "y.tif"), "--like", "no-such-dataset"])
     assert r.exit_code != 0 and "--like" in r.output and "no-such-dataset" in r.output
+
+
+#: ``orokit render`` in a process of its own (as the console script runs it), then the collector's state
+_OWN_PROCESS = """
+import gc, sys
+from orokit.cli import main as m
+m._CONSOLE["process"] = True
+m.cli.main(["render", sys.argv[1], "-o", sys.argv[2], "--resolution", "100m", "--no-erosion", "--seed", "3",
+            "--extent", "0", "0", "4000", "2000", "--no-progress"], standalone_mode=False)
+print(gc.isenabled(), gc.get_freeze_count())
+"""
+
+
+def test_cli_render_freezes_the_loaded_modules_out_of_the_collector_in_its_own_process_only(tmp_path):
+    """In orokit's own process the objects alive once the modules are loaded and the tree read are frozen
+    out of the collector (and collection is on again); a caller's process (CliRunner) is left as it was;
+    the raster is the same."""
+    import gc
+    import subprocess
+    import sys
+
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+
+    gpkg = tmp_path / "tree.gpkg"
+    write_divide_tree_gpkg(two_peaks(), gpkg)
+    res = subprocess.run([sys.executable, "-c", _OWN_PROCESS, str(gpkg), str(tmp_path / "own.tif")],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    enabled, frozen = res.stdout.split()[-2:]
+    assert enabled == "True" and int(frozen) > 10_000  # the modules' objects (~150 k in a full render)
+    before = (gc.isenabled(), gc.get_freeze_count())
+    r = CliRunner().invoke(cli, ["render", str(gpkg), "-o", str(tmp_path / "runner.tif"), "--resolution", "100m",
+                                 "--no-erosion", "--seed", "3", "--extent", "0", "0", "4000", "2000"])
+    assert r.exit_code == 0, r.output
+    assert (gc.isenabled(), gc.get_freeze_count()) == before
+    with rasterio.open(tmp_path / "own.tif") as a, rasterio.open(tmp_path / "runner.tif") as b:
+        assert a.read(1).tobytes() == b.read(1).tobytes()
