@@ -74,6 +74,7 @@ def sample_elevation(
     k_neighbours: int = 16,
     floor_slope: float = 0.05,
     floor_relief_ratio: float = 0.0,
+    valley_floor_slope: float = 0.0,
     profile: Callable[[np.ndarray], np.ndarray] | None = None,
     tree: cKDTree | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -93,6 +94,9 @@ def sample_elevation(
     steep instead of a gentle ramp where the cones have fallen.
     ``ridge_floor`` (one value per ridge point) bounds how deep the cones dig
     (:func:`flank_envelope`). ``tree``: a ``cKDTree`` of ``ridge_xy`` already built.
+    With ``valley_floor_slope`` > 0 the valley floor is not flat: it rises from the bed at that
+    slope (m/m) across the floor, ``h(r) + valley_floor_slope * min(d(p, R), w)``, and the
+    hillslope starts from its edge (floors that fall toward the river, not flat pools).
     Returns ``(h, d_ridge, d_river)``.
     """
     tree = tree if tree is not None else cKDTree(ridge_xy)
@@ -111,6 +115,8 @@ def sample_elevation(
     dR, ir = cKDTree(river_xy).query(points, workers=-1)
     w = river_w[ir]
     hq, hr = ridge_z[iq], river_z[ir]
+    if valley_floor_slope > 0:
+        hr = hr + float(valley_floor_slope) * np.minimum(dR, w)
     denom = np.maximum(dR + dT - w, 1e-9)
     alpha = np.clip(dT / denom, 0.0, 1.0)
     if profile is None:

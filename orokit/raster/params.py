@@ -45,8 +45,12 @@ class RenderParams:
     valley_slope_ref : the bed slope at which the floor has its ``A^0.4`` width (None: ``river_slope``):
         beds gentler than it get wider floors, steeper ones narrower.
     floor_relief_ratio : where the flank cones fall below it, the ground rises from the river at
-        ``max(0.05, floor_relief_ratio x (ridge - river) / distance)`` instead of a gentle 0.05 ramp
-        (:func:`orokit.raster.interpolate.sample_elevation`); 0 = off.
+        ``max(floor_slope, floor_relief_ratio x (ridge - river) / distance)`` instead of a gentle
+        ``floor_slope`` ramp (:func:`orokit.raster.interpolate.sample_elevation`); 0 = off.
+    floor_slope : where the flank cones fall below it, the ground rises from the valley floor's edge at
+        least at this slope (m/m; :func:`orokit.raster.interpolate.sample_elevation`).
+    valley_floor_slope : the valley floor rises from the bed at this slope (m/m) across its width
+        instead of lying flat at the bed (:func:`orokit.raster.interpolate.sample_elevation`); 0 = flat.
     min_prominence_m : eps of the orometry to keep; noise amplitude is ``noise_ratio * eps``.
     noise_ratio : amplitude of the paper's multi-fractal value noise as a fraction of eps (< 0.5 so no new
         peak reaches eps); 0 (off) since session 8: it changed no landform statistic (<= 6 % band power,
@@ -127,6 +131,11 @@ class RenderParams:
     flank_depth : the cones of a ridge piece reach at most ``flank_depth * (peak - saddle)``
         below its saddle (None: no limit; far from ridges steep cones dug canyons): valleys as deep as
         the tree's own relief allows, so low-relief trees (dune fields, plateaus) keep shallow ones.
+    flank_depth_saddle_ratio : the cones of a ridge piece reach at most ``flank_depth`` x
+        ``min(peak - saddle, flank_depth_saddle_ratio * (saddle - s))`` below its saddle, ``s`` the lowest of the
+        ``flank_depth_saddle_k`` saddles nearest to it (the tree's own quantities): a volcano whose saddle lies at the
+        level of the saddles around it (a plateau) gets shallow cones; None = off. Session 13: 1 gets
+        andes-chile's slope 7.19 -> 4.61 but makes the steep ranges too gentle (their low cols look the same).
     smooth_m : Gaussian sigma (metres) that rounds the skeleton raster's planar facets and creases
         (the TIN carries no information below its meshing distance ``lam``), faded to 0 within
         ``texture_clearance_m`` of peaks and saddles; 0 = off.
@@ -168,6 +177,8 @@ class RenderParams:
     saddle_floor_min_ratio: float = 0.5
     saddle_floor_spread: float | None = None
     floor_relief_ratio: float = 0.0
+    floor_slope: float = 0.05
+    valley_floor_slope: float = 0.0
     min_prominence_m: float = 30.0
     noise_ratio: float = 0.0
     uplift_radius: float = 1500.0
@@ -191,6 +202,8 @@ class RenderParams:
     field_smooth_m: float = 200.0
     field_weight: float = 1.0
     flank_depth: float | None = 1.0
+    flank_depth_saddle_ratio: float | None = None
+    flank_depth_saddle_k: int = 16
     keep_hill_ratio: float = 0.0
     cut_slope: float = 0.0
     cut_depth_ratio: float = 1.0
@@ -234,6 +247,13 @@ class RenderParams:
             raise InputError(f"flank_slope_gradient must be > 0 or None, got {self.flank_slope_gradient!r}")
         if self.flank_slope_relief_m is not None and self.flank_slope_gradient is not None:
             raise InputError("set at most one of flank_slope_relief_m and flank_slope_gradient")
+        for name in ("floor_slope", "valley_floor_slope"):
+            if not float(getattr(self, name)) >= 0.0:
+                raise InputError(f"{name} must be >= 0 (m/m), got {getattr(self, name)!r}")
+        if self.flank_depth_saddle_ratio is not None and not float(self.flank_depth_saddle_ratio) >= 0.0:
+            raise InputError(f"flank_depth_saddle_ratio must be >= 0 or None, got {self.flank_depth_saddle_ratio!r}")
+        if not int(self.flank_depth_saddle_k) >= 1:
+            raise InputError(f"flank_depth_saddle_k must be >= 1, got {self.flank_depth_saddle_k!r}")
         if self.surface not in ("tin", "field"):
             raise InputError(f"surface must be 'tin' or 'field', got {self.surface!r}")
 

@@ -149,14 +149,18 @@ def relief_slope(relief: np.ndarray, slope: float, relief_m: float, *, power: fl
 
 
 def _cone_floor(lines: Polylines, point_origin: np.ndarray, pieces: RidgeSegments, node_z: np.ndarray,
-                depth_ratio: float | None) -> np.ndarray | None:
+                depth_ratio: float | None, saddle_drop: np.ndarray | None = None) -> np.ndarray | None:
     """Lowest elevation the flank cone of each densified ridge point may reach:
     ``saddle - depth_ratio * (peak - saddle)`` of its ridge piece (peak -> saddle); a
-    refined vertex shared by several pieces takes the lowest. None: no floor."""
+    refined vertex shared by several pieces takes the lowest. None: no floor. With
+    ``saddle_drop`` (one value per piece) the depth is at most that: ``min(peak - saddle, drop)``."""
     if depth_ratio is None:
         return None
     hp, hs = node_z[pieces.node0], node_z[pieces.node1]
-    piece_floor = hs - float(depth_ratio) * (hp - hs)
+    depth = hp - hs
+    if saddle_drop is not None:
+        depth = np.minimum(depth, saddle_drop)
+    piece_floor = hs - float(depth_ratio) * depth
     seg_floor = piece_floor[lines.origin] if lines.origin is not None else piece_floor
     vert = np.full(lines.xy.shape[0], np.inf)
     np.minimum.at(vert, lines.segments[:, 0], seg_floor)
@@ -250,7 +254,13 @@ def build_skeleton(
         # (within 2 lambda) they stay steep so the saddle stays the highest pass
         near, _ = cKDTree(nodes[n:, :2]).query(rxy, workers=-1)
         rs = np.where(near > 2.0 * lam, np.minimum(rs, params.flank_max_slope), rs)
-    rfloor = _cone_floor(ridge_lines, rorig, ridges, nodes[:, 2], params.flank_depth)
+    drop = None
+    if params.flank_depth_saddle_ratio is not None and n < nodes.shape[0]:
+        # how far each piece's saddle stands above the lowest of the saddles around it
+        ps = nodes[ridges.node1]
+        s_low, _, _ = local_relief(ps[:, :2], p, s, k=params.flank_depth_saddle_k)
+        drop = params.flank_depth_saddle_ratio * np.maximum(ps[:, 2] - s_low, 0.0)
+    rfloor = _cone_floor(ridge_lines, rorig, ridges, nodes[:, 2], params.flank_depth, drop)
     rtree = cKDTree(rxy)
 
     def envelope(xy: np.ndarray) -> np.ndarray:
@@ -300,7 +310,8 @@ def build_skeleton(
     h, dT, dR = sample_elevation(pts, rxy, rz, vxy, vz, vw, ridge_slope=rs,
                                  ridge_floor=rfloor, profile=_hillslope(params),
                                  k_neighbours=params.flank_neighbours,
-                                 floor_relief_ratio=params.floor_relief_ratio, tree=rtree)
+                                 floor_relief_ratio=params.floor_relief_ratio, floor_slope=params.floor_slope,
+                                 valley_floor_slope=params.valley_floor_slope, tree=rtree)
     if floor is not None:
         h = np.maximum(h, floor(pts))  # no ground below the tree's own floor (below every nearby saddle)
     far = (np.minimum(dT, dR) >= 0.5 * lam)
