@@ -376,4 +376,8 @@ def cli(ctx: click.Context, verbose: int, quiet: bool) -> None:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    # ``python -m orokit.cli.main`` runs this file as ``__main__``, a copy of the module the commands import:
+    # the imported module's main(), so that its owns_process() (which they ask) is the one set
+    from orokit.cli.main import main as _main
+
+    _main()

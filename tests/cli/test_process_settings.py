@@ -55,9 +55,9 @@ main()
 """
 
 
-def _console(*args: str, env: dict | None = None) -> str:
+def _console(*args: str, env: dict | None = None, script: str = SCRIPT) -> str:
     base = {k: v for k, v in os.environ.items() if k != "ARROW_DEFAULT_MEMORY_POOL"}
-    res = subprocess.run([sys.executable, "-c", SCRIPT, *args], capture_output=True, text=True, timeout=300,
+    res = subprocess.run([sys.executable, "-c", script, *args], capture_output=True, text=True, timeout=300,
                          env={**base, **(env or {})})
     assert res.returncode == 0, res.stderr
     return res.stdout.splitlines()[-1]
@@ -74,3 +74,18 @@ def test_console_script_applies_them_to_analyze(tmp_path):
 @pytest.mark.parametrize("args", [["--version"], ["data", "list"]])
 def test_console_script_other_commands_keep_the_defaults(args):
     assert _console(*args) == "[] None"
+
+
+#: ``python -m orokit.cli.main``: runpy runs the module as ``__main__``, a second copy of ``orokit.cli.main``
+MODULE = SCRIPT.replace("from orokit.cli.main import main\n", "import runpy\n").replace(
+    "main()\n", "runpy.run_module('orokit.cli.main', run_name='__main__', alter_sys=True)\n")
+
+
+def test_python_m_is_orokits_own_process_for_every_command_module(tmp_path):
+    """``python -m orokit.cli.main analyze`` gets all of analyze's settings, the LLVM drop included: the
+    commands ask :func:`owns_process` of the imported ``orokit.cli.main``, not of the ``__main__`` copy
+    (before: ``['arenas 2'] system``, the drop skipped)."""
+    assert "runpy.run_module" in MODULE and "import main" not in MODULE
+    dem = str(_dem(tmp_path / "dem.tif"))
+    args = ["-q", "analyze", dem, "--no-progress", "--min-prominence", "5", "-o", str(tmp_path / "m")]
+    assert _console(*args, script=MODULE) == "['arenas 2', 'drop libllvmlite'] system"
