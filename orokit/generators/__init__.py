@@ -22,12 +22,14 @@ import importlib
 import json
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import xarray as xr
 
 from orokit.errors import InputError
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 __all__ = ["GeneratorSpec", "GENERATORS", "get_generator", "render_terrain", "describe_generators"]
 
