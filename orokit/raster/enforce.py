@@ -105,6 +105,15 @@ def _border_pairs(owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _kernels.border_pairs(np.ascontiguousarray(owner, np.int64))
 
 
+def _cut_mask(sp: np.ndarray, keep: np.ndarray, lab: np.ndarray) -> np.ndarray:
+    """The cells of the spurious basins (``sp``) that are not kept (``keep`` per basin label, ``lab`` flat):
+    ``sp`` itself when no hill is kept (always without ``keep_hills_m``: no pass over the raster, ~0.4 CPU s
+    at 9 M cells over the rounds; :func:`_kernels.reconstruct_masked` never writes its mask)."""
+    if not keep.any():
+        return sp
+    return sp & ~keep[np.maximum(lab, 0)].reshape(sp.shape)
+
+
 class _Basins:
     """Basins of steepest ascent of a raster and the tree peak owning each, kept up to date as cells change.
 
@@ -218,7 +227,7 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
         cut = 0
         sp, src, keep = spurious_hills(own, lab, top)
         if sp.any():
-            cutting = sp & ~keep[np.maximum(lab, 0)].reshape(z.shape)
+            cutting = _cut_mask(sp, keep, lab)
             if cutting.any():
                 cut = _kernels.reconstruct_masked(z, cutting, 1e-3, cut_slope * grid.cell_size_m, cut_depth_m)
                 stats["cut"] += cut

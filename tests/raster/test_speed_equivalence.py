@@ -507,3 +507,22 @@ def test_pass_violations_on_two_threads_equal_one_call(seed):
     assert ia.size > 10
     for g, w in zip(got, (ia, ib, bn)):
         assert g.dtype == w.dtype and g.tobytes() == w.tobytes()
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("kept_share", [0.0, 0.3])
+def test_cut_mask_equals_the_explicit_mask_and_the_flood_leaves_its_mask(seed, kept_share):
+    """The enforcement's cut mask (the spurious basins themselves when none is kept) equals the explicit
+    ``sp & ~keep[lab]``; the flood that cuts them never writes its mask (so the mask may be ``sp`` itself)."""
+    from orokit.raster.enforce import _cut_mask
+
+    rng = np.random.default_rng(seed)
+    lab = rng.integers(-1, 60, (33, 29)).reshape(-1)
+    sp = rng.random((33, 29)) < 0.5
+    keep = rng.random(60) < kept_share
+    got = _cut_mask(sp, keep, lab)
+    assert got.dtype == bool and np.array_equal(got, sp & ~keep[np.maximum(lab, 0)].reshape(sp.shape))
+    z = _raster_with_ties((33, 29), seed, nan_share=0.03)
+    before = got.copy()
+    _kernels.reconstruct_masked(z, got, 1e-3, 0.5, 2.0)
+    assert np.array_equal(got, before)
