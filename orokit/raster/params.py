@@ -17,6 +17,9 @@ class RenderParams:
     river_margin : river beds lie at least this far below the ridges they face.
     river_max_sink_m : river beds lie at most this far below the bound the ridges around them
         set (None: no limit; :func:`orokit.raster.rivers.river_network`).
+    river_graded : the beds between two river nodes at their bound fall evenly along the flow
+        (:func:`orokit.raster.rivers.graded_beds`) instead of a staircase of cone-following reaches and flats at
+        ``river_slope``; False = off.
     valley_coef : valley width ``w = valley_coef * A^0.4`` (A in m^2).
     river_relief_ratio : the minimum bed slope of a river node is ``max(river_slope, river_relief_ratio x g)``,
         g the gradient from its nearest ridge point down to the bed's bound (valleys deepen below steep
@@ -166,6 +169,7 @@ class RenderParams:
     river_slope: float = 0.01
     river_margin: float = 5.0
     river_max_sink_m: float | None = None
+    river_graded: bool = False
     valley_coef: float = 0.15
     valley_slope_exponent: float = 0.0
     valley_slope_ref: float | None = None

@@ -18,7 +18,8 @@ from orokit.raster import _kernels
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["RidgeSegments", "RiverNetwork", "local_relief", "ridge_segments", "river_network", "saddle_floor"]
+__all__ = ["RidgeSegments", "RiverNetwork", "graded_beds", "local_relief", "ridge_segments", "river_network",
+           "saddle_floor"]
 
 
 @dataclass(frozen=True)
@@ -166,6 +167,51 @@ def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
     return s - depth
 
 
+def graded_beds(receiver: np.ndarray, length: np.ndarray, drop: np.ndarray, start: np.ndarray,
+                swept: np.ndarray, *, tol: float = 1e-6) -> np.ndarray:
+    """Beds that fall evenly along each run of sweep-bound nodes instead of a staircase.
+
+    ``swept`` are the beds after the downstream sweep of ``start`` (each node at most its start value and
+    at least ``drop`` below its donor; nodes numbered from the outlets upstream, receivers before donors).
+    A node still at its start value (or an outlet) is an anchor; between the anchor that sets a node's bed
+    upstream (the head) and the next anchor downstream, the bed falls linearly with the flow distance from
+    the head's start value to the lower anchor's bed, so it never lies above the swept bed (the lower
+    anchor lies at least the run's drops below the head). Returns the graded beds, before a new sweep.
+
+    >>> g = graded_beds(np.array([-1, 0, 1, 2]), np.array([0.0, 100.0, 100.0, 100.0]),
+    ...                 np.array([0.0, 1.0, 1.0, 1.0]), np.array([0.0, 300.0, 300.0, 100.0]),
+    ...                 np.array([0.0, 98.0, 99.0, 100.0]))
+    >>> g.round(3).tolist()
+    [0.0, 33.333, 66.667, 100.0]
+    """
+    n = swept.size
+    anchor = (swept >= start - tol) | (receiver < 0)
+    up = np.zeros(n)  # flow distance from the node's head
+    head = swept.copy()  # the head's bed
+    best = np.full(n, np.inf)  # the lowest candidate from a donor (the one the sweep kept)
+    rec, ln, dr, sw = receiver.tolist(), length.tolist(), drop.tolist(), swept.tolist()
+    up_l, head_l, best_l, anc = up.tolist(), head.tolist(), best.tolist(), anchor.tolist()
+    for v in range(n - 1, -1, -1):  # donors before receivers
+        if anc[v]:
+            up_l[v], head_l[v] = 0.0, sw[v]
+        r = rec[v]
+        if r >= 0 and not anc[r]:
+            cand = sw[v] - dr[v]
+            if cand < best_l[r]:
+                best_l[r] = cand
+                up_l[r], head_l[r] = up_l[v] + ln[v], head_l[v]
+    down_l, low_l = [0.0] * n, list(sw)  # flow distance to the next anchor downstream and its bed
+    for v in range(n):  # receivers before donors
+        r = rec[v]
+        if r >= 0:
+            down_l[v] = ln[v] + (0.0 if anc[r] else down_l[r])
+            low_l[v] = sw[r] if anc[r] else low_l[r]
+    up, head, down, low = (np.asarray(a) for a in (up_l, head_l, down_l, low_l))
+    run = up + down
+    t = np.divide(up, run, out=np.zeros(n), where=run > 0)
+    return np.where(anchor, swept, np.minimum(swept, head + (low - head) * t))
+
+
 def _segment_params(p0, p1, q0, q1):
     """Parameter along q of the intersection of segments p and q (rows paired)."""
     r = p1 - p0
@@ -229,6 +275,7 @@ def river_network(
     relief_ratio: float = 0.0,
     sink_relief_ratio: float | None = None,
     floor=None,
+    graded: bool = False,
 ) -> RiverNetwork:
     """Rivers of a Divide Tree: dual Voronoi edges not crossing a ridge, oriented to outlets.
 
@@ -252,6 +299,8 @@ def river_network(
         makes no higher pass), never above the ridges it crosses minus ``margin_m`` (closed depressions may
         form, as with ``max_sink_m``); a bed that crosses no ridge is raised to the floor itself, which
         should lie below the saddles around it.
+    graded : after the sweep, the beds between two nodes at their bound fall evenly (:func:`graded_beds`)
+        instead of following the cap and then running at ``slope`` (a staircase: steep reaches and flat ones).
 
     Returns
     -------
@@ -367,9 +416,14 @@ def river_network(
         g = relief / np.maximum(dq, 1.0)
         node_slope = np.maximum(float(slope), float(relief_ratio) * g)
         # the kernel drops slope x length per edge: a per-node slope is a per-node drop
-        h = _kernels.river_elevations(order_arr, receiver, length * node_slope, h0, 1.0, float(base_elevation))
+        drop = length * node_slope
+        h = _kernels.river_elevations(order_arr, receiver, drop, h0, 1.0, float(base_elevation))
     else:
+        drop = length * float(slope)
         h = _kernels.river_elevations(order_arr, receiver, length, h0, float(slope), float(base_elevation))
+    if graded and h.size:
+        h = _kernels.river_elevations(order_arr, receiver, drop, graded_beds(receiver, length, drop, h0, h), 1.0,
+                                      float(base_elevation))
     if max_sink_m is not None:
         h = np.maximum(h, h0 - float(max_sink_m))
     if sink_relief_ratio is not None and relief is not None:

@@ -275,7 +275,7 @@ def build_skeleton(
                            margin_m=params.river_margin, slope=params.river_slope, cap=envelope,
                            max_sink_m=params.river_max_sink_m, relief_ratio=params.river_relief_ratio,
                            sink_relief_ratio=params.river_sink_relief_ratio,
-                           floor=floor)
+                           floor=floor, graded=params.river_graded)
     t["rivers"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

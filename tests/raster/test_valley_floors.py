@@ -105,3 +105,36 @@ def test_render_with_the_options_keeps_the_orometry():
     res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
     comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
     assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+
+
+def test_graded_beds_fall_evenly_between_anchors_never_above_the_staircase():
+    """``river_graded``: on the small tree's network the beds are never above the plain sweep's, fall
+    downstream by at least the sweep's drop, keep the nodes at their bound (the anchors) where nothing
+    upstream lowers them, and some flats of the staircase are gone (a bed lower by > 1 m)."""
+    from orokit.raster.rivers import graded_beds
+
+    assert RenderParams().river_graded is False
+    for floor in (1.0, None):  # with the saddle floor and without it (the floor may raise beds into closed depressions)
+        plain = _skeleton(saddle_floor_ratio=floor).river_network
+        graded = _skeleton(saddle_floor_ratio=floor, river_graded=True).river_network
+        np.testing.assert_array_equal(plain.receiver, graded.receiver)
+        h, g, r = plain.elevation, graded.elevation, plain.receiver
+        assert (g <= h + 1e-9).all() and (g < h - 1.0).any()
+    has = r >= 0
+    has[has] = g[r[has]] > g.min() + 1e-9  # beds clamped at the base elevation (outlets) fall less
+    assert (g[has] >= g[r[has]] + 0.01 * plain.length[has] - 1e-6).all()  # the last loop: no floor
+    # a straight chain: source at its bound 100 m, then 3 sweep-bound nodes, an anchor at 40, outlet at 0
+    rec = np.array([-1, 0, 1, 2, 3, 4])
+    ln = np.array([0.0, 100.0, 100.0, 100.0, 100.0, 100.0])
+    start = np.array([0.0, 40.0, 500.0, 500.0, 500.0, 100.0])
+    swept = np.array([0.0, 40.0, 97.0, 98.0, 99.0, 100.0])
+    np.testing.assert_allclose(graded_beds(rec, ln, 0.01 * ln, start, swept), [0.0, 40.0, 55.0, 70.0, 85.0, 100.0])
+
+
+def test_render_with_graded_beds_keeps_the_orometry():
+    tree = small_tree()
+    dem = render_elevation(tree, cell_size_m=50.0, erosion=False, params=RenderParams(lam=200.0, river_graded=True),
+                           rng=7)
+    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
