@@ -10,7 +10,7 @@ from orokit.errors import InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["TIN", "constrained_tin", "remove_spurious_maxima"]
+__all__ = ["TIN", "constrained_tin", "remove_spurious_maxima", "unique_points"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +50,26 @@ def remove_spurious_maxima(tin: TIN, keep: np.ndarray) -> TIN:
     return tin.with_z(_kernels.reconstruct_from_markers(indptr, indices, tin.z, marker))
 
 
+def unique_points(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(xy, axis=0, return_inverse=True)`` (inverse flat) for finite float64 points ``(n, 2)``.
+
+    Each point is one complex128 (x + iy): numpy sorts complex numbers by real then imaginary part, the
+    order of the rows, and compares them as the rows' fields are compared, so the unique points, their
+    order and the inverse are the same, ~7x faster than sorting rows. A point with a coordinate of -0.0
+    (equal to 0.0, other bytes: which of two such points is kept follows the sort) takes np.unique's rows.
+
+    >>> u, inv = unique_points(np.array([[1.0, 2.0], [0.0, 5.0], [1.0, 2.0]]))
+    >>> u.tolist(), inv.tolist()
+    ([[0.0, 5.0], [1.0, 2.0]], [1, 0, 1])
+    """
+    xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
+    if (np.signbit(xy) & (xy == 0)).any():
+        uniq, inv = np.unique(xy, axis=0, return_inverse=True)
+        return uniq, inv.ravel()
+    c, inv = np.unique(xy.view(np.complex128)[:, 0], return_inverse=True)
+    return c.view(np.float64).reshape(-1, 2), inv.ravel()
+
+
 def constrained_tin(xy: np.ndarray, z: np.ndarray, segments: np.ndarray) -> TIN:
     """Constrained Delaunay triangulation of points with elevation and fixed segments.
 
@@ -63,8 +83,7 @@ def constrained_tin(xy: np.ndarray, z: np.ndarray, segments: np.ndarray) -> TIN:
     if xy.shape[0] < 3:
         raise InputError(f"a TIN needs at least 3 points, got {xy.shape[0]}")
     # Triangle needs unique vertices: merge exact duplicates
-    uniq, inv = np.unique(xy, axis=0, return_inverse=True)
-    inv = inv.ravel()
+    uniq, inv = unique_points(xy)
     zu = np.empty(uniq.shape[0])
     zu[inv] = z
     seg = inv[np.asarray(segments, np.int64).reshape(-1, 2)]

@@ -526,3 +526,21 @@ def test_cut_mask_equals_the_explicit_mask_and_the_flood_leaves_its_mask(seed, k
     before = got.copy()
     _kernels.reconstruct_masked(z, got, 1e-3, 0.5, 2.0)
     assert np.array_equal(got, before)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("zeros", [False, True])
+def test_unique_points_equal_numpy_unique_rows(seed, zeros):
+    """The TIN's duplicate merge gives np.unique(xy, axis=0)'s points, order and inverse (with points on
+    the axes, +0.0 and -0.0 among them, and exact duplicates)."""
+    from orokit.raster.tin import unique_points
+
+    rng = np.random.default_rng(seed)
+    xy = np.round(rng.random((3000, 2)) * 50.0, 1) - 25.0  # many exact duplicates, ties in x with other y
+    if zeros:
+        xy[rng.integers(0, 3000, 40), rng.integers(0, 2, 40)] = 0.0
+        xy[rng.integers(0, 3000, 40), rng.integers(0, 2, 40)] = -0.0
+    want_u, want_i = np.unique(xy, axis=0, return_inverse=True)
+    got_u, got_i = unique_points(xy)
+    assert got_u.tobytes() == want_u.tobytes() and np.array_equal(got_i, want_i.ravel())
+    assert np.array_equal(got_u[got_i], xy)
