@@ -273,7 +273,25 @@ def render_elevation(
         warnings.warn(f"{int((~inside).sum())} of {inside.size} peaks lie outside the extent and are cut off",
                       OrokitWarning, stacklevel=2)
 
-    skel = build_skeleton(tree, extent=ext, params=params, saddle_clearance_m=1.5 * grid.cell_size_m, rng=rng)
+    # the distance to the nodes (a distance transform that releases the GIL) runs on a second thread from
+    # the moment the skeleton has placed the nodes: while the TIN is built and rasterized (one core busy),
+    # then the power law is fitted and, with the replacing detail, the slope weights and the low-pass of
+    # the skeleton run; dist_job.result() is the same array wherever it is first needed
+    dist_jobs: list[Future] = []
+
+    def nodes_placed(node_xyz: np.ndarray) -> None:
+        mask = np.ones((grid.ny, grid.nx), bool)
+        row, col, ok = grid.cell_of(node_xyz[:, :2])
+        mask[row[ok], col[ok]] = False
+        pool = ThreadPoolExecutor(1, thread_name_prefix="orokit-distance")
+        dist_jobs.append(pool.submit(_node_distance, mask, grid.cell_size_m))
+        pool.shutdown(wait=False)  # its thread ends with the job
+
+    skel = build_skeleton(tree, extent=ext, params=params, saddle_clearance_m=1.5 * grid.cell_size_m, rng=rng,
+                          on_nodes=nodes_placed)
+    if not dist_jobs:
+        nodes_placed(skel.node_xyz)
+    dist_job = dist_jobs.pop()
     timings = dict(skel.timings)
 
     t0 = time.perf_counter()
@@ -300,14 +318,7 @@ def render_elevation(
     timings["raster"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    mask = np.ones(z.shape, bool)
-    row, col, ok = grid.cell_of(nodes[:, :2])
-    mask[row[ok], col[ok]] = False
-    # the distance to the nodes (a distance transform that releases the GIL) runs on a second thread
-    # while the power law is fitted and, with the replacing detail, the slope weights and the low-pass
-    # of the skeleton run here; dist_job.result() is the same array wherever it is first needed
-    pool = ThreadPoolExecutor(2, thread_name_prefix="orokit-noise")
-    dist_job = pool.submit(_node_distance, mask, grid.cell_size_m)
+    pool = ThreadPoolExecutor(1, thread_name_prefix="orokit-noise")
     detail = {}
     # the detail draws from its own stream: turning it on leaves the texture and noise of the render as they were
     detail_rng = np.random.default_rng([seed, 1])
@@ -379,7 +390,7 @@ def render_elevation(
                             beta=params.texture_beta, largest_m=params.texture_largest_m, rng=rng) * weight
         del fade, weight
     dist_job.result()  # raises what the distance transform raised
-    del dist_job, mask
+    del dist_job
     if noise_amp > 0:
         assert uplift is not None
         zmin, zmax = float(z.min()), float(z.max())

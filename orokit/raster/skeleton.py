@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -184,7 +185,7 @@ def _hillslope(params: RenderParams):
 
 def build_skeleton(
     tree, *, extent: tuple[float, float, float, float], params: RenderParams = RenderParams(),
-    saddle_clearance_m: float = 0.0, rng: SeedLike = None
+    saddle_clearance_m: float = 0.0, rng: SeedLike = None, on_nodes: Callable[[np.ndarray], object] | None = None
 ) -> TerrainSkeleton:
     """Rivers, refined ridges and rivers, Poisson samples with elevations and the TIN.
 
@@ -199,6 +200,8 @@ def build_skeleton(
 
     Saddles closer than ``saddle_clearance_m`` to one of their peaks are first moved
     along their ridge (:func:`separate_saddles`; ``render_elevation`` uses 1.5 cells).
+    ``on_nodes`` is called with the nodes (:attr:`TerrainSkeleton.node_xyz`) before the TIN is built
+    (``render_elevation`` starts its distance transform there).
     """
     rng = np.random.default_rng(rng)
     t = {}
@@ -319,6 +322,8 @@ def build_skeleton(
     pts, h = pts[far], h[far]
     t["samples"] = time.perf_counter() - t0
 
+    if on_nodes is not None:
+        on_nodes(nodes)
     t0 = time.perf_counter()
     nr = ridge_lines.xy.shape[0]
     nv = river_lines.xy.shape[0]
