@@ -69,15 +69,17 @@ def check_stop() -> None:
         raise KeyboardInterrupt(f"signal {_STOP[0]} received: outputs not replaced")
 
 
-def temp_path_for(final_path: PathLike) -> Path:
+def temp_path_for(final_path: PathLike, tag: str = "") -> Path:
     """Return a unique temporary path in the directory of ``final_path``.
 
     The name keeps the final suffix (``.gpkg``, ``.tif``...) so format drivers that
     choose the format from the extension still work, and starts with a dot so the
-    file is hidden while it is being written.
+    file is hidden while it is being written. ``tag`` goes before its random part
+    (``.NAME.tmp-TAGxxxxxxxxxxxx.SUFFIX``), e.g. the run's ``PID@HOST-`` so a later run can
+    tell a killed run's file from a running one's.
     """
     final = Path(final_path)
-    return final.with_name(f".{final.name}.tmp-{uuid.uuid4().hex[:12]}{final.suffix}")
+    return final.with_name(f".{final.name}.tmp-{tag}{uuid.uuid4().hex[:12]}{final.suffix}")
 
 
 def _fsync_file(path: Path) -> None:
@@ -115,7 +117,7 @@ def _remove(path: Path) -> None:
 
 
 @contextlib.contextmanager
-def atomic_path(final_path: PathLike, *, fsync: bool = True, parents: bool = True) -> Iterator[Path]:
+def atomic_path(final_path: PathLike, *, fsync: bool = True, parents: bool = True, tag: str = "") -> Iterator[Path]:
     """Yield a temporary path; on success move it to ``final_path`` atomically.
 
     Parameters
@@ -127,6 +129,8 @@ def atomic_path(final_path: PathLike, *, fsync: bool = True, parents: bool = Tru
     parents
         Create missing parent directories (False: a missing one is an error, e.g. a
         temporary folder a finished run has removed must not be made again).
+    tag
+        Put in the temporary name (:func:`temp_path_for`).
 
     Yields
     ------
@@ -158,7 +162,7 @@ def atomic_path(final_path: PathLike, *, fsync: bool = True, parents: bool = Tru
     final = Path(final_path)
     if parents:
         final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = temp_path_for(final)
+    tmp = temp_path_for(final, tag)
     try:
         yield tmp
         if not tmp.exists():

@@ -2,11 +2,15 @@
 
 ``checkpoint.json`` records the run the folder belongs to (input, chunks, threshold);
 a folder of another run is refused. Chunk files are written atomically, so a file
-that exists is complete and a rerun reuses it.
+that exists is complete and a rerun reuses it; the temporary file of a chunk that a
+killed run was writing holds that run's process (``.chunk_I_J.npz.tmp-PID@HOST-...``) and
+is removed when the folder is opened again.
 """
 from __future__ import annotations
 
 import json
+import logging
+import re
 from pathlib import Path
 from typing import Any, cast
 
@@ -14,13 +18,22 @@ import numpy as np
 
 from orokit._typing import PathLike
 from orokit.errors import TilingError
-from orokit.io.atomic import atomic_path, write_text_atomic
+from orokit.io.atomic import atomic_path
+from orokit.io.spill_io import run_ended, run_tag
+
+logger = logging.getLogger(__name__)
 
 __all__ = ["open_checkpoint", "chunk_path", "write_chunk", "read_chunk", "discard_chunk"]
+
+#: a temporary file of the folder's own (``atomic_path``'s name for a chunk or checkpoint.json): the rest after ``.tmp-``
+_TEMP = re.compile(r"\.(?:chunk_\d+_\d+\.npz|checkpoint\.json)\.tmp-(.+)")
 
 
 def open_checkpoint(folder: PathLike, fingerprint: dict[str, Any]) -> Path:
     """Create ``folder`` (or check that it belongs to the run described by ``fingerprint``).
+
+    The temporary files that runs which have ended left in it (a chunk being written when the
+    process was killed) are removed; a running process's are left.
 
     Raises
     ------
@@ -41,8 +54,19 @@ def open_checkpoint(folder: PathLike, fingerprint: dict[str, Any]) -> Path:
                 "use a new folder or delete it"
             )
     else:
-        write_text_atomic(meta, json.dumps(fingerprint, indent=1))
+        with atomic_path(meta, tag=run_tag()) as tmp:
+            tmp.write_text(json.dumps(fingerprint, indent=1), encoding="utf-8", newline="\n")
+    _remove_stale_temps(root)
     return root
+
+
+def _remove_stale_temps(root: Path) -> None:
+    """Remove the folder's temporary files whose run has ended (:func:`~orokit.io.spill_io.run_ended`)."""
+    for path in sorted(root.iterdir()):
+        match = _TEMP.fullmatch(path.name)
+        if match and path.is_file() and run_ended(match.group(1).rpartition("-")[0]):
+            logger.info("removing %s, left by a run that was killed", path)
+            path.unlink(missing_ok=True)
 
 
 def chunk_path(root: PathLike, i: int, j: int) -> Path:
@@ -52,7 +76,7 @@ def chunk_path(root: PathLike, i: int, j: int) -> Path:
 
 def write_chunk(path: PathLike, arrays: dict[str, np.ndarray]) -> None:
     """Write the arrays of one chunk atomically (uncompressed npz)."""
-    with atomic_path(path) as tmp:
+    with atomic_path(path, tag=run_tag()) as tmp:  # a killed run's temporary file is known as its own
         with open(tmp, "wb") as fh:
             np.savez(fh, **cast("dict[str, Any]", arrays))  # not allow_pickle: only arrays
 

@@ -24,24 +24,38 @@ from orokit.io.atomic import atomic_path, is_no_space_error
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["spill_folder", "remove_folder", "remove_stale_folders", "write_spill", "read_spill", "SpilledColumns"]
+__all__ = ["spill_folder", "remove_folder", "remove_stale_folders", "run_tag", "run_ended", "write_spill", "read_spill",
+           "SpilledColumns"]
 
 #: name prefixes of the temporary folders of a run (spills of the chunk tasks, the peak table's columns)
 SPILL_PREFIX, COLUMNS_PREFIX = "orokit-spill-", "orokit-columns-"
 
 
-def _owner() -> str:
-    """``PID@HOST-``: the part of a folder name after its prefix that names the run's process."""
+def run_tag() -> str:
+    """``PID@HOST-``: the part of a temporary name that names the run's process (the spill and column
+    folders after their prefix, a checkpoint's temporary chunk files after ``.tmp-``)."""
     import os
     import socket
 
     return f"{os.getpid()}@{socket.gethostname()}-"
 
 
+def run_ended(owner: str) -> bool:
+    """True when ``owner`` (``PID@HOST``: :func:`run_tag` without its dash) names a process that is not running
+    on this host, or is not of that form (a name made before names held the process); False for a running
+    process or another host's."""
+    import socket
+
+    pid, at, where = owner.partition("@")
+    if at and pid.isdigit():
+        return where == socket.gethostname() and not _alive(int(pid))
+    return True
+
+
 def _make_folder(prefix: str, parent: PathLike | None) -> Path:
     if parent is not None:
         Path(parent).mkdir(parents=True, exist_ok=True)
-    return Path(tempfile.mkdtemp(prefix=prefix + _owner(), dir=parent))
+    return Path(tempfile.mkdtemp(prefix=prefix + run_tag(), dir=parent))
 
 
 def _alive(pid: int) -> bool:
@@ -64,22 +78,14 @@ def remove_stale_folders(parent: PathLike) -> list[Path]:
     no process id (made before names held one). A folder of another host, or of a process that is
     running, is left alone; nothing else in ``parent`` (a checkpoint's chunk files) is touched.
     """
-    import socket
-
     root = Path(parent)
     if not root.is_dir():
         return []
-    host = socket.gethostname()
     removed = []
     for folder in sorted(root.iterdir()):
         prefix = next((p for p in (SPILL_PREFIX, COLUMNS_PREFIX) if folder.name.startswith(p)), None)
-        if prefix is None or not folder.is_dir():
+        if prefix is None or not folder.is_dir() or not run_ended(folder.name[len(prefix):].rpartition("-")[0]):
             continue
-        owner, sep, _ = folder.name[len(prefix):].rpartition("-")
-        pid, at, where = owner.partition("@")
-        if sep and at and pid.isdigit():
-            if where != host or _alive(int(pid)):
-                continue
         remove_folder(folder)
         removed.append(folder)
     if removed:

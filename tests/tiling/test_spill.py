@@ -233,6 +233,17 @@ if where == "merge":  # in the chunk pass: some chunks finished, the spill folde
             os.kill(os.getpid(), signal.SIGKILL)
         return real(*a, **k)
     te._merge_task = merge
+elif where == "write":  # in the chunk pass, while a chunk file is written: its temporary file half full
+    import numpy as np
+    real_savez, count = np.savez, []
+    def savez(fh, **arrays):
+        count.extend([1] if "/.chunk_" in str(getattr(fh, "name", "")) else [])
+        if len(count) == 6:
+            fh.write(b"PK" * 1000)
+            fh.flush()
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real_savez(fh, **arrays)
+    np.savez = savez
 else:  # in the isolation search: every chunk finished, the column store written
     ti.tiled_isolation = lambda *a, **k: os.kill(os.getpid(), signal.SIGKILL)
 orokit.analyze(tif, min_prominence_m=1.0, chunks=(13, 16), geometry=False, blocks=True, checkpoint=ck,
@@ -240,9 +251,10 @@ orokit.analyze(tif, min_prominence_m=1.0, chunks=(13, 16), geometry=False, block
 """
 
 
-@pytest.mark.parametrize("where", ["merge", "isolation"])
+@pytest.mark.parametrize("where", ["merge", "write", "isolation"])
 def test_a_rerun_after_a_killed_checkpoint_run_removes_its_folders_and_keeps_its_chunks(where, make_dem, tmp_path):
-    """A run killed (SIGKILL) in the chunk pass or the isolation search leaves its spill and column folders in
+    """A run killed (SIGKILL) in the chunk pass (between chunks, or while a chunk file is written) or the
+    isolation search leaves its spill and column folders, and the temporary file of the chunk being written, in
     the checkpoint folder; the rerun removes them, reuses the finished chunks (their files untouched) and
     writes the files of a run without a checkpoint."""
     import gc
@@ -257,13 +269,15 @@ def test_a_rerun_after_a_killed_checkpoint_run_removes_its_folders_and_keeps_its
     child = subprocess.run([sys.executable, "-c", _KILLED_RUN, str(tif), str(ck), where], capture_output=True)
     assert child.returncode == -9, child.stderr.decode()[-2000:]
     left = sorted(p.name.split("-")[1] for p in ck.iterdir() if p.name.startswith("orokit-"))
-    assert left == (["spill"] if where == "merge" else ["columns"])
+    assert left == (["columns"] if where == "isolation" else ["spill"])
+    assert len(list(ck.glob(".chunk_*.tmp-*"))) == (1 if where == "write" else 0)
     chunks = {p: p.stat().st_mtime_ns for p in ck.glob("chunk_*.npz")}
-    assert len(chunks) >= (6 if where == "merge" else 7 * 7)
+    assert len(chunks) >= (7 * 7 if where == "isolation" else 5)
     b = orokit.analyze(str(tif), min_prominence_m=1.0, chunks=(13, 16), geometry=False, blocks=True, checkpoint=ck,
                        scheduler="synchronous")
     mine = f"{os.getpid()}@"  # the rerun's own column store, alive with its result
     assert [p.name.split("-")[1] for p in ck.iterdir() if p.name.startswith("orokit-")] == ["columns"]
+    assert not list(ck.glob(".*"))  # no temporary chunk file left
     assert all(mine in p.name for p in ck.iterdir() if p.name.startswith("orokit-"))
     assert all(p.stat().st_mtime_ns == t for p, t in chunks.items())  # reused, not written again
     a = orokit.analyze(str(tif), min_prominence_m=1.0, chunks=(13, 16), geometry=False, blocks=True,
@@ -305,3 +319,29 @@ def test_only_the_folders_of_ended_runs_on_this_host_are_stale(tmp_path):
         assert store.folder.name.startswith(f"orokit-columns-{os.getpid()}@{host}-")
         assert remove_stale_folders(tmp_path) == [] and live.exists() and store.folder.exists()
     assert remove_stale_folders(tmp_path / "missing") == []
+
+
+def test_opening_a_checkpoint_removes_the_temporary_chunk_files_of_ended_runs_only(tmp_path):
+    import os
+    import socket
+    import subprocess
+    import sys
+
+    from orokit.io.checkpoint_io import chunk_path, open_checkpoint, write_chunk
+
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead, host = int(ended.stdout), socket.gethostname()
+    fingerprint = {"input": "x", "chunks": [13, 16]}
+    open_checkpoint(tmp_path, fingerprint)
+    names = {f".chunk_00001_00002.npz.tmp-{dead}@{host}-0123456789ab.npz": False,
+             ".chunk_00000_00001.npz.tmp-0123456789ab.npz": False,  # named before names held the process
+             f".checkpoint.json.tmp-{dead}@{host}-0123456789ab.json": False,
+             f".chunk_00002_00002.npz.tmp-{os.getpid()}@{host}-0123456789ab.npz": True,
+             f".chunk_00003_00002.npz.tmp-{dead}@other.host-0123456789ab.npz": True,
+             f".notes.txt.tmp-{dead}@{host}-0123456789ab.txt": True}  # not the checkpoint's own
+    for name in names:
+        (tmp_path / name).write_bytes(b"PK")
+    write_chunk(chunk_path(tmp_path, 0, 0), {"a": np.arange(3)})
+    assert open_checkpoint(tmp_path, fingerprint) == tmp_path
+    kept = sorted(n for n, k in names.items() if k)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([*kept, "checkpoint.json", "chunk_00000_00000.npz"])
