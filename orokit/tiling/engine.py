@@ -242,7 +242,7 @@ def _finalize_task(root: _Part, min_prominence_m: float, outside: str, nby: int,
     s.eb = s.eb[order]
     s.ez = s.ez[order]
     s.ekey = s.ekey[order]
-    s.nexit = s.nexit[:0]  # not used by the finalize
+    s.nexit = np.empty(0, s.nexit.dtype)  # not used by the finalize (a view [:0] would keep it alive)
     del order
     iso = root[1]
     del root  # the root summary is released by the finalize as it goes (dask holds its tuple till the end)

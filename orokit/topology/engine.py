@@ -334,7 +334,8 @@ def spill_orometry(core: Orometry, store: Any) -> None:
         values = getattr(core, f)
         if f not in store:
             store.put(f, values)
-        setattr(core, f, values[:0])
+        # a new empty array, not ``values[:0]``: a view would keep the whole column alive
+        setattr(core, f, np.empty(0, values.dtype))
 
 
 def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | None,

@@ -280,10 +280,16 @@ def test_tables_whose_own_columns_wait_in_a_store_write_the_same_files(result, t
     store = SpilledColumns(parent=tmp_path / "spill")
     for name, dtype in engine.ISOLATION_ARRAYS:
         store.put(name, iso[name].to_numpy(dtype))
+    import gc
+    import weakref
+
+    moved = {f: weakref.ref(getattr(core, f)) for f in engine.SPILLED_OROMETRY}
     lean = engine.build_result(core, transform=transform, crs=crs, isolation=None, geometry=False, blocks=True,
                                store=store)
+    gc.collect()
     for f in engine.SPILLED_OROMETRY:
         assert getattr(core, f).size == 0, f  # moved to the store
+        assert moved[f]() is None, f  # freed (an empty view [:0] would keep the whole column alive)
     assert len(store) == 4 + len(engine.SPILLED_OROMETRY) + 2 and "line_parent" in store
     whole = result.peaks.drop(columns="geometry")
     n = len(whole)
