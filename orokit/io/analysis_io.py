@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import logging
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -108,28 +109,28 @@ def _write_parquet(frame, path: Path, crs: Any = None, batch_rows: int | None = 
     without geometry (points are made from ``x``/``y`` in ``crs``). The file is that of
     ``GeoDataFrame.to_parquet`` (the same bytes while the table fits in one row group;
     beyond, the same table in row groups of ``batch_rows``). Only the schema goes through
-    geopandas (from the first row); each row group's columns go to Arrow without copies
-    and its points straight to WKB.
+    pandas (from the first row; geopandas only for a GeoDataFrame, :func:`_geoparquet_schema`
+    otherwise); each row group's columns go to Arrow without copies and its points straight to WKB.
     """
-    import geopandas as gpd
     import pyarrow as pa
     import pyarrow.parquet as pq
-    from geopandas.io.arrow import _geopandas_to_arrow
 
     from orokit.io.divide_tree_gpkg import WRITE_BATCH_ROWS
     from orokit.io.wkb import point_wkb
 
     step = batch_rows or WRITE_BATCH_ROWS
     n = len(frame)
-    has_geometry = isinstance(frame, gpd.GeoDataFrame)
+    gpd = sys.modules.get("geopandas")  # a GeoDataFrame exists only once geopandas is imported
+    has_geometry = gpd is not None and isinstance(frame, gpd.GeoDataFrame)
     head = table_rows(frame, 0, 1)
     if has_geometry:
-        crs = frame.crs
+        from geopandas.io.arrow import _geopandas_to_arrow
+
         geometry_name = frame.geometry.name
+        schema = _geopandas_to_arrow(head).schema
     else:
-        head = gpd.GeoDataFrame(head, geometry=gpd.points_from_xy(head["x"], head["y"]), crs=crs)
         geometry_name = "geometry"
-    schema = _geopandas_to_arrow(head).schema
+        schema = _geoparquet_schema(head, crs)
     schema = schema.with_metadata(_whole_table_metadata(schema.metadata, frame, n))
     with atomic_path(path) as tmp, pq.ParquetWriter(str(tmp), schema, compression="snappy") as writer:
         # one row group at a time, its points made for it: no WKB of the whole table (~25 bytes per row)
@@ -146,6 +147,68 @@ def _write_parquet(frame, path: Path, crs: Any = None, batch_rows: int | None = 
                     arrays.append(pa.Array.from_pandas(rows.index.get_level_values(field.name), type=field.type))
             writer.write_table(pa.Table.from_arrays(arrays, schema=schema))
             del arrays, rows
+
+
+def _geoparquet_schema(head, crs: Any):
+    """The Arrow schema ``GeoDataFrame.to_parquet`` gives ``head`` (a DataFrame with ``x``, ``y``)
+    with point geometries from them in ``crs``, without importing geopandas or shapely (~34 MiB
+    resident with pyogrio): its ``pandas`` and ``geo`` metadata (GeoParquet 1.1.0, the
+    geometry's WKB field with its ``geoarrow.wkb`` extension metadata), key for key.
+    """
+    import pyarrow as pa
+
+    frame = head.copy(deep=False)
+    frame.attrs = {}  # geopandas's frame of the attributes has none (they go to PANDAS_ATTRS)
+    frame["geometry"] = None  # as geopandas does: a null column, then the WKB field put in its place
+    schema = pa.Schema.from_pandas(frame, preserve_index=None)
+    projjson = None if crs is None else _pyproj_crs(crs).to_json_dict()
+    extension = {"ARROW:extension:name": "geoarrow.wkb",
+                 "ARROW:extension:metadata": "{}" if projjson is None else json.dumps({"crs": projjson})}
+    i = schema.get_field_index("geometry")
+    schema = schema.set(i, pa.field("geometry", pa.binary(), nullable=True, metadata=extension))
+    column: dict[str, Any] = {"encoding": "WKB", "crs": None if projjson is None else _without_member_ids(projjson),
+                              "geometry_types": ["Point"] if len(head) else []}
+    if len(head):
+        x, y = float(head["x"].iloc[0]), float(head["y"].iloc[0])
+        if np.isfinite([x, y]).all():
+            column["bbox"] = [x, y, x, y]
+    geo = {"primary_column": "geometry", "columns": {"geometry": column}, "version": "1.1.0",
+           "creator": {"library": "geopandas", "version": _geopandas_version()}}
+    meta = dict(schema.metadata)
+    meta[b"geo"] = json.dumps(geo).encode()
+    if head.attrs:
+        meta[b"PANDAS_ATTRS"] = json.dumps(head.attrs).encode()
+    return schema.with_metadata(meta)
+
+
+def _pyproj_crs(crs: Any):
+    from pyproj import CRS
+
+    return CRS.from_user_input(crs)
+
+
+def _without_member_ids(projjson: dict) -> dict:
+    """PROJJSON without the ids of datum ensemble members, as geopandas writes it in ``geo`` (for older
+    PROJ; like geopandas, through nested objects only, not lists)."""
+    out = json.loads(json.dumps(projjson))
+
+    def strip(value: dict) -> None:
+        for key, v in value.items():
+            if isinstance(v, dict):
+                strip(v)
+            elif key == "members" and isinstance(v, list):
+                for member in v:
+                    member.pop("id", None)
+
+    strip(out)
+    return out
+
+
+def _geopandas_version() -> str:
+    """The installed geopandas's version (the ``creator`` of GeoParquet's metadata), without importing it."""
+    from importlib.metadata import version
+
+    return version("geopandas")
 
 
 def _geometry_wkb(geometry):

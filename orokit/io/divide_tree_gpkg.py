@@ -109,7 +109,6 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
     with two idle cores (one core: use False, the copy costs ~0.1 s per 100,000 rows).
     """
     import pyarrow as pa
-    import pyogrio
 
     from orokit.io.gdal_arrow import gdal_library, write_arrow_layer
     from orokit.io.wkb import point_wkb, polyline_wkb
@@ -163,6 +162,8 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
             write_arrow_layer(dst, layer, schema, itertools.chain([first], stream), geometry_name="geometry",
                               geometry_type=geometry_type, crs=crs, layer_options=_LAYER_OPTIONS)
             return
+        import pyogrio
+
         reader = pa.RecordBatchReader.from_batches(schema, itertools.chain([first], stream))
         del first
         pyogrio.write_arrow(reader, dst, layer=layer, geometry_name="geometry", geometry_type=geometry_type, crs=crs,
@@ -229,10 +230,25 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
             frame.reset_index().to_file(tmp, layer=name, geometry_type="Point", engine="pyogrio", use_arrow=True,
                                           **_GPKG)
         # attrs go to a small non-spatial table (portable across GDAL versions)
-        frame = pd.DataFrame({"key": list(meta), "value": list(meta.values())})
-        pyogrio.write_dataframe(frame, tmp, layer="orokit_metadata", driver="GPKG")
+        _write_metadata(tmp, meta)
     logger.info("wrote %s: %d peaks, %d ridges", path, tree.n_peaks, len(tree.edges))
     return path
+
+
+def _write_metadata(path: Path, meta: dict[str, str]) -> None:
+    """``meta`` as the non-spatial layer ``orokit_metadata`` (string columns ``key``, ``value``) of ``path``."""
+    import pyarrow as pa
+
+    from orokit.io.gdal_arrow import gdal_library, write_arrow_layer
+
+    table = pa.table({"key": pa.array(list(meta), pa.string()), "value": pa.array(list(meta.values()), pa.string())})
+    if gdal_library() is not None:
+        write_arrow_layer(path, "orokit_metadata", table.schema, table.to_batches(), geometry_name=None,
+                          geometry_type=None, crs=None, layer_options={})
+        return
+    import pyogrio
+
+    pyogrio.write_dataframe(table.to_pandas(), path, layer="orokit_metadata", driver="GPKG")
 
 
 #: GeoPackage tables that describe a layer by a ``table_name`` column (those present in both files are copied)

@@ -4,9 +4,11 @@
 beside it gets ~10 % of its CPU), so two layers written from two threads take turns,
 and so does every other Python thread. This module calls the same GDAL functions
 (``OGR_L_CreateFieldFromArrowSchema``, ``OGR_L_WriteArrowBatch``) through ``ctypes``,
-which releases the GIL during each call, on the GDAL library pyogrio loaded (the same
-driver, options and bytes). :func:`gdal_library` is None when that library cannot be
-found (another platform or build): callers then use pyogrio.
+which releases the GIL during each call, on the GDAL library rasterio loaded (orokit
+reads every raster with it: writing through it loads no second GDAL, ~34 MiB resident with
+pyogrio, shapely and geopandas). :func:`gdal_library` falls back on pyogrio's library when
+rasterio's is not found or lacks the GeoPackage driver, and is None when neither is found
+(another platform or build): callers then use pyogrio.
 """
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ import contextlib
 import ctypes
 import functools
 import threading
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +52,7 @@ _OPTIONS = ctypes.POINTER(ctypes.c_char_p)
 #: GDALOpenEx flags: GDAL_OF_UPDATE | GDAL_OF_VECTOR | GDAL_OF_VERBOSE_ERROR
 _OPEN_UPDATE_VECTOR = 0x01 | 0x04 | 0x40
 #: OGRwkbGeometryType codes of the geometry types written here
-GEOMETRY_TYPES = {"Point": 1, "LineString": 2}
+GEOMETRY_TYPES = {"Point": 1, "LineString": 2, None: 100}  # None: a table without geometry (wkbNone)
 
 
 _SIGNATURES: dict[str, tuple[Any, list[Any]]] = {
@@ -78,8 +80,9 @@ _SIGNATURES: dict[str, tuple[Any, list[Any]]] = {
     "CPLSetThreadLocalConfigOption": (None, [ctypes.c_char_p, ctypes.c_char_p]),
     "CPLPushErrorHandler": (None, [ctypes.c_void_p]),
     "CPLPopErrorHandler": (None, []),
+    "GDALAllRegister": (None, []),
 }
-#: a GDAL configuration option set through pyogrio to tell its library from other loaded ones
+#: a GDAL configuration option set through rasterio (or pyogrio) to tell its library from other loaded ones
 _PROBE = "OROKIT_GDAL_ARROW_PROBE"
 
 
@@ -101,11 +104,12 @@ _FIND = threading.Lock()  # one search, also when two writer threads ask first a
 
 
 def gdal_library() -> ctypes.CDLL | None:
-    """The GDAL library pyogrio uses (its C functions declared), or None when it is not found.
+    """The GDAL library rasterio uses (its C functions declared), else pyogrio's, or None when neither is found.
 
-    Another GDAL may be loaded beside it (rasterio's wheels bundle their own, of another
-    version, with its own drivers and settings): the one whose configuration pyogrio sets
-    is taken.
+    Several GDALs may be loaded at once (rasterio's and pyogrio's wheels bundle their own,
+    of other versions, with their own drivers and settings): the one whose configuration
+    rasterio sets is taken (drivers registered, PROJ's data found as rasterio finds it);
+    pyogrio's (imported only then) when that one has no GeoPackage driver.
     """
     with _FIND:
         return _find_library()
@@ -113,12 +117,28 @@ def gdal_library() -> ctypes.CDLL | None:
 
 @functools.lru_cache(maxsize=1)
 def _find_library() -> ctypes.CDLL | None:
+    import rasterio
+    from rasterio._env import del_gdal_config, set_gdal_config
+
+    with rasterio.Env():  # GDAL's drivers registered, its and PROJ's data paths set (they stay)
+        pass
+    lib = _probe(lambda key, value: set_gdal_config(key, value), del_gdal_config)
+    if lib is not None:
+        lib.GDALAllRegister()
+        if lib.GDALGetDriverByName(b"GPKG"):
+            return lib
+    import pyogrio  # loads its GDAL and registers its drivers
+
+    return _probe(lambda key, value: pyogrio.set_gdal_config_options({key: value}),
+                  lambda key: pyogrio.set_gdal_config_options({key: None}))
+
+
+def _probe(set_option: Callable[[str, str], None], unset_option: Callable[[str], None]) -> ctypes.CDLL | None:
+    """The loaded GDAL library on which ``set_option`` sets a configuration option, its functions declared."""
     import uuid
 
-    import pyogrio  # loads GDAL and registers its drivers
-
     token = uuid.uuid4().hex
-    pyogrio.set_gdal_config_options({_PROBE: token})
+    set_option(_PROBE, token)
     try:
         for path in _loaded_libraries():
             try:
@@ -133,14 +153,14 @@ def _find_library() -> ctypes.CDLL | None:
                 return lib
         return None
     finally:
-        pyogrio.set_gdal_config_options({_PROBE: None})
+        unset_option(_PROBE)
 
 
 @contextlib.contextmanager
 def thread_config_option(name: str, value: str) -> Iterator[bool]:
     """GDAL's configuration option ``name`` is ``value`` for the calling thread only while the block runs.
 
-    Set on the GDAL library pyogrio uses (:func:`gdal_library`) with
+    Set on the GDAL library the writers use (:func:`gdal_library`) with
     ``CPLSetThreadLocalConfigOption``, so GDAL calls made by other threads (a caller's own
     writers) keep their settings; the thread's previous value is restored after. Yields
     False, setting nothing, when that library is not found.
@@ -163,14 +183,15 @@ def _options(values: dict[str, str]) -> Any:
     return (ctypes.c_char_p * (len(items) + 1))(*items, None)
 
 
-def write_arrow_layer(path: Path, layer: str, schema: Any, batches: Iterable[Any], *, geometry_name: str,
-                      geometry_type: str, crs: str | None, layer_options: dict[str, str],
+def write_arrow_layer(path: Path, layer: str, schema: Any, batches: Iterable[Any], *, geometry_name: str | None,
+                      geometry_type: str | None, crs: str | None, layer_options: dict[str, str],
                       driver: str = "GPKG") -> None:
     """Write ``batches`` (pyarrow RecordBatches of ``schema``) as a new layer of ``path``.
 
     What ``pyogrio.write_arrow`` does for a new layer (the file is created, or opened in
     update mode when it exists; one transaction), with the GIL released inside GDAL.
-    ``geometry_name``: the WKB column; ``crs``: anything ``OSRSetFromUserInput`` reads.
+    ``geometry_name``: the WKB column (None with ``geometry_type`` None: a table without
+    geometry); ``crs``: anything ``OSRSetFromUserInput`` reads.
 
     Raises
     ------
@@ -191,7 +212,7 @@ def write_arrow_layer(path: Path, layer: str, schema: Any, batches: Iterable[Any
 
 
 def _write_layer(lib: ctypes.CDLL, path: Path, layer: str, schema: Any, batches: Iterable[Any], *,
-                 geometry_name: str, geometry_type: str, crs: str | None, layer_options: dict[str, str],
+                 geometry_name: str | None, geometry_type: str | None, crs: str | None, layer_options: dict[str, str],
                  driver: str) -> None:
     def fail(what: str) -> OSError:
         msg = lib.CPLGetLastErrorMsg()
@@ -225,7 +246,8 @@ def _write_layer(lib: ctypes.CDLL, path: Path, layer: str, schema: Any, batches:
             if not lib.OGR_L_CreateFieldFromArrowSchema(lyr, child, None):
                 raise fail(f"cannot create the field {child.contents.name.decode()!r}")
         started = lib.GDALDatasetStartTransaction(ds, 0) == 0
-        write_options = _options({"GEOMETRY_NAME": geometry_name, "GEOMETRY_ENCODING": "WKB"})
+        write_options = _options({} if geometry_name is None else
+                                 {"GEOMETRY_NAME": geometry_name, "GEOMETRY_ENCODING": "WKB"})
         for batch in batches:
             c_array = _ArrowArray()
             batch._export_to_c(ctypes.addressof(c_array))

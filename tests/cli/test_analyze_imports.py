@@ -25,3 +25,33 @@ print(sorted(m for m in ("pandas", "geopandas", "shapely", "pyogrio") if m in sy
 def test_engine_runs_without_pandas_imported():
     out = subprocess.run([sys.executable, "-c", CODE], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+WRITING = """
+import atexit, sys
+import numpy as np
+import rasterio
+from rasterio.transform import from_origin
+
+z = (np.random.default_rng(0).random((60, 70)) * 100).astype("float32")
+with rasterio.open(sys.argv[1], "w", driver="GTiff", height=60, width=70, count=1, dtype="float32",
+                   crs="EPSG:32633", transform=from_origin(500000, 4000000, 30, 30)) as dst:
+    dst.write(z, 1)
+atexit.register(lambda: print(sorted(m for m in ("geopandas", "shapely", "pyogrio") if m in sys.modules)))
+from orokit.cli.main import main
+
+sys.argv = ["orokit", "-q", "analyze", sys.argv[1], "-o", sys.argv[2], "--no-progress"]
+main()
+"""
+
+
+def test_analyze_writes_its_files_without_geopandas_shapely_or_pyogrio(tmp_path):
+    """The whole ``orokit analyze`` process (the console script) writes the CSV, the GeoParquet
+    tables and the GeoPackage through pyarrow and rasterio's GDAL: pyogrio's GDAL, shapely and
+    geopandas (~34 MiB resident) are never loaded (issue 13). pandas still is (the tables are frames)."""
+    out = tmp_path / "out"
+    res = subprocess.run([sys.executable, "-c", WRITING, str(tmp_path / "dem.tif"), str(out)],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.strip().splitlines()[-1] == "[]", res.stdout + res.stderr
+    assert (out / "analysis.json").is_file() and (out / "dividetree.gpkg").is_file()

@@ -15,21 +15,23 @@ from orokit.io.atomic import is_no_space_error
 pytestmark = pytest.mark.skipif(gdal_arrow.gdal_library() is None, reason="GDAL's C library not found here")
 
 
-def test_the_library_is_pyogrios_when_another_gdal_is_loaded_first(tmp_path):
-    """rasterio's wheels bundle a GDAL of their own (another version, drivers and settings); when it
-    is mapped before pyogrio's (here: loaded after it), the writer still takes pyogrio's and writes."""
+def test_the_library_is_rasterios_when_pyogrios_gdal_is_loaded_first(tmp_path):
+    """rasterio's and pyogrio's wheels each bundle a GDAL (other versions, drivers and settings); with
+    pyogrio's mapped first, the writer takes rasterio's (the one orokit reads rasters with, so that
+    ``orokit analyze`` loads no second GDAL) and the file reads back through pyogrio's."""
     script = textwrap.dedent(f"""
         import pyogrio
         import rasterio
-        with rasterio.Env():
-            pass
+        from rasterio.env import set_gdal_config
         from orokit.io import gdal_arrow
         from orokit.io.divide_tree_io import read_divide_tree_gpkg, write_divide_tree_gpkg
         from orokit.topology.divide_tree import DivideTree
 
         lib = gdal_arrow.gdal_library()
-        pyogrio.set_gdal_config_options({{"OROKIT_TEST_OPTION": "set by pyogrio"}})
-        assert lib.CPLGetConfigOption(b"OROKIT_TEST_OPTION", None) == b"set by pyogrio", lib._name
+        set_gdal_config("OROKIT_TEST_OPTION", "set by rasterio")
+        assert lib.CPLGetConfigOption(b"OROKIT_TEST_OPTION", None) == b"set by rasterio", lib._name
+        pyogrio.set_gdal_config_options({{"OROKIT_TEST_OPTION2": "set by pyogrio"}})
+        assert lib.CPLGetConfigOption(b"OROKIT_TEST_OPTION2", None) is None, lib._name
         tree = DivideTree.from_arrays([[500000, 4e6, 10], [500100, 4e6, 12]], [[500050, 4e6, 5]], [[0, 1, 0]],
                                       crs="EPSG:32633")
         assert read_divide_tree_gpkg(write_divide_tree_gpkg(tree, {str(tmp_path / "t.gpkg")!r})).equals(tree)

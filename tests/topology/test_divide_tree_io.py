@@ -118,14 +118,14 @@ def test_gpkg_round_trip(small_txt, tmp_path):
     assert layers["peaks"] == "Point" and layers["ridges"] == "LineString"
     assert not list(tmp_path.glob(".*tmp*"))  # no temporary file left behind
     # the GeoPackage is written without SQLite's per-transaction syncs (atomic_path syncs the file once):
-    # the process-wide GDAL setting is restored after the write
-    assert pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS") is None
-    pyogrio.set_gdal_config_options({"OGR_SQLITE_SYNCHRONOUS": "NORMAL"})
+    # the process-wide setting of the GDAL the writers use is restored after the write
+    assert _writers_option("OGR_SQLITE_SYNCHRONOUS") is None
+    _set_writers_option("OGR_SQLITE_SYNCHRONOUS", "NORMAL")
     try:
         write_divide_tree_gpkg(tree, tmp_path / "again.gpkg")
-        assert pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS") == "NORMAL"
+        assert _writers_option("OGR_SQLITE_SYNCHRONOUS") == "NORMAL"
     finally:
-        pyogrio.set_gdal_config_options({"OGR_SQLITE_SYNCHRONOUS": None})
+        _set_writers_option("OGR_SQLITE_SYNCHRONOUS", None)
     assert read_divide_tree_gpkg(tmp_path / "again.gpkg").equals(tree)
 
 
@@ -136,8 +136,6 @@ def test_sqlite_sync_is_off_in_the_writing_threads_only(small_txt, tmp_path, mon
     its own (before session 13 it was set process-wide for the whole write)."""
     import threading
 
-    import pyogrio
-
     import orokit.io.wkb as wkb
 
     seen: list[tuple[object, object]] = []
@@ -145,10 +143,10 @@ def test_sqlite_sync_is_off_in_the_writing_threads_only(small_txt, tmp_path, mon
 
     def spy(x, y):  # called in each writing thread, inside the write
         other: list[object] = []
-        probe = threading.Thread(target=lambda: other.append(pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS")))
+        probe = threading.Thread(target=lambda: other.append(_writers_option("OGR_SQLITE_SYNCHRONOUS")))
         probe.start()
         probe.join()
-        seen.append((pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS"), other[0]))
+        seen.append((_writers_option("OGR_SQLITE_SYNCHRONOUS"), other[0]))
         return point_wkb(x, y)
 
     monkeypatch.setattr(wkb, "point_wkb", spy)
@@ -156,9 +154,29 @@ def test_sqlite_sync_is_off_in_the_writing_threads_only(small_txt, tmp_path, mon
     path = write_divide_tree_gpkg(tree, tmp_path / "tree.gpkg", parallel=parallel)
     assert read_divide_tree_gpkg(path).equals(tree)
     assert len(seen) >= 3  # peaks, saddles, runoffs
-    assert all(mine in (False, "OFF") for mine, _ in seen)  # pyogrio reads "OFF" as False
+    assert all(mine == "OFF" for mine, _ in seen)
     assert all(theirs is None for _, theirs in seen)
-    assert pyogrio.get_gdal_config_option("OGR_SQLITE_SYNCHRONOUS") is None  # restored in this thread
+    assert _writers_option("OGR_SQLITE_SYNCHRONOUS") is None  # restored in this thread
+
+
+def _writers_option(name: str) -> str | None:
+    """A GDAL configuration option as the GeoPackage writers' GDAL (``gdal_arrow.gdal_library()``) sees it
+    in the calling thread."""
+    from orokit.io import gdal_arrow
+
+    value = gdal_arrow.gdal_library().CPLGetConfigOption(name.encode(), None)
+    return None if value is None else value.decode()
+
+
+def _set_writers_option(name: str, value: str | None) -> None:
+    """Set (None: unset) a process-wide GDAL configuration option of the writers' GDAL."""
+    import ctypes
+
+    from orokit.io import gdal_arrow
+
+    lib = gdal_arrow.gdal_library()
+    lib.CPLSetConfigOption.argtypes = [ctypes.c_char_p, ctypes.c_char_p]
+    lib.CPLSetConfigOption(name.encode(), None if value is None else value.encode())
 
 
 _LOCAL_TM = ('PROJCS["local TM",GEOGCS["WGS 84",DATUM["WGS_1984",SPHEROID["WGS 84",6378137,298.257223563]],'
@@ -180,11 +198,12 @@ def test_gpkg_writers_write_the_same_layers(small_txt, tmp_path, monkeypatch, cr
 
     from orokit.io import gdal_arrow
 
-    import rasterio  # noqa: F401  (its wheel maps another GDAL into the process: pyogrio's must be the one used)
+    from rasterio.env import set_gdal_config
 
     lib = gdal_arrow.gdal_library()
     assert lib is not None  # found on this platform: the test compares both writers
-    assert "pyogrio" in str(lib._name) or "rasterio" not in str(lib._name)
+    set_gdal_config("OROKIT_TEST_WHICH_GDAL", "rasterio's")  # the writers use rasterio's GDAL, not pyogrio's
+    assert lib.CPLGetConfigOption(b"OROKIT_TEST_WHICH_GDAL", None) == b"rasterio's", lib._name
     tree = dataclasses.replace(read_divide_tree_txt(small_txt, height=10), crs=crs)
     extra = {"depressions": gpd.GeoDataFrame({"depth": [3.0, 4.5]}, geometry=[Point(0, 0), Point(1, 1)], crs=crs)}
     with monkeypatch.context() as m:
