@@ -135,7 +135,7 @@ def search_pyramid(z: np.ndarray) -> tuple[np.ndarray, ...] | None:
 
     One thread, ~0.1 s at 60 M cells; ``orokit analyze`` runs it beside the tree's last steps.
     """
-    if np.isnan(z).any():
+    if z.size and np.isnan(np.max(z)):  # max propagates NaN: no bool temporary of z's size (14 MiB at 15 M)
         return None
     # no nodata: the pyramid of z itself, in z's dtype (no NaN-free copy, no NaN pyramid)
     return (z, *_kernels.build_pyramid(z))

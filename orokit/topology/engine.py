@@ -144,6 +144,16 @@ def orometry(z: np.ndarray, *, min_prominence_m: float, outside: str = "unknown"
     return finalize_graph(**saddle_graph(z), min_prominence_m=min_prominence_m, outside=outside)
 
 
+def _has_inf(z: np.ndarray) -> bool:
+    """Whether ``z`` holds +-inf, from two reductions that skip NaN (no temporary of z's size: a bool
+    per cell, 14 MiB at 15 M cells, stayed in the heap through the engine's peak).
+
+    >>> _has_inf(np.array([1.0, np.nan])), _has_inf(np.array([np.nan, -np.inf]))
+    (False, True)
+    """
+    return bool(z.size) and bool(np.isinf(np.fmax.reduce(z, axis=None)) or np.isinf(np.fmin.reduce(z, axis=None)))
+
+
 def saddle_graph(z: np.ndarray) -> dict[str, Any]:
     """Steps 1-3 of :func:`orometry`: the basins' saddle graph, as keyword arguments of :func:`finalize_graph`.
 
@@ -151,7 +161,7 @@ def saddle_graph(z: np.ndarray) -> dict[str, Any]:
     """
     if z.ndim != 2 or z.size == 0:
         raise InputError(f"the DEM must be a non-empty 2-D array; got shape {z.shape}")
-    if np.isinf(z).any():
+    if _has_inf(z):
         raise InputError("the DEM contains infinite values; mark nodata as NaN")
     z = np.ascontiguousarray(z)
     zf = z.ravel()

@@ -77,3 +77,15 @@ def test_huge_plateau_is_one_peak_and_fast():
     elapsed = time.perf_counter() - t0
     assert sorted(zip(peaks["row"], peaks["col"], peaks["prominence"])) == [(50, 60, 10.0), (580, 590, 3.0)]
     assert elapsed < 20.0
+
+
+@pytest.mark.parametrize("bad", [np.inf, -np.inf])
+def test_infinite_cell_is_refused_beside_nodata(bad):
+    """The engine's check of infinite cells (reductions that skip NaN) finds one among NaN cells."""
+    from orokit.topology.engine import saddle_graph
+
+    z = np.array([[np.nan, 1, 2], [3, np.nan, 4]], np.float32)
+    saddle_graph(z)  # finite cells and NaN: accepted
+    z[1, 2] = bad
+    with pytest.raises(InputError, match="infinite"):
+        saddle_graph(z)
