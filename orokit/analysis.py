@@ -223,8 +223,10 @@ def analyze(
         graph = engine.saddle_graph(z)
         # the engine's peak memory is past: the libraries of the tables and files load in a second
         # thread, and the isolation's pyramid is built in a third (numba, no GIL), while this one
-        # finishes the tree (wall time: the finalize is serial)
-        libraries = _import_in_thread(_table_libraries)
+        # finishes the tree (wall time: the finalize is serial). With isolation, the libraries load
+        # once the tree is done, beside the search: beside the finalize (raster, pyramid and saddle
+        # graph held) they set the process's peak at 15 M cells
+        libraries = None if isolation else _import_in_thread(_table_libraries)
         with ThreadPoolExecutor(1) as pool:
             pyramid = pool.submit(search_pyramid, z) if isolation else None
             core = engine.finalize_graph(**graph, min_prominence_m=min_prominence_m, outside=outside)
@@ -232,6 +234,8 @@ def analyze(
             pyr = None if pyramid is None else pyramid.result()
             del pyramid  # the future holds its result (the pyramid and z) as long as it lives
         release_free_heap()  # the saddle graph's arrays, freed inside the heap, before the isolation's
+        if libraries is None:
+            libraries = _import_in_thread(_table_libraries)
         t_core = time.perf_counter()
         _advance(bar)
         iso = None
@@ -240,11 +244,11 @@ def analyze(
             rows, cols = core.peak_row.astype(np.int64), core.peak_col.astype(np.int64)
             best, cand, edge = nearest_higher(z, rows, cols, metric, pyr)
             del pyr
-            libraries.join()  # no import in this thread while that one imports
             width = z.shape[1]
             if release:
                 del z
                 dem.release()
+            libraries.join()  # no import in this thread while that one imports (after the raster is let go)
             iso = finish_isolation(metric, rows, cols, best, cand, width, edge)
             del best, cand, edge
         elif release:
