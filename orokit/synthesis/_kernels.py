@@ -120,6 +120,48 @@ def _disk_gain(qx, qy, cx0, cy0, cstep, cnx, cny, covered, radius, mark):
 
 
 @njit(cache=True)
+def _count_deficit(qx, qy, cx0, cy0, cstep, cnx, cny, target, have, frac, radius):
+    """Mean over the disk centres within ``radius`` of (qx, qy) of ``(frac T - have) / sqrt(frac T + 1)``
+    (T = ``target``): > 0 where the disks around hold fewer peaks than their share so far."""
+    if cnx == 0 or cny == 0 or target.size == 0:
+        return 0.0
+    i0 = max(0, int(math.ceil((qx - radius - cx0) / cstep)))
+    i1 = min(cnx - 1, int(math.floor((qx + radius - cx0) / cstep)))
+    j0 = max(0, int(math.ceil((qy - radius - cy0) / cstep)))
+    j1 = min(cny - 1, int(math.floor((qy + radius - cy0) / cstep)))
+    r2 = radius * radius
+    s = 0.0
+    n = 0
+    for j in range(j0, j1 + 1):
+        dy = cy0 + j * cstep - qy
+        for i in range(i0, i1 + 1):
+            dx = cx0 + i * cstep - qx
+            if dx * dx + dy * dy <= r2:
+                e = frac * target[j * cnx + i]
+                s += (e - have[j * cnx + i]) / math.sqrt(e + 1.0)
+                n += 1
+    return s / n if n > 0 else 0.0
+
+
+@njit(cache=True)
+def _count_add(qx, qy, cx0, cy0, cstep, cnx, cny, have, radius):
+    """One more peak in every disk whose centre lies within ``radius`` of (qx, qy)."""
+    if cnx == 0 or cny == 0 or have.size == 0:
+        return
+    i0 = max(0, int(math.ceil((qx - radius - cx0) / cstep)))
+    i1 = min(cnx - 1, int(math.floor((qx + radius - cx0) / cstep)))
+    j0 = max(0, int(math.ceil((qy - radius - cy0) / cstep)))
+    j1 = min(cny - 1, int(math.floor((qy + radius - cy0) / cstep)))
+    r2 = radius * radius
+    for j in range(j0, j1 + 1):
+        dy = cy0 + j * cstep - qy
+        for i in range(i0, i1 + 1):
+            dx = cx0 + i * cstep - qx
+            if dx * dx + dy * dy <= r2:
+                have[j * cnx + i] += 1.0
+
+
+@njit(cache=True)
 def throw_darts(
     px, py, z, n_start, n_end,
     fixed, fx, fy,
@@ -131,6 +173,7 @@ def throw_darts(
     floor_w,
     cx0, cy0, cstep, cnx, cny, covered, n_covered, cover_target, radius, disk_w,
     grad_edges, grad_ne, grad_open, grad_target, grad_have, grad_on,
+    kx0, ky0, kstep, knx, kny, count_target, count_have, count_w,
 ):
     """Place peaks ``n_start..n_end-1`` (sorted by decreasing elevation) by dart throwing.
 
@@ -152,6 +195,13 @@ def throw_darts(
     Gradient target (``grad_on[t]``): the candidate's weight is also multiplied by the
     remaining demand of its bin of ``(z_nearest - z) / d``, the elevation gradient to its
     nearest (higher) placed peak, as for the isolation bins (``grad_have`` updated in place).
+
+    Per-disk peak count (``count_w > 0``; centres on their own grid ``kx0, ky0, kstep, knx, kny``,
+    covering the whole domain): disk centre ``c`` should end with ``count_target[c]`` peaks within
+    ``radius``; after peak ``k`` of ``n`` it should hold
+    ``f = (k + 1) / n`` of them. A candidate's weight is multiplied by ``exp(count_w D)``, D the
+    mean of ``(f T - have) / sqrt(f T + 1)`` over the centres within ``radius`` of it (clipped to
+    [-3, 3]); ``count_have`` is updated in place.
     Returns per placed peak the isolation distance (NaN for the first).
     """
     m = cand_x.shape[1]
@@ -159,6 +209,8 @@ def throw_darts(
     w = np.empty(m)
     n_centres = cnx * cny
     per_disk = math.pi * radius * radius / (cstep * cstep) if cstep > 0 else 1.0
+    use_count = count_w > 0 and count_target.size == knx * kny and count_target.size > 0
+    n_all = z.size
     for k in range(n_start, n_end):
         r = k - n_start
         t = ptype[k]
@@ -206,6 +258,10 @@ def throw_darts(
                 if use_disks:
                     gain = _disk_gain(qx, qy, cx0, cy0, cstep, cnx, cny, covered, radius, False)
                     wc = wc * math.exp(-disk_w * abs(gain - demand) / per_disk)
+                if use_count:
+                    dc = _count_deficit(qx, qy, kx0, ky0, kstep, knx, kny, count_target, count_have,
+                                        (k + 1.0) / n_all, radius)
+                    wc = wc * math.exp(count_w * min(max(dc, -3.0), 3.0))
                 w[c] = wc
                 total += wc
             if total > 0:
@@ -243,6 +299,8 @@ def throw_darts(
                     grad_have[t, b3] += 1.0
         if n_covered[0] < n_centres:
             n_covered[0] += _disk_gain(qx, qy, cx0, cy0, cstep, cnx, cny, covered, radius, True)
+        if use_count:
+            _count_add(qx, qy, kx0, ky0, kstep, knx, kny, count_have, radius)
         ci, cj = _cell_of(qx, qy, gx0, gy0, gcell, gnx, gny)
         cell = cj * gnx + ci
         nxt[k] = head[cell]

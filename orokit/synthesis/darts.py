@@ -15,10 +15,11 @@ from scipy.ndimage import gaussian_filter
 from orokit._typing import SeedLike
 from orokit.synthesis import _kernels
 from orokit.synthesis.controls import ControlMaps, Domain
+from orokit.synthesis.disks import disk_centres
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["pass_bounds", "draw_candidates", "ridge_density", "void_density", "place_peaks"]
+__all__ = ["pass_bounds", "draw_candidates", "ridge_density", "void_density", "place_peaks", "disk_count_targets"]
 
 
 def pass_bounds(n: int, n_passes: int) -> list[tuple[int, int]]:
@@ -121,6 +122,7 @@ def place_peaks(
     void_weight: float = 0.0,
     disks: list | None = None,
     disk_weight: float = 0.0,
+    disk_count_weight: float = 0.0,
     elevation_tolerance: float = 0.05,
     gradients: list | None = None,
     gradient_tail: float | None = None,
@@ -141,6 +143,10 @@ def place_peaks(
         (:mod:`orokit.synthesis.disks`) and the strength of the per-disk target: the share of
         disk centres holding one of the highest peaks follows the type's ``top_rank``
         distribution (0, or a type without the record: off).
+    disk_count_weight : strength of the per-disk peak count target: every disk centre draws a
+        target count from the type's ``peaks`` quantiles (:func:`disk_count_targets`) and
+        candidates are drawn towards disks short of their share (0, or a type without the
+        record: off; nothing is drawn from ``rng`` then).
     gradients : per type, the histogram of the elevation gradient from a peak to its nearest
         higher peak (:attr:`orokit.synthesis.terrain_type.TerrainType.gradient`), followed like
         the isolation histograms; None (for the list or a type): not followed.
@@ -207,6 +213,14 @@ def place_peaks(
     nxt = np.full(n, -1, np.int64)
     u = rng.random(n)
     cover = _coverage_setup(disks, disk_weight, ptype, n_types, domain)
+    count_grid: tuple = (0.0, 0.0, 1.0, 0, 0, np.zeros(0))
+    if disk_count_weight > 0 and disks and len(disks) == n_types and all(d is not None for d in disks):
+        radius = float(disks[0]["radius_m"])
+        step = disk_centres((domain.x0, domain.y0, domain.x0 + domain.width, domain.y0 + domain.height),
+                            radius)[2]
+        kx0, ky0, knx, kny, target = disk_count_targets(disks, controls, domain, step, radius, rng)
+        count_grid = (kx0, ky0, step, knx, kny, target)
+    count_have = np.zeros(count_grid[5].size)
     density = controls.density.copy()
     type_masks = [controls.type_index == t for t in range(n_types)]
     passes = pass_bounds(n, n_passes)
@@ -234,6 +248,7 @@ def place_peaks(
             px, py, np.ascontiguousarray(z, dtype=float), s, e, fixed, fx, fy, cand_x, cand_y, cand_w, ptype.astype(np.int64), u,
             de, ne_d, dopen, dt, dh, ae, ne_a, at, ah, head, nxt,
             domain.x0, domain.y0, gcell, gnx, gny, floor_w, *cover, ge, ne_g, gopen, gt, gh, gon,
+            *count_grid, count_have, float(disk_count_weight),
         )
         if p_i + 1 < len(passes):
             fa = fb = None
@@ -249,7 +264,49 @@ def place_peaks(
                 dens_r /= max(1.0, float(dens_r.max()))
             density = controls.density * (ridge_floor + (1 - ridge_floor) * dens_r)
         logger.debug("pass %d: placed peaks %d..%d", p_i, s, e)
-    return px, py, {"passes": passes, "disk_centres": int(cover[3] * cover[4]) if cover[-1] > 0 else 0}
+    info = {"passes": passes, "disk_centres": int(cover[3] * cover[4]) if cover[-1] > 0 else 0}
+    if count_grid[5].size:
+        info["disk_count"] = {"target": count_grid[5], "placed": count_have}
+    return px, py, info
+
+
+def disk_count_targets(disks: list, controls: ControlMaps, domain: Domain, step: float, radius: float,
+                       rng: np.random.Generator) -> tuple[float, float, int, int, np.ndarray]:
+    """Disk centres on a grid of ``step`` over the whole domain and their target peak counts.
+
+    A Gaussian random field on the centres, smoothed over half the disk radius (the
+    correlation of the counts of overlapping disks of a uniform random density), is mapped
+    by rank onto the quantiles of the ``peaks`` record of the centre's type (the real disks'
+    counts, so the twin's disks hold as many peaks as the real ones, not ``n`` spread evenly),
+    times the density map ``C_P``'s mass in the disk (inside the domain) over a full disk's
+    at the mean density: a disk reaching past the border wants its inside share.
+    Returns x0, y0 (the south-west centre), nx, ny and the targets (row-major from the south).
+    """
+    from scipy.signal import fftconvolve
+
+    nx = max(1, int(np.ceil(domain.width / step)))
+    ny = max(1, int(np.ceil(domain.height / step)))
+    x0 = domain.x0 + 0.5 * (domain.width - (nx - 1) * step)
+    y0 = domain.y0 + 0.5 * (domain.height - (ny - 1) * step)
+    field = gaussian_filter(rng.standard_normal((ny, nx)), sigma=max(0.5 * radius / step, 0.5))
+    u = (np.argsort(np.argsort(field.ravel(), kind="stable"), kind="stable") + 0.5) / field.size
+    x, y = (v.ravel() for v in np.meshgrid(x0 + np.arange(nx) * step, y0 + np.arange(ny) * step))
+    row, col = domain.cell_index(x, y)
+    ctype = controls.type_index[row, col]
+    q = np.zeros(x.size)
+    for t, d in enumerate(disks):
+        mine = ctype == t
+        if d is not None and mine.any():
+            q[mine] = np.interp(u[mine], np.asarray(d["levels"], float), np.asarray(d["peaks"], float))
+    cs_x, cs_y = domain.cell
+    ky = np.arange(-int(radius // cs_y), int(radius // cs_y) + 1) * cs_y
+    kx = np.arange(-int(radius // cs_x), int(radius // cs_x) + 1) * cs_x
+    kernel = (kx[None, :] ** 2 + ky[:, None] ** 2 <= radius**2).astype(float)
+    dens = np.clip(np.nan_to_num(controls.density), 0.0, None)
+    mass = np.clip(fftconvolve(dens, kernel, mode="same")[row, col], 0.0, None)
+    full = float(kernel.sum() * dens.mean())
+    target = q * mass / full if full > 0 else np.zeros_like(q)
+    return float(x0), float(y0), nx, ny, np.ascontiguousarray(target, dtype=float)
 
 
 def _coverage_setup(disks: list | None, disk_weight: float, ptype: np.ndarray, n_types: int,

@@ -106,6 +106,11 @@ class SynthesisParams:
         (issue 11, ``benchmarks/realism.py``, 6 tuning regions, seeds 0-2): the Wasserstein
         distance of the per-disk ``top_rank`` to the real DEM's went from 0.14-0.27 to 0.02-0.09
         (seed 2), twin disks right 87.2 % on average against 84.6 % with 0, landforms equal.
+    disk_count_weight : strength of the per-disk peak count target in the dart throwing: every 10 km
+        disk centre draws a target count from the type's ``disks`` record (its ``peaks`` quantiles,
+        a smooth random field mapped by rank) and each peak's candidates are weighted towards the
+        disks short of their share (:func:`orokit.synthesis.darts.disk_count_targets`; 0 or a type
+        without the record: off). An option, off (issue 11, session 14: see NOTES).
     border_trend : the automatic C_H follows the type's ``border_rank`` (mean elevation rank of
         its peaks by distance to the data border, in its ``disks`` record), so the twin of a DEM
         cropped around its relief holds its highest peaks inside as the DEM does; without it
@@ -182,6 +187,7 @@ class SynthesisParams:
     use_bands: bool | Literal["auto"] = "auto"
     void_weight: float = 1.0
     disk_weight: float = 32.0
+    disk_count_weight: float = 0.0
     border_trend: bool = True
     elevation_tolerance: float = 0.0125
     saddle_slope_ratio: float | None = 1.5
@@ -214,7 +220,7 @@ class SynthesisParams:
         f = self.ridge_slope_factor
         if not (isinstance(f, (int, float)) and 0 < float(f) < np.inf):
             raise InputError(f"ridge_slope_factor must be a number > 0, got {f!r}")
-        for name in ("void_weight", "disk_weight"):
+        for name in ("void_weight", "disk_weight", "disk_count_weight"):
             v = getattr(self, name)
             try:
                 ok = bool(np.isfinite(float(v)) and float(v) >= 0)
@@ -375,6 +381,7 @@ def synthesize_divide_tree(
             [t.histograms["isolation_distance"] for t in types], [t.histograms["isolation_direction"] for t in types],
             peaks.rho, n_passes=p.n_passes, n_candidates=p.n_candidates, forced=peaks.forced,
             void_weight=float(p.void_weight), disks=[t.disks for t in types], disk_weight=float(p.disk_weight),
+            disk_count_weight=float(p.disk_count_weight),
             elevation_tolerance=float(p.elevation_tolerance),
             gradients=[t.gradient for t in types] if p.follow_gradient else None,
             gradient_tail=None if p.gradient_tail is None else float(p.gradient_tail), rng=gen,
