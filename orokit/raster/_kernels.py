@@ -657,7 +657,8 @@ def ascent_pointers(z: np.ndarray) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def update_basins(z: np.ndarray, ptr: np.ndarray, lab: np.ndarray, own: np.ndarray, tid: np.ndarray,
-                  changed: np.ndarray, peak_cells: np.ndarray, peak_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                  changed: np.ndarray, peak_cells: np.ndarray, peak_ids: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Basins of steepest ascent after the cells ``changed`` (flat) of ``z`` changed (in place).
 
     ``ptr`` (:func:`ascent_pointers`), ``lab`` (basin id per cell) and ``own`` (``tid`` of the
@@ -667,8 +668,9 @@ def update_basins(z: np.ndarray, ptr: np.ndarray, lab: np.ndarray, own: np.ndarr
     from those cells) can change basin; they are relabelled by following their new chains. A new
     maximum gets the next basin id (``tid.size``, ...) and the tree peak of its cell
     (``peak_cells`` sorted, ``peak_ids`` beside them; -1 if none). Returns the new maxima's cells
-    and their ``tid`` (append them to the basin arrays). Each cell's owner is that of a full
-    relabelling; basin ids differ from it (old ids of vanished maxima are left unused).
+    and their ``tid`` (append them to the basin arrays), and the relabelled cells (no other cell's
+    owner changed). Each cell's owner is that of a full relabelling; basin ids differ from it (old
+    ids of vanished maxima are left unused).
     """
     H, W = z.shape
     mark = np.zeros(H * W, np.uint8)  # 1: pointer recomputed, 2: may change basin
@@ -707,7 +709,8 @@ def update_basins(z: np.ndarray, ptr: np.ndarray, lab: np.ndarray, own: np.ndarr
                     nq += 1
     for t in range(nq):
         lab[queue[t]] = -3  # unresolved
-    return _resolve_basins(ptr, lab, own, tid, queue[:nq], peak_cells, peak_ids)
+    new_top, new_tid = _resolve_basins(ptr, lab, own, tid, queue[:nq], peak_cells, peak_ids)
+    return new_top, new_tid, queue[:nq].copy()
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -806,6 +809,93 @@ def pass_violations(owner: np.ndarray, z: np.ndarray, parent: np.ndarray, height
                     bv[nv] = bn
                     nv += 1
     return ia[:nv].copy(), ib[:nv].copy(), bv[:nv].copy(), total
+
+
+@njit(cache=True, nogil=True)
+def _pass_check(owner: np.ndarray, z: np.ndarray, parent: np.ndarray, height: np.ndarray, depth: np.ndarray,
+                tol: float, a: int, b: int) -> float:
+    """The bottleneck of the pair of flat cells ``(a, b)`` if it is a violation of :func:`pass_violations`
+    (owners differ, both >= 0, lower cell above the finite bottleneck + ``tol``), else NaN."""
+    oa = owner[a]
+    ob = owner[b]
+    if oa == ob or oa < 0 or ob < 0:
+        return np.nan
+    bn = _bottleneck(parent, height, depth, min(oa, ob), max(oa, ob))
+    if min(np.float64(z[a]), np.float64(z[b])) > bn + tol and np.isfinite(bn):
+        return bn
+    return np.nan
+
+
+@njit(cache=True, nogil=True)
+def pass_violations_near(owner: np.ndarray, z: np.ndarray, parent: np.ndarray, height: np.ndarray,
+                         depth: np.ndarray, tol: float, cells: np.ndarray, ia: np.ndarray, ib: np.ndarray,
+                         bn: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`pass_violations` (all directions) when only the ``cells`` (flat, repeats allowed) changed owner
+    or elevation since the call that returned ``(ia, ib, bn)``: its pairs without a changed cell are
+    kept (a pair's verdict depends on its two cells only), the pairs at a changed cell are checked
+    again; the same arrays, in the same order (direction E, SW, S, SE, then raster order of ``a``)."""
+    ny, nx = owner.shape
+    size = ny * nx
+    own = owner.reshape(-1)
+    zf = z.reshape(-1)
+    mark = np.zeros(size, np.uint8)
+    for t in range(cells.size):
+        mark[cells[t]] = 1
+    keys = np.empty(64, np.int64)  # direction * size + a
+    vals = np.empty(64, np.float64)
+    nk = 0
+    for t in range(ia.size):
+        a = ia[t]
+        b = ib[t]
+        if mark[a] != 0 or mark[b] != 0:
+            continue
+        ra = a // nx
+        rb = b // nx
+        d = 0 if rb == ra else (b - rb * nx) - (a - ra * nx) + 2  # E, or SW / S / SE by column step
+        keys = _grow(keys, nk)
+        vals = _grow(vals, nk)
+        keys[nk] = d * size + a
+        vals[nk] = bn[t]
+        nk += 1
+    for t in range(cells.size):
+        c = cells[t]
+        if mark[c] != 1:
+            continue
+        mark[c] = 2
+        i = c // nx
+        j = c - i * nx
+        for d in range(4):
+            dr = 0 if d == 0 else 1
+            dc = 1 if d == 0 else d - 2
+            for side in range(2):  # c as the pair's first cell, then as its second
+                ai = i if side == 0 else i - dr
+                aj = j if side == 0 else j - dc
+                bi = ai + dr
+                bj = aj + dc
+                if ai < 0 or bi >= ny or min(aj, bj) < 0 or max(aj, bj) >= nx:
+                    continue
+                a = ai * nx + aj
+                if side == 1 and mark[a] != 0:  # a changed cell: checked as its own first cell
+                    continue
+                v = _pass_check(own, zf, parent, height, depth, tol, a, bi * nx + bj)
+                if v == v:
+                    keys = _grow(keys, nk)
+                    vals = _grow(vals, nk)
+                    keys[nk] = d * size + a
+                    vals[nk] = v
+                    nk += 1
+    order = np.argsort(keys[:nk])
+    oa = np.empty(nk, np.int64)
+    ob = np.empty(nk, np.int64)
+    ov = np.empty(nk, np.float64)
+    for t in range(nk):
+        key = keys[order[t]]
+        d = key // size
+        a = key - d * size
+        oa[t] = a
+        ob[t] = a + (1 if d == 0 else nx + d - 2)
+        ov[t] = vals[order[t]]
+    return oa, ob, ov
 
 
 @njit(cache=True, nogil=True)

@@ -131,8 +131,9 @@ class _Basins:
         self.own = _kernels.basin_owner(self.lab, self.tid)
         self.ptr = _kernels.ascent_pointers(z)
 
-    def relabel(self, cells: np.ndarray) -> None:
-        """Relabel after whole basins (``cells``, flat; tree peak cells never among them) were lowered.
+    def relabel(self, cells: np.ndarray) -> np.ndarray:
+        """Relabel after whole basins (``cells``, flat; tree peak cells never among them) were lowered;
+        returns the relabelled cells (no other cell's owner changed).
 
         Any other cell pointing into them would belong to them, except a tree peak cell in a spurious
         basin (kept out of the cut): those are relabelled too, and no other cell changes basin
@@ -140,6 +141,7 @@ class _Basins:
         cells = np.concatenate([np.asarray(cells, np.int64), self.cells[self.own[self.cells] == -1]])
         self._add(_kernels.relabel_basins(self.z, self.ptr, self.lab, self.own, self.tid, cells, self.cells,
                                           self.pid))
+        return cells
 
     def _add(self, new: tuple[np.ndarray, np.ndarray]) -> None:
         top, tid = new
@@ -147,12 +149,15 @@ class _Basins:
             self.top = np.concatenate([self.top, top])
             self.tid = np.concatenate([self.tid, tid])
 
-    def update(self, changed: np.ndarray) -> None:
-        """Relabel after the cells ``changed`` (flat indices) of the raster changed."""
+    def update(self, changed: np.ndarray) -> np.ndarray:
+        """Relabel after the cells ``changed`` (flat indices) of the raster changed; returns the
+        relabelled cells (no other cell's owner changed)."""
         if changed.size == 0:
-            return
-        self._add(_kernels.update_basins(self.z, self.ptr, self.lab, self.own, self.tid,
-                                         np.ascontiguousarray(changed, np.int64), self.cells, self.pid))
+            return np.empty(0, np.int64)
+        top, tid, cells = _kernels.update_basins(self.z, self.ptr, self.lab, self.own, self.tid,
+                                                 np.ascontiguousarray(changed, np.int64), self.cells, self.pid)
+        self._add((top, tid))
+        return cells
 
 
 def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.ndarray, drop_m: float = 0.5,
@@ -221,6 +226,9 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
         keep = (src >= 0) & (zf[top] - lv < keep_hills_m) & (zf[top] < peak_z[np.maximum(src, 0)])
         return sp, src, keep
 
+    # the cells whose owner or elevation changed since the last pass check (None: check every pair); kept
+    # hills get their owner from a flood of the whole raster each round, so with them every round checks all
+    changed: list[np.ndarray] | None = None
     for _ in range(max_rounds):
         stats["rounds"] += 1
         own, lab, top = owners()
@@ -231,7 +239,10 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
             if cutting.any():
                 cut = _kernels.reconstruct_masked(z, cutting, 1e-3, cut_slope * grid.cell_size_m, cut_depth_m)
                 stats["cut"] += cut
-                basins.relabel(np.flatnonzero(cutting))  # only the cut basins' cells can change basin
+                # only the cut basins' cells can change basin (and elevation)
+                relabelled = basins.relabel(np.flatnonzero(cutting))
+                if changed is not None:
+                    changed.append(relabelled)
                 own, lab, top = owners()
                 sp, src, keep = spurious_hills(own, lab, top)
         if sp.any() and keep_hills_m > 0:
@@ -239,8 +250,15 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
             # cell ascends to the hill top, whose best path out reaches that basin)
             stats["kept"] = int(np.unique(lab[sp.reshape(-1)]).size)
             own = np.where(sp, src[np.maximum(lab, 0)].reshape(z.shape), own)
-        # border pairs (_border_pairs) whose pass is above the tree's bottleneck (-inf: separate trees)
-        ia, ib, bn = _pass_violations(np.ascontiguousarray(own, np.int64), z, parent, height, depth, n, 1e-3)
+        # border pairs (_border_pairs) whose pass is above the tree's bottleneck (-inf: separate trees):
+        # after the first round only the pairs at a changed cell are checked again (the same pairs)
+        if changed is None:
+            ia, ib, bn = _pass_violations(np.ascontiguousarray(own, np.int64), z, parent, height, depth, n, 1e-3)
+        else:
+            ia, ib, bn = _kernels.pass_violations_near(np.ascontiguousarray(own, np.int64), z, parent, height,
+                                                       depth, 1e-3, np.concatenate([np.empty(0, np.int64), *changed]),
+                                                       ia, ib, bn)
+        changed = None if keep_hills_m > 0 else []
         stats["left"] = int(ia.size)
         if not ia.size:
             break
@@ -255,7 +273,10 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
         pick = pick[keep_pair]
         before = zf[pick]
         np.minimum.at(zf, pick, np.maximum(target[keep_pair].astype(zf.dtype), ff[pick]))
-        basins.update(pick[zf[pick].view(np.uint32) != before.view(np.uint32)])
+        lowered = pick[zf[pick].view(np.uint32) != before.view(np.uint32)]
+        relabelled = basins.update(lowered)
+        if changed is not None:
+            changed += [lowered, relabelled]
         stats["capped"] += int(keep_pair.sum())
         if not keep_pair.any() and cut == 0:
             break

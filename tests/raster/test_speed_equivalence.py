@@ -215,25 +215,33 @@ def test_basins_kept_up_to_date_equal_a_full_relabelling(seed):
             pick = (np.arange(r, r + 7)[:, None] * z.shape[1] + np.arange(c, c + 7)[None, :]).ravel()
             pick = pick[np.isfinite(zf[pick])]
         before = zf.copy()
+        own = basins.own.copy()
         zf[pick] = np.minimum(zf[pick], np.floor(zf[pick] - rng.integers(0, 3, pick.size)))
-        basins.update(np.flatnonzero(before.view(np.uint32) != zf.view(np.uint32)))
+        moved = basins.update(np.flatnonzero(before.view(np.uint32) != zf.view(np.uint32)))
         _same_basins(basins, z, cells, pid)
+        assert np.isin(np.flatnonzero(basins.own != own), moved).all()  # every owner change reported
         # a cut: whole spurious basins (tree peak cells kept out) lowered, some of their cells only
+        own = basins.own.copy()
         cut = basins.own == -1
         cut[cells] = False
         hit = np.flatnonzero(cut & (rng.random(zf.size) < 0.7))
         zf[hit] = np.floor(zf[hit] - rng.integers(0, 4, hit.size))
-        basins.relabel(np.flatnonzero(cut))
+        moved = basins.relabel(np.flatnonzero(cut))
         _same_basins(basins, z, cells, pid)
+        assert np.isin(np.flatnonzero(basins.own != own), moved).all() and np.isin(hit, moved).all()
 
 
 def _full_relabelling(self, changed):
-    """The reference for :meth:`_Basins.update`: label the whole raster again."""
+    """The reference for :meth:`_Basins.update`: label the whole raster again (returns the changed
+    cells and those whose owner changed)."""
     from orokit.raster.enforce import _Basins
 
-    if changed.size:
-        fresh = _Basins(self.z, self.cells, self.pid)
-        self.lab, self.top, self.tid, self.own, self.ptr = fresh.lab, fresh.top, fresh.tid, fresh.own, fresh.ptr
+    if not changed.size:
+        return np.empty(0, np.int64)
+    fresh = _Basins(self.z, self.cells, self.pid)
+    moved = np.flatnonzero(fresh.own != self.own)
+    self.lab, self.top, self.tid, self.own, self.ptr = fresh.lab, fresh.top, fresh.tid, fresh.own, fresh.ptr
+    return np.union1d(np.asarray(changed, np.int64), moved)
 
 
 @pytest.mark.parametrize("params", [{}, {"keep_hill_ratio": 0.3, "cut_slope": 0.3}])
@@ -544,3 +552,68 @@ def test_unique_points_equal_numpy_unique_rows(seed, zeros):
     got_u, got_i = unique_points(xy)
     assert got_u.tobytes() == want_u.tobytes() and np.array_equal(got_i, want_i.ravel())
     assert np.array_equal(got_u[got_i], xy)
+
+
+@pytest.mark.parametrize("shape", [(1, 9), (9, 1), (2, 2), (6, 2), (2, 7), (31, 26)])
+@pytest.mark.parametrize("seed", range(4))
+def test_pass_violations_near_changed_cells_equal_a_full_check(shape, seed):
+    """After owners and elevations change at some cells (edges and corners among them, runs of
+    neighbours, repeats), checking again only the pairs at those cells gives the arrays of a full check."""
+    rng = np.random.default_rng(seed)
+    n = 12
+    own = rng.integers(-2, n, shape)
+    own[rng.random(shape) < 0.4] = rng.integers(0, 3)
+    z = (rng.random(shape) * 100).astype(np.float32)
+    m = n - 1 - seed % 2  # with an odd seed, a peak without an edge (-inf bottlenecks)
+    parent, height, depth = _kernels.merge_tree(n, np.arange(m), np.arange(1, m + 1), rng.random(m) * 50)
+    ia, ib, bn, _ = _kernels.pass_violations(own, z, parent, height, depth, n, 1e-3)
+    size = own.size
+    for _ in range(6):
+        k = int(rng.integers(0, max(size // 3, 1) + 1))
+        cells = rng.choice(size, k)  # with repeats
+        if rng.random() < 0.5 and size > 4:
+            start = int(rng.integers(0, size - 3))
+            cells = np.concatenate([cells, np.arange(start, start + 3)])  # neighbours changed together
+        cells = cells.astype(np.int64)
+        o, zf = own.reshape(-1), z.reshape(-1)
+        o[cells] = np.where(rng.random(cells.size) < 0.5, rng.integers(-2, n, cells.size), o[cells])
+        zf[cells] = np.where(rng.random(cells.size) < 0.5, (rng.random(cells.size) * 100).astype(np.float32),
+                             zf[cells])
+        ia, ib, bn = _kernels.pass_violations_near(own, z, parent, height, depth, 1e-3, cells, ia, ib, bn)
+        wa, wb, wv, _ = _kernels.pass_violations(own, z, parent, height, depth, n, 1e-3)
+        for g, w in zip((ia, ib, bn), (wa, wb, wv)):
+            assert g.dtype == w.dtype and g.tobytes() == w.tobytes()
+
+
+@pytest.mark.parametrize("params", [{}, {"keep_hill_ratio": 0.3, "cut_slope": 0.3}])
+def test_enforcement_with_incremental_pass_checks_same_bytes(monkeypatch, params):
+    """A render whose enforcement checks every border pair in every round finds the same pairs in every
+    round and gives the same bytes (the incremental check is used: more than one round on this tree)."""
+    from helpers.trees import small_tree
+    from orokit.raster import enforce
+    from orokit.raster.params import RenderParams
+    from orokit.raster.render import render_elevation
+
+    p = RenderParams(lam=200.0, **params)
+    found: list[list[tuple[bytes, ...]]] = [[], []]
+    whole, near = enforce._pass_violations, _kernels.pass_violations_near
+
+    def logged(run, f):
+        def call(*args):
+            out = f(*args)
+            found[run].append(tuple(a.tobytes() for a in out))
+            return out
+        return call
+
+    def full(owner, z, parent, height, depth, tol, cells, ia, ib, bn):
+        # any n above every owner keys the owner pairs uniquely (the merge tree has >= n nodes)
+        return _kernels.pass_violations(owner, z, parent, height, depth, parent.size, tol)[:3]
+
+    monkeypatch.setattr(enforce, "_pass_violations", logged(0, whole))
+    monkeypatch.setattr(_kernels, "pass_violations_near", logged(0, near))
+    fast = render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=3).values
+    monkeypatch.setattr(enforce, "_pass_violations", logged(1, whole))
+    monkeypatch.setattr(_kernels, "pass_violations_near", logged(1, full))
+    ref = render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=3).values
+    assert fast.tobytes() == ref.tobytes()
+    assert found[0] == found[1] and len(found[0]) > 1
