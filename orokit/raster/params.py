@@ -20,6 +20,12 @@ class RenderParams:
     river_graded : the beds between two river nodes at their bound fall evenly along the flow
         (:func:`orokit.raster.rivers.graded_beds`) instead of a staircase of cone-following reaches and flats at
         ``river_slope``; False = off.
+    river_base_slope : river beds lie no lower than the domain's base level plus this slope (m/m) times their
+        flow distance to their outlet (:func:`orokit.raster.rivers.river_network`): without it the sweep pins long
+        rivers to the base level, flat valley floors at one level near the border; None = off.
+    river_base_saddle_k : that lift stops at the lowest of the bed's ``river_base_saddle_k`` nearest saddles (less
+        ``river_margin``; :func:`orokit.raster.rivers.local_relief`): a basin's beds stay near its low saddles; None =
+        no such bound.
     valley_coef : valley width ``w = valley_coef * A^0.4`` (A in m^2).
     river_relief_ratio : the minimum bed slope of a river node is ``max(river_slope, river_relief_ratio x g)``,
         g the gradient from its nearest ridge point down to the bed's bound (valleys deepen below steep
@@ -170,6 +176,8 @@ class RenderParams:
     river_margin: float = 5.0
     river_max_sink_m: float | None = None
     river_graded: bool = False
+    river_base_slope: float | None = None
+    river_base_saddle_k: int | None = None
     valley_coef: float = 0.15
     valley_slope_exponent: float = 0.0
     valley_slope_ref: float | None = None
@@ -254,6 +262,10 @@ class RenderParams:
         for name in ("floor_slope", "valley_floor_slope"):
             if not float(getattr(self, name)) >= 0.0:
                 raise InputError(f"{name} must be >= 0 (m/m), got {getattr(self, name)!r}")
+        if self.river_base_slope is not None and not float(self.river_base_slope) >= 0.0:
+            raise InputError(f"river_base_slope must be >= 0 (m/m) or None, got {self.river_base_slope!r}")
+        if self.river_base_saddle_k is not None and not int(self.river_base_saddle_k) >= 1:
+            raise InputError(f"river_base_saddle_k must be >= 1 or None, got {self.river_base_saddle_k!r}")
         if self.flank_depth_saddle_ratio is not None and not float(self.flank_depth_saddle_ratio) >= 0.0:
             raise InputError(f"flank_depth_saddle_ratio must be >= 0 or None, got {self.flank_depth_saddle_ratio!r}")
         if not int(self.flank_depth_saddle_k) >= 1:

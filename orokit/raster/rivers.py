@@ -276,6 +276,8 @@ def river_network(
     sink_relief_ratio: float | None = None,
     floor=None,
     graded: bool = False,
+    base_slope: float | None = None,
+    base_cap=None,
 ) -> RiverNetwork:
     """Rivers of a Divide Tree: dual Voronoi edges not crossing a ridge, oriented to outlets.
 
@@ -301,6 +303,12 @@ def river_network(
         should lie below the saddles around it.
     graded : after the sweep, the beds between two nodes at their bound fall evenly (:func:`graded_beds`)
         instead of following the cap and then running at ``slope`` (a staircase: steep reaches and flat ones).
+    base_slope : after the sweep, a bed lies no lower than ``base_elevation + base_slope x`` its flow distance to
+        its outlet (nor above the ridges it faces less ``margin_m``; the cap does not bound it: where the cones reach
+        below the base level the beds lay on ``base_elevation`` above them), nor above ``base_cap`` (optional
+        callable ``(k, 2) xy -> (k,)``, e.g. the lowest nearby saddle), then the sweep runs again: a long
+        river no longer runs flat at ``base_elevation`` (the sweep's floor) for tens of km, a pool at one level
+        at the domain's bottom (None: off).
 
     Returns
     -------
@@ -424,6 +432,16 @@ def river_network(
     if graded and h.size:
         h = _kernels.river_elevations(order_arr, receiver, drop, graded_beds(receiver, length, drop, h0, h), 1.0,
                                       float(base_elevation))
+    if base_slope is not None and h.size:
+        if not float(base_slope) >= 0.0:
+            raise ValueError(f"base_slope must be >= 0 (m/m), got {base_slope!r}")
+        # the cones may reach below the base level (a bed there sits at base_elevation, over its cap): only
+        # the ridges the bed faces bound it
+        lift = np.minimum(base_elevation + float(base_slope) * flowdist, np.where(np.isfinite(bnd), bnd - margin_m,
+                                                                                  np.inf))
+        if base_cap is not None:
+            lift = np.minimum(lift, np.asarray(base_cap(xy), float) - margin_m)
+        h = _kernels.river_elevations(order_arr, receiver, drop, np.maximum(h, lift), 1.0, float(base_elevation))
     if max_sink_m is not None:
         h = np.maximum(h, h0 - float(max_sink_m))
     if sink_relief_ratio is not None and relief is not None:

@@ -278,7 +278,9 @@ def build_skeleton(
                            margin_m=params.river_margin, slope=params.river_slope, cap=envelope,
                            max_sink_m=params.river_max_sink_m, relief_ratio=params.river_relief_ratio,
                            sink_relief_ratio=params.river_sink_relief_ratio,
-                           floor=floor, graded=params.river_graded)
+                           floor=floor, graded=params.river_graded, base_slope=params.river_base_slope,
+                           base_cap=None if params.river_base_saddle_k is None else
+                           (lambda xy: local_relief(xy, p, s, k=int(params.river_base_saddle_k))[0]))
     t["rivers"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

@@ -138,3 +138,41 @@ def test_render_with_graded_beds_keeps_the_orometry():
     res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
     comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
     assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+
+
+def test_river_base_slope_lifts_the_beds_pinned_at_the_base_level():
+    """``river_base_slope``: on, no bed is lower than the plain sweep's (the sweep is monotone in its start),
+    fewer beds lie at the base elevation (the lowest bed), the beds still fall downstream by at least
+    ``river_slope`` per metre where not clamped, and a steeper lift raises at least as much; the saddle bound
+    (``river_base_saddle_k``) only lowers the lifted beds, never below the plain sweep's."""
+    off = {"river_base_slope": None, "river_base_saddle_k": None}
+    plain = _skeleton(**off).river_network
+    h = plain.elevation
+    base = h.min()
+    at_base = int(np.sum(h <= base + 1e-6))
+    assert at_base > plain.outlet.sum()  # the small tree's long rivers run at the base level (the flats)
+    last = h
+    for s in (0.01, 0.05):
+        net = _skeleton(**{**off, "river_base_slope": s}).river_network
+        np.testing.assert_array_equal(plain.receiver, net.receiver)
+        g, r = net.elevation, net.receiver
+        assert (g >= last - 1e-9).all() and (g > last + 1.0).any()
+        assert int(np.sum(g <= base + 1e-6)) < at_base
+        has = r >= 0
+        has[has] = g[r[has]] > base + 1e-9
+        assert (g[has] >= g[r[has]] + 0.01 * net.length[has] - 1e-6).all()
+        last = g
+        capped = _skeleton(river_base_slope=s, river_base_saddle_k=4).river_network.elevation
+        assert (capped >= h - 1e-9).all() and (capped <= g + 1e-9).all() and (capped < g - 1.0).any()
+    for name in ("river_base_slope", "river_base_saddle_k"):
+        with pytest.raises(InputError, match=name):
+            RenderParams(**{name: -1})
+
+
+def test_render_with_river_base_slope_keeps_the_orometry():
+    tree = small_tree()
+    dem = render_elevation(tree, cell_size_m=50.0, erosion=False,
+                           params=RenderParams(lam=200.0, river_base_slope=0.02, river_base_saddle_k=16), rng=7)
+    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
