@@ -180,18 +180,21 @@ def analyze(
             from orokit.metrics.isolation import KernelMetric
 
             metric = KernelMetric.from_grid(transform, crs) if isolation else None
+            if blocks:
+                from orokit.io.spill_io import SpilledColumns
+                from orokit.tiling.engine import in_process, spill_parent
+
+                # what the search does not read (~65 bytes per peak) waits on disk until the tables; with
+                # the tasks in this process the finalize puts it there as it is made
+                store = SpilledColumns(parent=spill_parent(checkpoint))
             with bounded_gdal_cache():  # chunks are read once (plus halos): GDAL's cache would only grow
                 tiled_core = tiled_orometry(data, min_prominence_m=min_prominence_m, outside=outside,
                                             scheduler=scheduler, checkpoint=checkpoint, progress=progress,
-                                            isolation_metric=metric)
+                                            isolation_metric=metric,
+                                            store=store if store is not None and in_process(scheduler) else None)
                 core = tiled_core.orometry
                 t_core = time.perf_counter()
-                if blocks and core.n_kept:
-                    from orokit.io.spill_io import SpilledColumns
-                    from orokit.tiling.engine import spill_parent
-
-                    # what the search does not read (~65 bytes per peak) waits on disk until the tables
-                    store = SpilledColumns(parent=spill_parent(checkpoint))
+                if store is not None and core.n_kept:
                     engine.spill_orometry(core, store)
                 iso = None
                 if isolation and core.n_kept:

@@ -217,19 +217,21 @@ def _merge_iso(parts: list, keep: np.ndarray | None = None) -> dict | None:
     return out
 
 
-def _merge_task(a: _Part, b: _Part, min_prominence_m: float) -> _Part:
+def _merge_task(a: _Part, b: _Part, min_prominence_m: float, reduce: bool = True) -> _Part:
     """Merged summary of two parts; settled isolation kept only for peaks still in it.
 
     The inputs are consumed (their arrays freed once merged): the scheduler holds them
-    until this task ends, and each part has this merge as its only consumer.
+    until this task ends, and each part has this merge as its only consumer. ``reduce=False``
+    (the root merge): the merged graph is not contracted, the finalize does that.
     """
-    s = merge_summaries(a[0], b[0], min_prominence_m, consume=True)
+    s = merge_summaries(a[0], b[0], min_prominence_m, consume=True, reduce=reduce)
     iso = None if a[1] is None and b[1] is None else _merge_iso([a[1], b[1]], keep=s.key[s.ismax])
     release_free_heap()
     return s, iso, {**a[2], **b[2]}
 
 
-def _finalize_task(root: _Part, min_prominence_m: float, outside: str, nby: int, nbx: int) -> tuple:
+def _finalize_task(root: _Part, min_prominence_m: float, outside: str, nby: int, nbx: int,
+                   store: Any = None) -> tuple:
     s, iso = root[0], root[1]
     logger.info("root summary: %d nodes (%d candidate peaks), %d edges, %.1f MB; settled isolation: %d peaks, %.1f MB",
                 s.n_nodes, int(s.ismax.sum()), s.ea.size, s.nbytes() / 2**20,
@@ -246,7 +248,8 @@ def _finalize_task(root: _Part, min_prominence_m: float, outside: str, nby: int,
     del order
     iso = root[1]
     del root  # the root summary is released by the finalize as it goes (dask holds its tuple till the end)
-    return finalize_summary(s, min_prominence_m=min_prominence_m, outside=outside, consume=True), iso, stats
+    return (finalize_summary(s, min_prominence_m=min_prominence_m, outside=outside, consume=True, store=store),
+            iso, stats)
 
 
 def _checkpoint_dir(checkpoint, data, min_prominence_m: float) -> Path | None:
@@ -289,8 +292,15 @@ def _same_disk(scheduler: Any) -> bool:
     return scheduler in ("threads", "threading", "processes", "synchronous", "sync")
 
 
+def in_process(scheduler: Any) -> bool:
+    """True when every task of ``scheduler`` runs in this process (threads, synchronous, or dask's
+    default without an active distributed client), so a task can fill an object of the caller."""
+    return _same_disk(scheduler) and scheduler not in ("processes",)
+
+
 def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", scheduler: Any = None,
-                   checkpoint=None, progress: bool = False, isolation_metric=None) -> TiledOrometry:
+                   checkpoint=None, progress: bool = False, isolation_metric=None,
+                   store: Any = None) -> TiledOrometry:
     """Exact orometry of a 2-D dask array (NaN = nodata), chunk by chunk.
 
     ``result.orometry`` is exactly the :class:`~orokit.topology.engine.Orometry` of the
@@ -306,7 +316,13 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
     ``TMPDIR`` (on a RAM-backed ``TMPDIR`` the spills take memory that the RSS does not show).
     The spill and column folders that a killed run left in the ``checkpoint`` folder are removed
     first (:func:`~orokit.io.spill_io.remove_stale_folders`); its finished chunks are reused.
+    ``store`` (a column store; only with a scheduler whose tasks run in this process,
+    :func:`in_process`): the finalize puts the result's columns that the isolation search does not
+    read there as it makes them (:data:`~orokit.topology.engine.SPILLED_OROMETRY`; ``orometry`` keeps
+    empty arrays of their types).
     """
+    if store is not None and not in_process(scheduler):
+        raise TilingError("a column store needs a scheduler running in this process (threads or synchronous)")
     if checkpoint is not None:  # a killed run's temporary folders (its finished chunks are reused)
         remove_stale_folders(checkpoint)
     with ExitStack() as stack:
@@ -315,11 +331,11 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
             spill = stack.enter_context(spill_folder(parent=spill_parent(checkpoint)))
         return _tiled_orometry(data, min_prominence_m=min_prominence_m, outside=outside, scheduler=scheduler,
                                checkpoint=checkpoint, progress=progress, isolation_metric=isolation_metric,
-                               spill=spill)
+                               spill=spill, store=store)
 
 
 def _tiled_orometry(data, *, min_prominence_m: float, outside: str, scheduler: Any, checkpoint, progress: bool,
-                    isolation_metric, spill: Path | None) -> TiledOrometry:
+                    isolation_metric, spill: Path | None, store: Any = None) -> TiledOrometry:
     import dask
 
     if data.ndim != 2:
@@ -358,6 +374,7 @@ def _tiled_orometry(data, *, min_prominence_m: float, outside: str, scheduler: A
     # frees each pair as soon as it is merged (a depth-first order holds about log2(chunks)
     # summaries); settled isolation and chunk statistics travel up with the summaries
     def reduce(i0, i1, j0, j1):
+        root = (i0, i1, j0, j1) == (0, nby, 0, nbx)
         if i1 - i0 == 1 and j1 - j0 == 1:
             return tiles[i0, j0]
         if i1 - i0 >= j1 - j0:
@@ -366,13 +383,16 @@ def _tiled_orometry(data, *, min_prominence_m: float, outside: str, scheduler: A
         else:
             m = (j0 + j1) // 2
             a, b = reduce(i0, i1, j0, m), reduce(i0, i1, m, j1)
+        # the root merge is not reduced: the finalize sorts, sweeps and prunes its graph once
         return dask.delayed(_merge_task)(
-            a, b, float(min_prominence_m), dask_key_name=f"orokit-merge-{i0}-{i1}-{j0}-{j1}-{data.name}"
+            a, b, float(min_prominence_m), reduce=not root,
+            dask_key_name=f"orokit-merge-{i0}-{i1}-{j0}-{j1}-{data.name}"
         )
 
     root = reduce(0, nby, 0, nbx)
-    final = dask.delayed(_finalize_task)(root, float(min_prominence_m), outside, nby, nbx,
-                                         dask_key_name=f"orokit-final-{data.name}-{min_prominence_m}-{outside}")
+    final = dask.delayed(_finalize_task)(root, float(min_prominence_m), outside, nby, nbx, store,
+                                         dask_key_name=f"orokit-final-{data.name}-{min_prominence_m}-{outside}"
+                                                       f"-{store is None}")
     compute = get_compute(scheduler)
     logger.info("tiled analysis of %dx%d cells in %d chunks", H, W, nby * nbx)
     if progress and (scheduler is None or isinstance(scheduler, str) and "://" not in scheduler):

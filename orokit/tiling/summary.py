@@ -219,12 +219,15 @@ def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
 
 
 def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence_m: float, *,
-                    consume: bool = False) -> ChunkSummary:
+                    consume: bool = False, reduce: bool = True) -> ChunkSummary:
     """Exact merge of the summaries of two rectangles that together form a rectangle.
 
     ``consume``: ``a`` and ``b`` are released (:meth:`ChunkSummary.release`) once their
     nodes and edges are in the merged graph, so the merge's sort and sweep run without
     them (at the top merges of a 4 G-cell mosaic the two inputs are ~0.5 GB).
+    ``reduce=False``: the merged graph as it is, not contracted (its bottlenecks are exact):
+    for the root, whose :func:`finalize_summary` sorts, sweeps and prunes it anyway, so the
+    root's nodes are not swept and pruned twice (the top merge of a 4 G-cell mosaic: ~6.5 M).
     """
     if a.consumed or b.consumed:
         from orokit.errors import TilingError
@@ -279,16 +282,20 @@ def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence_m: float, *
         b.release()
     s = ChunkSummary(region, a.shape, **merged, n_maxima=n_maxima)
     del merged
+    if not reduce:
+        return s
     return _reduce(s, min_prominence_m, _side_mask(s.key, region, s.shape))
 
 
 def finalize_summary(s: ChunkSummary, *, min_prominence_m: float, outside: str,
-                     consume: bool = False) -> Orometry:
+                     consume: bool = False, store: Any = None) -> Orometry:
     """Peaks and Divide Tree of the whole raster from its root summary.
 
     ``consume``: ``s`` is released (:meth:`ChunkSummary.release`) as its arrays are handed to
     :func:`~orokit.topology.engine.finalize_graph`, which lets each go once used (at a 4 G-cell
     mosaic's root, ~6.5 M nodes, they are freed during the finalize instead of after it).
+    ``store``: a column store where the finalize puts the result's columns the isolation search
+    does not read (:func:`~orokit.topology.engine.finalize_graph`).
     """
     if s.n_nodes == 0:
         from orokit.errors import InputError
@@ -303,7 +310,7 @@ def finalize_summary(s: ChunkSummary, *, min_prominence_m: float, outside: str,
         node_key=arrays.pop("key"), node_z=arrays.pop("z"), node_bmax=arrays.pop("bmax"),
         node_nmin=arrays.pop("nmin"), node_ismax=arrays.pop("ismax"), ea=arrays.pop("ea"), eb=arrays.pop("eb"),
         ez=arrays.pop("ez"), ekey=arrays.pop("ekey"), min_prominence_m=min_prominence_m, outside=outside,
-        shape=shape, n_maxima=n_maxima,
+        shape=shape, n_maxima=n_maxima, store=store,
     )
 
 

@@ -203,6 +203,7 @@ def finalize_graph(
     outside: str,
     shape: tuple[int, int],
     n_maxima: int,
+    store: Any = None,
 ) -> Orometry:
     """Peaks and pruned Divide Tree from a saddle graph whose bottlenecks are exact.
 
@@ -211,6 +212,9 @@ def finalize_graph(
     engine (nodes = basins) and by the tiled engine (nodes = merged tile summaries).
     Each array is let go once used (a caller that holds no other reference, as the tiled
     engine's finalize, frees it then: ~100 bytes per node of a 6.5 M-node root).
+    ``store`` (a column store, see :func:`spill_orometry`): the :data:`SPILLED_OROMETRY` columns go
+    there as soon as each is made, the result keeping empty arrays of their types (the kept peaks'
+    33 bytes are not held beside the prune, nor the ridges after it).
     """
     n = node_key.size
     # canonical order: saddle from high to low, then the basin pair (monkey saddles list
@@ -265,17 +269,21 @@ def finalize_graph(
     exact = ~touched[kept] & nonroot if outside == "unknown" else np.ones(kept.size, bool)
     kept_prom = prom[kept]
     del key_edge, parent, touched, prom, is_root, nonroot
+    if store is not None:
+        ks, ksz, par, exact, kept_prom = (_to_store(store, f, v) for f, v in (
+            ("key_saddle_cell", ks), ("key_saddle_z", ksz), ("parent", par), ("prominence_exact", exact),
+            ("prominence", kept_prom)))
     # every edge: of several edges at one saddle, the prune picks the same one in both engines
     oa, ob, oe, _, _, _ = _kernels.prune_edges(n, ea, eb, ez, ekey, keep, no_bmax, no_nmin, node_z, node_key, False)
     del ea, eb, keep
-    # the output one array at a time, each source let go once taken
-    ridge_saddle_cell = ekey[oe]
+    # the output one array at a time, each source let go once taken (and put in the store)
+    ridge_saddle_cell = _to_store(store, "ridge_saddle_cell", ekey[oe])
     del ekey
-    ridge_saddle_z = ez[oe]
+    ridge_saddle_z = _to_store(store, "ridge_saddle_z", ez[oe])
     del ez, oe
-    ridge_a = new_id[oa]
+    ridge_a = _to_store(store, "ridge_a", new_id[oa])
     del oa
-    ridge_b = new_id[ob]
+    ridge_b = _to_store(store, "ridge_b", new_id[ob])
     del ob, new_id
     peak_cell = node_key[kept]
     del node_key
@@ -296,6 +304,15 @@ def finalize_graph(
         ridge_saddle_cell=ridge_saddle_cell,
         ridge_saddle_z=ridge_saddle_z,
     )
+
+
+def _to_store(store: Any, name: str, values: np.ndarray) -> np.ndarray:
+    """``values`` put in the column ``store`` as column ``name``, then an empty array of their type
+    (without a store, ``values``)."""
+    if store is None:
+        return values
+    store.put(name, values)
+    return np.empty(0, values.dtype)
 
 
 def saddle_order(ea: np.ndarray, eb: np.ndarray, ez: np.ndarray, ekey: np.ndarray) -> np.ndarray:

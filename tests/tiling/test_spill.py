@@ -48,9 +48,9 @@ def test_spilled_settled_isolation_equals_the_carried_one(grid, tmp_path, monkey
     carried_parts = []
     real_merge = te._merge_task
 
-    def merge(a, b, eps):
+    def merge(a, b, eps, **kw):
         carried_parts.extend([a[1], b[1]])
-        return real_merge(a, b, eps)
+        return real_merge(a, b, eps, **kw)
 
     monkeypatch.setattr(te, "_merge_task", merge)
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
@@ -73,6 +73,28 @@ def test_spilled_settled_isolation_equals_the_carried_one(grid, tmp_path, monkey
     assert got["key"].size > 20
     for f in got:
         np.testing.assert_array_equal(got[f], want[f], err_msg=f)
+
+
+def test_the_finalize_puts_the_columns_the_search_does_not_read_in_the_store(tmp_path):
+    """With a column store the chunked engine's finalize writes the result's columns the isolation search
+    does not read as it makes them (the result keeps empty arrays): the same values as without a store."""
+    from orokit.errors import TilingError
+    from orokit.io.spill_io import SpilledColumns
+    from orokit.topology.engine import SPILLED_OROMETRY
+
+    data = da.from_array(_grid(), chunks=(17, 23))
+    plain = te.tiled_orometry(data, min_prominence_m=1.0, scheduler="synchronous").orometry
+    store = SpilledColumns(parent=tmp_path)
+    got = te.tiled_orometry(data, min_prominence_m=1.0, scheduler="threads", store=store).orometry
+    assert plain.n_kept > 50 and got.n_kept == plain.n_kept
+    np.testing.assert_array_equal(got.peak_cell, plain.peak_cell)
+    np.testing.assert_array_equal(got.peak_z, plain.peak_z)
+    for f in SPILLED_OROMETRY:
+        assert getattr(got, f).size == 0 and getattr(got, f).dtype == getattr(plain, f).dtype, f
+        np.testing.assert_array_equal(store.column(f), getattr(plain, f), err_msg=f)
+    with pytest.raises(TilingError, match="in this process"):  # a worker process would fill a copy of it
+        te.tiled_orometry(data, min_prominence_m=1.0, scheduler="processes", store=store)
+    store.close()
 
 
 def test_chunked_analysis_with_spill_writes_the_in_memory_files(make_dem, tmp_path, monkeypatch):
@@ -269,7 +291,8 @@ def test_a_rerun_after_a_killed_checkpoint_run_removes_its_folders_and_keeps_its
     child = subprocess.run([sys.executable, "-c", _KILLED_RUN, str(tif), str(ck), where], capture_output=True)
     assert child.returncode == -9, child.stderr.decode()[-2000:]
     left = sorted(p.name.split("-")[1] for p in ck.iterdir() if p.name.startswith("orokit-"))
-    assert left == (["columns"] if where == "isolation" else ["spill"])
+    # the column store exists from the start of the chunk pass (the finalize fills it)
+    assert left == (["columns"] if where == "isolation" else ["columns", "spill"])
     assert len(list(ck.glob(".chunk_*.tmp-*"))) == (1 if where == "write" else 0)
     chunks = {p: p.stat().st_mtime_ns for p in ck.glob("chunk_*.npz")}
     assert len(chunks) >= (7 * 7 if where == "isolation" else 5)

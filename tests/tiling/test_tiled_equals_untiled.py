@@ -48,10 +48,12 @@ def grids(draw):
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(grids(), st.sampled_from([0.0, 0.0, 1.0, 2.0]), st.sampled_from(["unknown", "sea"]), st.booleans())
-def test_chunk_summaries_merge_exactly(case, eps, outside, consume):
+@given(grids(), st.sampled_from([0.0, 0.0, 1.0, 2.0]), st.sampled_from(["unknown", "sea"]), st.booleans(),
+       st.booleans())
+def test_chunk_summaries_merge_exactly(case, eps, outside, consume, reduce_root):
     """Summaries over any chunking (1-row chunks, chunks cutting plateaus) merge to the exact result,
-    also when each merge frees its inputs (``consume``, as the engine's merge tasks do)."""
+    also when each merge frees its inputs (``consume``, as the engine's merge tasks do) and when the
+    last merge hands its graph to the finalize uncontracted (``reduce_root=False``, as the engine's root)."""
     z, ch, cw = case
     assume(not np.isnan(z).all())
     H, W = z.shape
@@ -62,15 +64,17 @@ def test_chunk_summaries_merge_exactly(case, eps, outside, consume):
         for i in range(len(rb) - 1) for j in range(len(cb) - 1)
     }
     # merge in raster order (row strips first), unlike the engine's halving order
+    nr, nc = len(rb) - 1, len(cb) - 1
     rows = []
-    for i in range(len(rb) - 1):
+    for i in range(nr):
         s = tiles[i, 0]
-        for j in range(1, len(cb) - 1):
-            s = merge_summaries(s, tiles[i, j], eps, consume=consume)
+        for j in range(1, nc):
+            last = nr == 1 and j == nc - 1
+            s = merge_summaries(s, tiles[i, j], eps, consume=consume, reduce=reduce_root or not last)
         rows.append(s)
     s = rows[0]
-    for r in rows[1:]:
-        s = merge_summaries(s, r, eps, consume=consume)
+    for k, r in enumerate(rows[1:]):
+        s = merge_summaries(s, r, eps, consume=consume, reduce=reduce_root or k < nr - 2)
     if consume and len(rows) > 1:
         assert rows[0].consumed and rows[0].n_nodes == 0 and rows[-1].ea.size == 0
         with pytest.raises(TilingError, match="already merged"):
