@@ -37,7 +37,7 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 __all__ = ["read_dem", "read_dem_array", "DemArray", "read_raster_band", "raster_cell_count",
-           "bounded_gdal_cache"]
+           "bounded_gdal_cache", "limit_gdal_cache"]
 
 ChunksLike = int | str | Sequence[int] | Mapping[str, int] | None
 CellSizeLike = float | tuple[float, float] | None
@@ -55,14 +55,30 @@ PLAUSIBLE_MAX_M = 9_000.0
 VOID_SENTINELS = (-9999.0, -32768.0, -32767.0, -99999.0)
 #: SRTM .hgt tiles: (rows, cols) for 2-byte samples
 _HGT_SHAPES = ((1201, 1201), (3601, 3601), (1801, 3601))
-#: GDAL block cache (bytes) while orokit reads: by default GDAL caches up to 5 % of the RAM,
-#: so a whole-raster read kept a second copy of the raster in the cache (twice the peak memory)
+#: GDAL block cache (bytes) of the ``orokit`` program (:func:`limit_gdal_cache`): by default GDAL caches up to
+#: 5 % of the RAM, and a whole-raster read kept its blocks in the cache (+16-20 MB peak at 15.1 M cells)
 READ_CACHE_BYTES = 32 * 2**20
 #: threads reading a whole raster (row stripes, one GDAL handle each) and rows a stripe has at least
 READ_THREADS = min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
 READ_MIN_ROWS = 512
 #: formats whose rows GDAL reads at any offset (a PNG or an ASCII grid is decoded from its start: one thread)
 READ_SPLIT_DRIVERS = frozenset({"GTiff", "COG", "SRTMHGT", "EHdr", "ENVI", "VRT"})
+
+
+def limit_gdal_cache(nbytes: int = READ_CACHE_BYTES) -> bool:
+    """Bound the block cache of rasterio's GDAL to ``nbytes`` for the rest of the process; False (nothing
+    done) when the user set ``GDAL_CACHEMAX`` (environment), which wins.
+
+    The cache size is global to the process (GDAL has no per-thread or per-dataset size), so
+    this is a process-wide setting: only the ``orokit`` program's entry point calls it
+    (``orokit.cli.main.apply_process_settings``), never library code run in a caller's process.
+    """
+    if "GDAL_CACHEMAX" in os.environ:
+        return False
+    from rasterio.env import set_gdal_config
+
+    set_gdal_config("GDAL_CACHEMAX", int(nbytes))
+    return True
 
 
 @contextlib.contextmanager
@@ -277,8 +293,8 @@ class _BandReader:
     def _read_all(self) -> NDArray[np.float32]:
         """The whole band, in row stripes read and converted by parallel threads (one GDAL handle each).
 
-        From the caller's thread under :func:`bounded_gdal_cache` (no cached second copy);
-        stripes start on block rows, so no block is read twice.
+        Stripes start on block rows, so no block is read twice; each stripe's handle is closed
+        once read (its blocks leave GDAL's cache).
         """
         h, w = self.shape
         raw = np.empty(self.shape, np.dtype(self.native_dtype))
@@ -297,14 +313,13 @@ class _BandReader:
                     raise self._read_error(exc, "") from exc
             return self._fill(raw[r0:r1], None if out is raw else out[r0:r1])
 
-        with bounded_gdal_cache():
-            if len(cuts) == 2:
-                parts = [stripe(0, h)]
-            else:
-                from concurrent.futures import ThreadPoolExecutor
+        if len(cuts) == 2:
+            parts = [stripe(0, h)]
+        else:
+            from concurrent.futures import ThreadPoolExecutor
 
-                with ThreadPoolExecutor(len(cuts) - 1) as pool:
-                    parts = list(pool.map(stripe, cuts[:-1], cuts[1:]))
+            with ThreadPoolExecutor(len(cuts) - 1) as pool:
+                parts = list(pool.map(stripe, cuts[:-1], cuts[1:]))
         del raw
         self._warn_implausible(sum(p[0] for p in parts), [v for p in parts for v in p[1]], "")
         return out

@@ -56,7 +56,7 @@ main()
 
 
 def _console(*args: str, env: dict | None = None, script: str = SCRIPT) -> str:
-    base = {k: v for k, v in os.environ.items() if k != "ARROW_DEFAULT_MEMORY_POOL"}
+    base = {k: v for k, v in os.environ.items() if k not in ("ARROW_DEFAULT_MEMORY_POOL", "GDAL_CACHEMAX")}
     res = subprocess.run([sys.executable, "-c", script, *args], capture_output=True, text=True, timeout=300,
                          env={**base, **(env or {})})
     assert res.returncode == 0, res.stderr
@@ -69,6 +69,24 @@ def test_console_script_applies_them_to_analyze(tmp_path):
     assert _console(*args, str(tmp_path / "a")) == "['arenas 2', 'drop libllvmlite'] system"
     # a user's choice of Arrow's pool stays
     assert _console(*args, str(tmp_path / "b"), env={"ARROW_DEFAULT_MEMORY_POOL": "jemalloc"}).endswith("jemalloc")
+
+
+#: the console script's process, printing the size of GDAL's block cache at its end (rasterio asks GDAL)
+GDAL_CACHE = SCRIPT.replace('print(calls, os.environ.get("ARROW_DEFAULT_MEMORY_POOL"))',
+                            'print(__import__("rasterio.env").env.get_gdal_config("GDAL_CACHEMAX"))')
+
+
+def test_console_script_bounds_gdals_cache_for_analyze(tmp_path):
+    """``orokit analyze`` bounds GDAL's block cache (32 MB) for its whole process, in-memory and chunked; a
+    user's ``GDAL_CACHEMAX`` wins; another command keeps GDAL's default (the library never changes it:
+    tests/io/test_read_dem_array.py)."""
+    assert GDAL_CACHE != SCRIPT
+    dem = str(_dem(tmp_path / "dem.tif"))
+    args = ["-q", "analyze", dem, "--no-progress", "--min-prominence", "5", "-o"]
+    assert _console(*args, str(tmp_path / "a"), script=GDAL_CACHE) == str(32 * 2**20)
+    assert _console(*args, str(tmp_path / "b"), "--chunks", "32", script=GDAL_CACHE) == str(32 * 2**20)
+    assert _console(*args, str(tmp_path / "c"), env={"GDAL_CACHEMAX": "123456789"}, script=GDAL_CACHE) == "123456789"
+    assert _console("data", "list", script=GDAL_CACHE) != str(32 * 2**20)
 
 
 @pytest.mark.parametrize("args", [["--version"], ["data", "list"]])

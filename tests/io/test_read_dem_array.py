@@ -200,3 +200,27 @@ def test_the_mosaic_vrt_of_a_tile_folder_goes_when_the_process_ends(tmp_path):
                          check=True, env={**os.environ, "TMPDIR": str(tmp)})
     assert out.stdout.split() == ["2"]  # there while the process runs
     assert list(tmp.iterdir()) == []  # gone after
+
+
+def test_library_reads_leave_gdals_cache_size_alone(tmp_path, monkeypatch):
+    """GDAL's block cache size is global to the process: a library read (in the caller's process) never
+    changes it, not even while it reads (before: 32 MB for the whole process during every whole read);
+    the bound is the ``orokit`` program's own setting (tests/cli/test_process_settings.py)."""
+    from rasterio.env import get_gdal_config
+
+    import orokit.io.dem as dem
+
+    monkeypatch.delenv("GDAL_CACHEMAX", raising=False)
+    path = _write(tmp_path / "a.tif", np.arange(600 * 40, dtype=np.float32).reshape(600, 40) % 5000)
+    size = get_gdal_config("GDAL_CACHEMAX")  # the cache's size in bytes (rasterio asks GDAL)
+    seen: list = []
+    opened = dem._open_dataset
+
+    def spy(*args, **kwargs):
+        seen.append(get_gdal_config("GDAL_CACHEMAX"))
+        return opened(*args, **kwargs)
+
+    monkeypatch.setattr(dem, "_open_dataset", spy)
+    assert read_dem_array(str(path)).values.shape == (600, 40)
+    assert len(seen) >= 2 and set(seen) == {size}  # header, then the pixels' stripes
+    assert get_gdal_config("GDAL_CACHEMAX") == size
