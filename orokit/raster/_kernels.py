@@ -8,6 +8,7 @@ depends on its donors).
 from __future__ import annotations
 
 import heapq
+import math
 
 import numpy as np
 from numba import njit, prange
@@ -955,3 +956,85 @@ def relabel_basins(z: np.ndarray, ptr: np.ndarray, lab: np.ndarray, own: np.ndar
         else:
             lab[j] = -3
     return _resolve_basins(ptr, lab, own, tid, cells, peak_cells, peak_ids)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def slope_magnitude(z: np.ndarray, res: np.float32) -> np.ndarray:
+    """``np.hypot(gx, gy)`` of ``gy, gx = np.gradient(z, res)`` for a float32 ``z`` (at least 2 x 2) and
+    float32 ``res``: the same float32 operations (central differences divided by ``2 res``, one-sided ones
+    by ``res`` on the edges; the C library's ``hypotf``, as numpy's), without the two gradient rasters
+    (rows on all threads)."""
+    ny, nx = z.shape
+    out = np.empty((ny, nx), np.float32)
+    two = np.float32(2.0) * res
+    for i in prange(ny):
+        for j in range(nx):
+            if i == 0:
+                gy = (z[1, j] - z[0, j]) / res
+            elif i == ny - 1:
+                gy = (z[ny - 1, j] - z[ny - 2, j]) / res
+            else:
+                gy = (z[i + 1, j] - z[i - 1, j]) / two
+            if j == 0:
+                gx = (z[i, 1] - z[i, 0]) / res
+            elif j == nx - 1:
+                gx = (z[i, nx - 1] - z[i, nx - 2]) / res
+            else:
+                gx = (z[i, j + 1] - z[i, j - 1]) / two
+            out[i, j] = math.hypot(gx, gy)
+    return out
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def flat_ramp(s: np.ndarray, t: np.float32) -> np.ndarray:
+    """``np.clip((minimum_filter(s, size=3, mode="nearest") - t) / t, 0, 1)`` for a float32 ``s`` without
+    NaN and a float32 ``t``: 0 where the least slope of a cell and its 8 neighbours is ``t`` or less,
+    rising linearly to 1 at ``2 t`` (the same float32 operations; rows on all threads)."""
+    ny, nx = s.shape
+    out = np.empty((ny, nx), np.float32)
+    for i in prange(ny):
+        i0 = max(i - 1, 0)
+        i1 = min(i + 1, ny - 1)
+        col = np.empty(nx, np.float32)  # least of the three rows in each column
+        for j in range(nx):
+            col[j] = min(s[i0, j], s[i, j], s[i1, j])
+        for j in range(nx):
+            m = min(col[max(j - 1, 0)], col[j], col[min(j + 1, nx - 1)])
+            v = (m - t) / t
+            out[i, j] = np.float32(0.0) if v < 0 else (np.float32(1.0) if v > 1 else v)
+    return out
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def gaussian_nearest(s: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``scipy.ndimage.gaussian_filter(s, sigma, mode="nearest")`` of a float32 ``s`` given its symmetric
+    1-D weights ``w`` (odd size, :func:`orokit.raster.render._gaussian_weights`): rows, then columns,
+    each pass as scipy's ``correlate1d`` computes a symmetric filter (float64 sums in the same order,
+    ``x[0] w[0] + sum (x[-k] + x[k]) w[-k]`` from the outermost pair in, rounded to float32 after each
+    pass); rows of cells on all threads."""
+    ny, nx = s.shape
+    r = w.size // 2
+    tmp = np.empty((ny, nx), np.float32)
+    for i in prange(ny):
+        acc = np.empty(nx, np.float64)
+        for j in range(nx):
+            acc[j] = np.float64(s[i, j]) * w[r]
+        for k in range(-r, 0):
+            ia = min(max(i + k, 0), ny - 1)
+            ib = min(max(i - k, 0), ny - 1)
+            wk = w[r + k]
+            for j in range(nx):
+                acc[j] += (np.float64(s[ia, j]) + np.float64(s[ib, j])) * wk
+        for j in range(nx):
+            tmp[i, j] = np.float32(acc[j])
+    out = np.empty((ny, nx), np.float32)
+    for i in prange(ny):
+        line = np.empty(nx + 2 * r, np.float64)
+        for j in range(nx + 2 * r):
+            line[j] = np.float64(tmp[i, min(max(j - r, 0), nx - 1)])
+        for j in range(nx):
+            a = line[j + r] * w[r]
+            for k in range(-r, 0):
+                a += (line[j + r + k] + line[j + r - k]) * w[r + k]
+            out[i, j] = np.float32(a)
+    return out

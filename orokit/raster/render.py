@@ -129,20 +129,30 @@ def _detail_weights(z: np.ndarray, res: float, near: np.ndarray, smooth_m: float
     return _detail_act(near, *_detail_slope(z, res, smooth_m, power, flat_deg))
 
 
+def _gaussian_weights(sigma: float, truncate: float = 4.0) -> np.ndarray:
+    """The 1-D weights :func:`scipy.ndimage.gaussian_filter` correlates with (radius
+    ``int(truncate sigma + 0.5)``, the same float64 values and order)."""
+    lw = int(truncate * float(sigma) + 0.5)
+    x = np.arange(-lw, lw + 1)
+    phi = np.exp(-0.5 / (float(sigma) * float(sigma)) * x ** 2)
+    return np.ascontiguousarray((phi / phi.sum())[::-1])
+
+
 def _detail_slope(z: np.ndarray, res: float, smooth_m: float, power: float,
                   flat_deg: float) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The parts of :func:`_detail_weights` that need the slope of ``z`` only: the flat test (None
     when ``flat_deg`` is 0) and the normalised smoothed slope (None when ``power`` is 0)."""
-    gy, gx = np.gradient(np.asarray(z, np.float32), np.float32(res))
-    s = np.hypot(gx, gy)
-    del gy, gx
+    z32 = np.ascontiguousarray(z, np.float32)
+    if min(z32.shape) < 2:
+        np.gradient(z32)  # numpy's error: too small for a gradient
+    # numba kernels with numpy's and scipy's float32 operations: the same bytes, one pass each on all cores
+    s = _kernels.slope_magnitude(z32, np.float32(res))
     flat = None
     if flat_deg > 0:
-        t = np.float32(np.tan(np.radians(flat_deg)))
-        flat = np.clip((ndimage.minimum_filter(s, size=3, mode="nearest") - t) / t, 0.0, 1.0)
+        flat = _kernels.flat_ramp(s, np.float32(np.tan(np.radians(flat_deg))))
     if power == 0:
         return flat, None
-    w = ndimage.gaussian_filter(s, max(0.5 * smooth_m / res, 0.5), mode="nearest")
+    w = _kernels.gaussian_nearest(s, _gaussian_weights(max(0.5 * smooth_m / res, 0.5)))
     if power != 1:
         w **= np.float32(power)
     m = float(np.sqrt(np.mean(w * w, dtype=np.float64)))

@@ -617,3 +617,68 @@ def test_enforcement_with_incremental_pass_checks_same_bytes(monkeypatch, params
     ref = render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=3).values
     assert fast.tobytes() == ref.tobytes()
     assert found[0] == found[1] and len(found[0]) > 1
+
+
+def _detail_slope_numpy(z, res, smooth_m, power, flat_deg):
+    """The numpy/scipy version of :func:`orokit.raster.render._detail_slope` that the slope and flat-test
+    kernels replaced."""
+    gy, gx = np.gradient(np.asarray(z, np.float32), np.float32(res))
+    s = np.hypot(gx, gy)
+    flat = None
+    if flat_deg > 0:
+        t = np.float32(np.tan(np.radians(flat_deg)))
+        flat = np.clip((ndimage.minimum_filter(s, size=3, mode="nearest") - t) / t, 0.0, 1.0)
+    if power == 0:
+        return flat, None
+    w = ndimage.gaussian_filter(s, max(0.5 * smooth_m / res, 0.5), mode="nearest")
+    if power != 1:
+        w **= np.float32(power)
+    m = float(np.sqrt(np.mean(w * w, dtype=np.float64)))
+    return flat, (w * np.float32(1.0 / m) if m > 0 else np.ones(z.shape, np.float32))
+
+
+@pytest.mark.parametrize("shape", [(2, 2), (2, 9), (9, 2), (3, 3), (57, 43)])
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("res", [30.0, 12.7, 0.3])
+def test_detail_slope_kernels_equal_numpy(shape, seed, res):
+    """The slope magnitude and flat test in numba give numpy's and scipy's float32 bytes (flats and
+    ties, slopes around the flat threshold, steep cliffs, negative heights, float64 input)."""
+    from orokit.raster.render import _detail_slope
+
+    rng = np.random.default_rng(seed)
+    t = np.tan(np.radians(2.0)) * res
+    z = (rng.integers(-2, 3, shape) * t * rng.choice([0.5, 1.0, 1.5, 40.0], shape)).astype(np.float32)
+    z += (rng.random(shape) * (res if seed == 2 else 0.0)).astype(np.float32) - np.float32(500.0 * seed)
+    for zz, flat_deg, power in ((z, 2.0, 1.0), (z.astype(np.float64), 3.0, 0.7), (z, 0.0, 0.0), (z, 2.0, 0.0)):
+        got = _detail_slope(zz, res, 200.0, power, flat_deg)
+        want = _detail_slope_numpy(zz, res, 200.0, power, flat_deg)
+        for g, w in zip(got, want):
+            assert (g is None) == (w is None)
+            if w is not None:
+                assert g.dtype == w.dtype and g.tobytes() == w.tobytes()
+    ramp = _detail_slope(z, res, 200.0, 1.0, 2.0)[0]
+    if shape == (57, 43):  # flat cells, cells on the ramp and steep ones
+        assert ramp is not None and (ramp == 0).any() and ((ramp > 0) & (ramp < 1)).any() and (ramp == 1).any()
+
+
+def test_detail_slope_too_small_raises_numpys_error():
+    from orokit.raster.render import _detail_slope
+
+    with pytest.raises(ValueError, match="too small"):
+        _detail_slope(np.zeros((1, 5), np.float32), 30.0, 200.0, 1.0, 2.0)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 30), (30, 1), (5, 4), (64, 77)])
+@pytest.mark.parametrize("sigma", [0.5, 1.7, 3.3333333333333335, 9.0])
+@pytest.mark.parametrize("seed", range(2))
+def test_gaussian_kernel_equals_scipy(shape, sigma, seed):
+    """The numba Gaussian gives scipy.ndimage.gaussian_filter's float32 bytes (mode nearest; radius larger
+    than the grid among them; smooth and rough inputs, large offsets)."""
+    from orokit.raster.render import _gaussian_weights
+
+    rng = np.random.default_rng(seed)
+    s = (rng.random(shape) * 10.0 ** rng.uniform(-3, 3, shape)).astype(np.float32)
+    s += np.float32(1000.0 * seed)
+    want = ndimage.gaussian_filter(s, sigma, mode="nearest")
+    got = _kernels.gaussian_nearest(s, _gaussian_weights(sigma))
+    assert got.dtype == want.dtype and got.tobytes() == want.tobytes()
