@@ -172,8 +172,6 @@ def analyze(
                 from orokit.errors import TilingError
 
                 raise TilingError(f"cannot reach the dask scheduler at {scheduler}: {exc}") from None
-        from orokit.io.dem import bounded_gdal_cache
-
         try:
             if chunks is not None:
                 data = data.rechunk(chunks) if hasattr(data, "rechunk") else _as_dask(data, chunks)
@@ -187,27 +185,26 @@ def analyze(
                 # what the search does not read (~65 bytes per peak) waits on disk until the tables; with
                 # the tasks in this process the finalize puts it there as it is made
                 store = SpilledColumns(parent=spill_parent(checkpoint))
-            with bounded_gdal_cache():  # chunks are read once (plus halos): GDAL's cache would only grow
-                tiled_core = tiled_orometry(data, min_prominence_m=min_prominence_m, outside=outside,
-                                            scheduler=scheduler, checkpoint=checkpoint, progress=progress,
-                                            isolation_metric=metric,
-                                            store=store if store is not None and in_process(scheduler) else None)
-                core = tiled_core.orometry
-                t_core = time.perf_counter()
-                if store is not None and core.n_kept:
-                    engine.spill_orometry(core, store)
+            tiled_core = tiled_orometry(data, min_prominence_m=min_prominence_m, outside=outside,
+                                        scheduler=scheduler, checkpoint=checkpoint, progress=progress,
+                                        isolation_metric=metric,
+                                        store=store if store is not None and in_process(scheduler) else None)
+            core = tiled_core.orometry
+            t_core = time.perf_counter()
+            if store is not None and core.n_kept:
+                engine.spill_orometry(core, store)
+            iso = None
+            if isolation and core.n_kept:
+                iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform,
+                                      crs=crs, compute=get_compute(scheduler),
+                                      chunk_stats=tiled_core.chunk_stats, known=tiled_core.chunk_isolation,
+                                      release_known=True)
+            del tiled_core  # the settled isolation (~90 bytes per candidate peak) is in iso now
+            if store is not None and iso is not None:  # to the store, freed before the tables are made
+                for name, dtype in engine.ISOLATION_ARRAYS:
+                    store.put(name, iso[name].to_numpy(dtype))
                 iso = None
-                if isolation and core.n_kept:
-                    iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform,
-                                          crs=crs, compute=get_compute(scheduler),
-                                          chunk_stats=tiled_core.chunk_stats, known=tiled_core.chunk_isolation,
-                                          release_known=True)
-                del tiled_core  # the settled isolation (~90 bytes per candidate peak) is in iso now
-                if store is not None and iso is not None:  # to the store, freed before the tables are made
-                    for name, dtype in engine.ISOLATION_ARRAYS:
-                        store.put(name, iso[name].to_numpy(dtype))
-                    iso = None
-                t_iso = time.perf_counter()
+            t_iso = time.perf_counter()
         finally:
             if client is not None:
                 client.close()

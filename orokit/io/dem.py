@@ -37,7 +37,7 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 __all__ = ["read_dem", "read_dem_array", "DemArray", "read_raster_band", "raster_cell_count",
-           "bounded_gdal_cache", "limit_gdal_cache"]
+           "limit_gdal_cache"]
 
 ChunksLike = int | str | Sequence[int] | Mapping[str, int] | None
 CellSizeLike = float | tuple[float, float] | None
@@ -79,21 +79,6 @@ def limit_gdal_cache(nbytes: int = READ_CACHE_BYTES) -> bool:
 
     set_gdal_config("GDAL_CACHEMAX", int(nbytes))
     return True
-
-
-@contextlib.contextmanager
-def bounded_gdal_cache(nbytes: int = READ_CACHE_BYTES) -> Iterator[None]:
-    """GDAL's block cache bounded to ``nbytes`` (process-wide) while the block runs.
-
-    A user's own ``GDAL_CACHEMAX`` (environment) wins. The cache size is global to the
-    process, so only the main thread changes it (dask worker threads read under the
-    bound their caller set).
-    """
-    if "GDAL_CACHEMAX" in os.environ or threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    with rasterio.Env(GDAL_CACHEMAX=int(nbytes)):
-        yield
 
 
 def _is_virtual(path: str) -> bool:

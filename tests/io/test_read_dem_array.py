@@ -202,13 +202,16 @@ def test_the_mosaic_vrt_of_a_tile_folder_goes_when_the_process_ends(tmp_path):
     assert list(tmp.iterdir()) == []  # gone after
 
 
-def test_library_reads_leave_gdals_cache_size_alone(tmp_path, monkeypatch):
+@pytest.mark.parametrize("chunked", [False, True])
+def test_library_reads_leave_gdals_cache_size_alone(tmp_path, monkeypatch, chunked):
     """GDAL's block cache size is global to the process: a library read (in the caller's process) never
-    changes it, not even while it reads (before: 32 MB for the whole process during every whole read);
-    the bound is the ``orokit`` program's own setting (tests/cli/test_process_settings.py)."""
+    changes it, not even while it reads (before: 32 MB for every thread of the process during a whole
+    read and during a chunked ``analyze``); the bound is the ``orokit`` program's own setting
+    (tests/cli/test_process_settings.py)."""
     from rasterio.env import get_gdal_config
 
     import orokit.io.dem as dem
+    from orokit.analysis import analyze
 
     monkeypatch.delenv("GDAL_CACHEMAX", raising=False)
     path = _write(tmp_path / "a.tif", np.arange(600 * 40, dtype=np.float32).reshape(600, 40) % 5000)
@@ -221,6 +224,9 @@ def test_library_reads_leave_gdals_cache_size_alone(tmp_path, monkeypatch):
         return opened(*args, **kwargs)
 
     monkeypatch.setattr(dem, "_open_dataset", spy)
-    assert read_dem_array(str(path)).values.shape == (600, 40)
-    assert len(seen) >= 2 and set(seen) == {size}  # header, then the pixels' stripes
+    if chunked:
+        analyze(read_dem(str(path), chunks=200), min_prominence_m=5.0, chunks=200, scheduler="threads")
+    else:
+        assert read_dem_array(str(path)).values.shape == (600, 40)
+    assert len(seen) >= 2 and set(seen) == {size}  # header, then the pixels (stripes or chunks)
     assert get_gdal_config("GDAL_CACHEMAX") == size
