@@ -8,6 +8,7 @@ the density map so the next, lower peaks land near them.
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 from scipy.ndimage import gaussian_filter
@@ -218,7 +219,7 @@ def place_peaks(
         radius = float(disks[0]["radius_m"])
         step = disk_centres((domain.x0, domain.y0, domain.x0 + domain.width, domain.y0 + domain.height),
                             radius)[2]
-        kx0, ky0, knx, kny, target = disk_count_targets(disks, controls, domain, step, radius, rng)
+        kx0, ky0, knx, kny, target = disk_count_targets(disks, controls, domain, step, radius, rng, n)
         count_grid = (kx0, ky0, step, knx, kny, target)
     count_have = np.zeros(count_grid[5].size)
     density = controls.density.copy()
@@ -271,7 +272,7 @@ def place_peaks(
 
 
 def disk_count_targets(disks: list, controls: ControlMaps, domain: Domain, step: float, radius: float,
-                       rng: np.random.Generator) -> tuple[float, float, int, int, np.ndarray]:
+                       rng: np.random.Generator, n: int | None = None) -> tuple[float, float, int, int, np.ndarray]:
     """Disk centres on a grid of ``step`` over the whole domain and their target peak counts.
 
     A Gaussian random field on the centres, smoothed over half the disk radius (the
@@ -279,7 +280,11 @@ def disk_count_targets(disks: list, controls: ControlMaps, domain: Domain, step:
     by rank onto the quantiles of the ``peaks`` record of the centre's type (the real disks'
     counts, so the twin's disks hold as many peaks as the real ones, not ``n`` spread evenly),
     times the density map ``C_P``'s mass in the disk (inside the domain) over a full disk's
-    at the mean density: a disk reaching past the border wants its inside share.
+    at the interior's mean density: a disk reaching past the border wants its inside share.
+    With ``n`` (the peaks to place), the strip within ``radius`` of the border takes the
+    density that the interior's (the record's mean count per disk area) leaves of ``n``
+    (0.1 to 2 times the interior's): the real crops hold more of their peaks inside than
+    an even spread (pyrenees: median 96 peaks per disk against 77 for ``n`` spread evenly).
     Returns x0, y0 (the south-west centre), nx, ny and the targets (row-major from the south).
     """
     from scipy.signal import fftconvolve
@@ -303,8 +308,19 @@ def disk_count_targets(disks: list, controls: ControlMaps, domain: Domain, step:
     kx = np.arange(-int(radius // cs_x), int(radius // cs_x) + 1) * cs_x
     kernel = (kx[None, :] ** 2 + ky[:, None] ** 2 <= radius**2).astype(float)
     dens = np.clip(np.nan_to_num(controls.density), 0.0, None)
+    gy_, gx_ = np.indices(dens.shape)
+    bx = np.minimum(gx_ + 0.5, dens.shape[1] - gx_ - 0.5) * cs_x
+    by = np.minimum(gy_ + 0.5, dens.shape[0] - gy_ - 0.5) * cs_y
+    strip = np.minimum(bx, by) < radius
+    if n is not None and strip.any() and (~strip).any() and q.mean() > 0:
+        # the border strip holds what the interior's density leaves of the n peaks
+        per_area = q.mean() / (math.pi * radius**2)
+        a_in = float(dens[~strip].sum()) * cs_x * cs_y
+        a_strip = float(dens[strip].sum()) * cs_x * cs_y
+        share = float(np.clip((n - per_area * a_in) / max(per_area * a_strip, 1e-300), 0.1, 2.0))
+        dens = np.where(strip, share * dens, dens)
     mass = np.clip(fftconvolve(dens, kernel, mode="same")[row, col], 0.0, None)
-    full = float(kernel.sum() * dens.mean())
+    full = float(kernel.sum() * (dens[~strip].mean() if (~strip).any() else dens.mean()))
     target = q * mass / full if full > 0 else np.zeros_like(q)
     return float(x0), float(y0), nx, ny, np.ascontiguousarray(target, dtype=float)
 

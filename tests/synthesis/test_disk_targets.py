@@ -170,6 +170,16 @@ def test_disk_count_targets_follow_the_record_and_the_border():
     # a disk centred on a corner keeps about a quarter of its count, on a side about half
     corner = (x < 1000) & (y < 1000)
     assert np.all(t[corner] < 0.32 * 80) and np.all(t[corner] > 0.2 * 20)
+    # with the number of peaks given, the border strip takes what the interior's density leaves:
+    # fewer peaks than the record's mean count spread evenly -> a sparser strip, same interior
+    even = 50.0 / (np.pi * R**2) * 60_000**2
+    t2 = disk_count_targets([rec], controls, domain, 1000.0, R, np.random.default_rng(0), n=int(0.7 * even))[4]
+    centre = (np.abs(x - 30_000) < 600) & (np.abs(y - 30_000) < 600)
+    side = (np.abs(x - 30_000) < 600) & (y < 1000)
+    assert np.all(t2[side] < 0.8 * t[side]) and np.all(t2[corner] < 0.8 * t[corner])
+    assert np.allclose(t2[centre], t[centre])  # a disk clear of the strip keeps its count
+    t3 = disk_count_targets([rec], controls, domain, 1000.0, R, np.random.default_rng(0), n=int(even))[4]
+    assert np.all(np.abs(t3[side] / t[side] - 1) < 0.05)
     # neighbouring centres want similar counts (overlapping disks), distant ones need not
     g = t.reshape(ny, nx)
     assert np.median(np.abs(np.diff(g[10:50, 10:50], axis=1))) < 0.1 * np.ptp(g[10:50, 10:50])
