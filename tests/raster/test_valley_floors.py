@@ -49,7 +49,7 @@ def _skeleton(**kw):
 
 
 def test_options_off_by_default_keep_the_skeleton_and_on_only_raise_it():
-    """The defaults are the session-12 skeleton (explicit off values give the same TIN); a steeper
+    """Explicit off values of these options give the default TIN; a steeper
     ``floor_slope`` or a tilted floor only raises samples; shallower cones (``flank_depth_saddle_ratio``)
     raise the beds' cap, so no bed is lower (the bed is monotone in the cap) and some are higher."""
     d = RenderParams()
@@ -145,6 +145,7 @@ def test_river_base_slope_lifts_the_beds_pinned_at_the_base_level():
     fewer beds lie at the base elevation (the lowest bed), the beds still fall downstream by at least
     ``river_slope`` per metre where not clamped, and a steeper lift raises at least as much; the saddle bound
     (``river_base_saddle_k``) only lowers the lifted beds, never below the plain sweep's."""
+    assert (RenderParams().river_base_slope, RenderParams().river_base_saddle_k) == (0.01, 16)  # session 14
     off = {"river_base_slope": None, "river_base_saddle_k": None}
     plain = _skeleton(**off).river_network
     h = plain.elevation
