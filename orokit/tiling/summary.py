@@ -123,7 +123,8 @@ def _reduce(s: ChunkSummary, min_prominence_m: float, needed: np.ndarray) -> Chu
     del nonroot, prom, key_edge
     # defer: where one saddle joins several kept parts, a removed part stays and every edge of
     # that saddle is kept, until the final prune (same choices as the in-memory engine)
-    oa, ob, oe, nb, nm, keep = _k.prune_edges(n, ea, eb, ez, ekey, keep, s.bmax, s.nmin, s.z, s.key, True)
+    oa, ob, oe, nb, nm, keep = _k.prune_edges(n, ea, eb, ez, ekey, keep, s.bmax, s.nmin, s.z, s.key, True,
+                                              _k.index_like(n, ea.size))
     del ea, eb, ez, ekey
     s.ea = s.eb = s.bmax = s.nmin = _NO_EDGES
     new_id = np.full(n, -1, np.int64)

@@ -520,8 +520,14 @@ def _before(g, h, key_t, key_hi, key_lo, node_z, node_key):
     return g < h
 
 
+def index_like(n: int, m: int = 0) -> np.ndarray:
+    """An empty array of the narrowest index type for ``n`` nodes and ``m`` edges (int32 below 2**31):
+    the dtype :func:`prune_edges` gives its union-find state and its output indices."""
+    return np.empty(0, np.int32 if max(n, m) < 2**31 - 1 else np.int64)
+
+
 @njit(cache=True, nogil=True)
-def prune_edges(n, ea, eb, ez, ekey, keep, bmax, nmin, node_z, node_key, defer):
+def prune_edges(n, ea, eb, ez, ekey, keep, bmax, nmin, node_z, node_key, defer, like):
     """Divide Tree restricted to the kept nodes, preserving bottleneck saddles.
 
     Edges (of any graph) must be sorted from the highest to the lowest saddle, those
@@ -548,29 +554,39 @@ def prune_edges(n, ea, eb, ez, ekey, keep, bmax, nmin, node_z, node_key, defer):
     ``bmax`` (highest border elevation reachable in a node's basin) and ``nmin``
     (lowest elevation of the basin) are carried to the node a removed node is
     absorbed into; the border value through the absorbing saddle ``w`` is
-    ``min(bmax, w)``, which keeps the "touched the unknown outside" flags exact.
+    ``min(bmax, w)``, which keeps the "touched the unknown outside" flags exact. With
+    ``defer`` the carried values are written over ``bmax`` and ``nmin`` (returned as
+    ``bmax_new`` and ``nmin_new``: a caller passes arrays it gives up).
 
     Returns ``(out_a, out_b, out_edge, bmax_new, nmin_new, keep_new)``: kept endpoints
     and the index of the original edge (its saddle) of each output ridge, the carried
     per-node values (meaningful at kept nodes; empty without ``defer``) and the kept
     nodes (``keep`` plus the deferred ones).
+
+    ``like``: an empty array whose integer type the union-find state and the three output index
+    arrays take (:func:`index_like`: int32 below 2**31 nodes and edges, 12 bytes per node and per
+    edge less at a 6.5 M-node root than int64).
     """
-    uf = np.arange(n)
+    uf = np.empty(n, like.dtype)
+    top = np.empty(n, like.dtype)
+    anchor = np.empty(n, like.dtype)  # anchor forest: a node points towards the kept node it is absorbed into
+    for i in range(n):
+        uf[i] = i
+        top[i] = i
+        anchor[i] = i
     keep = keep.copy()
     haskept = keep.copy()
-    top = np.arange(n)
     # the carried values matter only to a later merge: the final prune (not ``defer``) returns them
     # empty and skips them (32 bytes per node at the finalize of a 6.5 M-node root)
     carry = n if defer else 0
     comp_b = bmax[:carry].copy()
     comp_m = nmin[:carry].copy()
-    nb = bmax[:carry].copy()
-    nm = nmin[:carry].copy()
-    # anchor forest: a node points towards the kept node it is absorbed into
-    anchor = np.arange(n)
-    out_a = np.empty(ea.size, np.int64)
-    out_b = np.empty(ea.size, np.int64)
-    out_e = np.empty(ea.size, np.int64)
+    # the carried values are written over ``bmax`` and ``nmin`` (read only for the copies above)
+    nb = bmax[:carry]
+    nm = nmin[:carry]
+    out_a = np.empty(ea.size, like.dtype)
+    out_b = np.empty(ea.size, like.dtype)
+    out_e = np.empty(ea.size, like.dtype)
     # per edge of the current saddle (index g - e), grown to the largest saddle: not per edge of
     # the graph (16-40 bytes per edge at the top merges and the finalize of a 4 G-cell mosaic)
     pre_a = np.empty(16, np.int64)

@@ -239,7 +239,7 @@ class DivideTree:
         ids = np.arange(self.n_peaks, dtype=np.int64)
         from orokit.topology import _kernels  # numba: imported when first used
         oa, ob, oe, _, _, _ = _kernels.prune_edges(
-            self.n_peaks, a[order], b[order], sz, s[order], keep, -inf, inf, pz, ids, False
+            self.n_peaks, a[order], b[order], sz, s[order], keep, -inf, inf, pz, ids, False, ids[:0]
         )
         new_id = np.full(self.n_peaks, -1, np.int64)
         new_id[keep] = np.arange(int(keep.sum()))

@@ -274,7 +274,8 @@ def finalize_graph(
             ("key_saddle_cell", ks), ("key_saddle_z", ksz), ("parent", par), ("prominence_exact", exact),
             ("prominence", kept_prom)))
     # every edge: of several edges at one saddle, the prune picks the same one in both engines
-    oa, ob, oe, _, _, _ = _kernels.prune_edges(n, ea, eb, ez, ekey, keep, no_bmax, no_nmin, node_z, node_key, False)
+    oa, ob, oe, _, _, _ = _kernels.prune_edges(n, ea, eb, ez, ekey, keep, no_bmax, no_nmin, node_z, node_key, False,
+                                               _kernels.index_like(n, ea.size))
     del ea, eb, keep
     # the output one array at a time, each source let go once taken (and put in the store)
     ridge_saddle_cell = _to_store(store, "ridge_saddle_cell", ekey[oe])
