@@ -4,7 +4,6 @@ from __future__ import annotations
 import itertools
 import json
 import logging
-import warnings
 from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
@@ -202,9 +201,10 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
 
         write(dst, ridges, lines, len(a), "ridges", "LineString")
 
-    with atomic_path(path) as tmp, _sqlite_without_sync(), warnings.catch_warnings():
-        # a tree on a local grid has no CRS: that is recorded in attrs, not a problem
-        warnings.filterwarnings("ignore", message="'crs' was not provided", category=UserWarning)
+    # no warnings.catch_warnings here: this may run in a writer thread, and the filters it swaps are the
+    # process's (other threads' filters and recorders were lost or leaked). A tree on a local grid has
+    # no CRS (recorded in attrs); GDAL's C API writes it without pyogrio's warning about that
+    with atomic_path(path) as tmp, _sqlite_without_sync():
         if parallel:
             from concurrent.futures import ThreadPoolExecutor
 
@@ -227,12 +227,30 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
             if isinstance(extra, pd.DataFrame):
                 points(tmp, extra, "point_id", key)
         for name, frame in (layers or {}).items():
-            frame.reset_index().to_file(tmp, layer=name, geometry_type="Point", engine="pyogrio", use_arrow=True,
-                                          **_GPKG)
+            _write_point_frame(tmp, name, frame.reset_index())
         # attrs go to a small non-spatial table (portable across GDAL versions)
         _write_metadata(tmp, meta)
     logger.info("wrote %s: %d peaks, %d ridges", path, tree.n_peaks, len(tree.edges))
     return path
+
+
+def _write_point_frame(path: Path, layer: str, frame: Any) -> None:
+    """The point GeoDataFrame ``frame`` as the layer ``layer`` of ``path``: the layer ``to_file`` (pyogrio,
+    through Arrow) writes, through GDAL's C API when found (pyogrio warns of a missing CRS; its writer
+    otherwise, which then does)."""
+    import pyarrow as pa
+    import shapely
+
+    from orokit.io.gdal_arrow import gdal_library, write_arrow_layer
+
+    if gdal_library() is None:
+        frame.to_file(path, layer=layer, geometry_type="Point", engine="pyogrio", use_arrow=True, **_GPKG)
+        return
+    name = frame.geometry.name
+    table = pd.DataFrame(frame, copy=False).assign(**{name: shapely.to_wkb(frame.geometry.values)})
+    batch = pa.Table.from_pandas(table, preserve_index=False)
+    write_arrow_layer(path, layer, batch.schema, batch.to_batches(), geometry_name=name, geometry_type="Point",
+                      crs=_gdal_crs(frame.crs), layer_options=_LAYER_OPTIONS)
 
 
 def _write_metadata(path: Path, meta: dict[str, str]) -> None:

@@ -190,6 +190,7 @@ def test_gpkg_writers_write_the_same_layers(small_txt, tmp_path, monkeypatch, cr
     """GDAL's C API without the GIL (``orokit.io.gdal_arrow``) and ``parallel=True`` (saddles and ridges
     from a second GeoPackage, copied by SQLite) write the layers pyogrio's writer writes, in the same order;
     GDAL reads and appends to the file; no temporary file is left."""
+    import contextlib
     import dataclasses
 
     import geopandas as gpd
@@ -206,8 +207,10 @@ def test_gpkg_writers_write_the_same_layers(small_txt, tmp_path, monkeypatch, cr
     assert lib.CPLGetConfigOption(b"OROKIT_TEST_WHICH_GDAL", None) == b"rasterio's", lib._name
     tree = dataclasses.replace(read_divide_tree_txt(small_txt, height=10), crs=crs)
     extra = {"depressions": gpd.GeoDataFrame({"depth": [3.0, 4.5]}, geometry=[Point(0, 0), Point(1, 1)], crs=crs)}
-    with monkeypatch.context() as m:
+    with monkeypatch.context() as m, contextlib.ExitStack() as stack:
         m.setattr(gdal_arrow, "gdal_library", lambda: None)  # pyogrio's writer
+        if crs is None:  # it says so (orokit swaps no warning filters: tested below)
+            stack.enter_context(pytest.warns(UserWarning, match="'crs' was not provided"))
         one = write_divide_tree_gpkg(tree, tmp_path / "one.gpkg", layers=extra)
     two = write_divide_tree_gpkg(tree, tmp_path / "two.gpkg", layers=extra, parallel=True)
     layers = pyogrio.list_layers(one).tolist()
@@ -228,6 +231,48 @@ def test_gpkg_writers_write_the_same_layers(small_txt, tmp_path, monkeypatch, cr
     # the file stays a GeoPackage GDAL edits: a layer appended and the copied layers' feature counts kept
     pyogrio.write_dataframe(pd.DataFrame({"a": [1, 2]}), two, layer="more")
     assert pyogrio.read_info(two, layer="saddles", force_feature_count=True)["features"] == tree.n_saddles
+
+
+def test_gpkg_writer_thread_leaves_the_warning_filters_alone(small_txt, tmp_path, monkeypatch):
+    """``write_divide_tree_gpkg`` runs in a writer thread beside others (``write_analysis``): it must not
+    swap the process's warning filters (``warnings.catch_warnings`` is not thread-safe: another thread's
+    filters or recorder were lost or kept for good). Before: every layer was written inside one, to hide
+    pyogrio's warning about a tree without CRS; GDAL's C API writes such a tree without it."""
+    import dataclasses
+    import threading
+    import warnings
+
+    import geopandas as gpd
+    from shapely.geometry import Point
+
+    from orokit.io import gdal_arrow
+
+    tree = dataclasses.replace(read_divide_tree_txt(small_txt, height=10), crs=None)
+    extra = {"depressions": gpd.GeoDataFrame({"depth": [3.0]}, geometry=[Point(0, 0)], crs=None)}
+    filters = warnings.filters
+    swapped: list[str] = []
+    write = gdal_arrow.write_arrow_layer
+
+    def spy(path, layer, *args, **kwargs):
+        if warnings.filters is not filters:
+            swapped.append(layer)
+        return write(path, layer, *args, **kwargs)
+
+    monkeypatch.setattr(gdal_arrow, "write_arrow_layer", spy)
+    errors: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            write_divide_tree_gpkg(tree, tmp_path / "t.gpkg", layers=extra, parallel=True)
+        except BaseException as exc:  # noqa: BLE001 - raised below, in the test's thread
+            errors.append(exc)
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    thread.join()
+    assert not errors, errors
+    assert swapped == [] and warnings.filters is filters
+    assert read_divide_tree_gpkg(tmp_path / "t.gpkg").equals(tree)
 
 
 def test_gpkg_keeps_crs(tmp_path):
