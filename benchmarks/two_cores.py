@@ -29,7 +29,7 @@ from pathlib import Path
 
 #: main-thread phases whose start and end cut the timeline into windows ("module:function")
 PHASES = [
-    "orokit.io.dem:read_dem_array", "orokit.topology._kernels:ascent_labels", "orokit.topology.engine:basin_graph",
+    "orokit.io.dem:read_dem_array", "orokit.topology.engine:saddle_graph",
     "orokit.topology.engine:finalize_graph", "orokit.metrics.isolation:nearest_higher",
     "orokit.topology.engine:build_result", "orokit.io.analysis_io:write_analysis",
 ]

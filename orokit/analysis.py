@@ -221,6 +221,10 @@ def analyze(
         from orokit.tiling.memory import release_free_heap
 
         graph = engine.saddle_graph(z)
+        if release and not isolation:  # the finalize reads the graph only: the pixels go before it
+            del z
+            dem.release()
+            release = False
         # the engine's peak memory is past: the libraries of the tables and files load in a second
         # thread, and the isolation's pyramid is built in a third (numba, no GIL), while this one
         # finishes the tree (wall time: the finalize is serial). With isolation, the libraries load

@@ -4,9 +4,13 @@ Steps (DESIGN.md §2):
 
 1. Steepest ascent: every cell points to its highest 8-neighbour in the total order
    (elevation, then raster order); chains end at the maxima of that order.
-2. Basins: every cell is labelled with the maximum its chain reaches.
+2. Basins: every cell belongs to the maximum its chain reaches.
 3. Passes: for each pair of adjacent basins the highest pass is the highest of the
    lower cells of their adjacent cell pairs (hash-reduced in one sweep).
+
+Steps 1-3 run by row strips (:func:`saddle_graph`): a strip's cells are labelled with
+their chains' ends inside it (a maximum or an exit to the next strip), the exits are
+resolved through the strips' first and last rows, so no label per raster cell is held.
 4. One Kruskal sweep over the passes from high to low gives the maximum spanning tree
    of the basin graph (the full Divide Tree) and, by the elder rule, every maximum's
    key saddle, parent and prominence, plus the "touched the unknown outside" flag.
@@ -21,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from orokit.errors import InputError
-from orokit.topology import _kernels
+from orokit.topology import _kernels, _strip_kernels
 from orokit.topology.divide_tree import DivideTree
 from orokit.topology.tables import (
     PEAK_COLUMNS,
@@ -154,29 +158,67 @@ def _has_inf(z: np.ndarray) -> bool:
     return bool(z.size) and bool(np.isinf(np.fmax.reduce(z, axis=None)) or np.isinf(np.fmin.reduce(z, axis=None)))
 
 
-def saddle_graph(z: np.ndarray) -> dict[str, Any]:
+#: cells per row strip of :func:`saddle_graph` (a strip's terminal per cell, 4 bytes, is held while it is worked)
+STRIP_CELLS = 1 << 21
+
+
+def strip_bounds(shape: tuple[int, int], strips: int | None = None) -> list[tuple[int, int]]:
+    """The row strips ``(r0, r1)`` of :func:`saddle_graph`: ``strips`` of them (at most one per row), by
+    default enough for :data:`STRIP_CELLS` cells each and at least two per numba thread.
+
+    >>> strip_bounds((10, 4), 3)
+    [(0, 3), (3, 6), (6, 10)]
+    """
+    H, W = shape
+    if strips is None:
+        strips = max(2 * _threads(), -(-H * W // STRIP_CELLS))
+    k = max(1, min(int(strips), H))
+    return [(t * H // k, (t + 1) * H // k) for t in range(k)]
+
+
+def saddle_graph(z: np.ndarray, *, strips: int | None = None) -> dict[str, Any]:
     """Steps 1-3 of :func:`orometry`: the basins' saddle graph, as keyword arguments of :func:`finalize_graph`.
 
-    The engine's peak memory (a basin label per cell) is reached and freed here.
+    Row strips (:func:`strip_bounds`), two at a time per numba thread, each labelled with the
+    terminals of its chains (:mod:`orokit.topology._strip_kernels`): no label per raster cell is
+    held, only a strip's (4 bytes per cell of a strip). The chains that leave a strip (exits)
+    are resolved through the neighbouring strips' first and last rows, the pairs across each
+    strip's last row made from those rows; every basin pair keeps its highest pass. The graph
+    does not depend on ``strips``.
     """
     if z.ndim != 2 or z.size == 0:
         raise InputError(f"the DEM must be a non-empty 2-D array; got shape {z.shape}")
     if _has_inf(z):
         raise InputError("the DEM contains infinite values; mark nodata as NaN")
     z = np.ascontiguousarray(z)
-    zf = z.ravel()
-    # basin ids in place of the pointers: 4 bytes per cell when they fit
-    label = np.empty(z.size, np.int32 if z.size < 2**31 - 2 else np.int64)
-    max_cell = _kernels.ascent_labels(z, label)
-    n_max = int(max_cell.size)
+    H, W = z.shape
+    bounds = strip_bounds(z.shape, strips)
+    big = max(r1 - r0 for r0, r1 in bounds) * W + 2 * W + 2 >= 2**31
+    ltype = np.int64 if big or z.size >= 2**31 - 2 else np.int32
+
+    def strip(b: tuple[int, int]) -> tuple[Any, ...]:
+        r0, r1 = b
+        lab = np.empty((r1 - r0) * W, ltype)
+        m, cells = _strip_kernels.strip_ascent(z, r0, r1, lab)
+        graph = _strip_kernels.strip_graph(z, lab, m + 2 * W, r0, r1)
+        return (int(m), cells, *graph, lab[:W].astype(np.int64), lab[-W:].astype(np.int64))
+
+    if len(bounds) == 1:
+        parts = [strip(bounds[0])]
+    else:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(min(_threads(), len(bounds))) as pool:
+            parts = list(pool.map(strip, bounds))
+    n_max, node_key, bmax, nmin, ea, eb, ec = _join_strips(z, bounds, parts)
+    del parts
     if n_max == 0:
         raise InputError("the DEM has no valid cells (all nodata)")
-    border_z, nmin, ea, eb, ec = basin_graph(z, label, n_max)
-    del label
+    zf = z.ravel()
     return {
-        "node_key": max_cell,
-        "node_z": zf[max_cell].astype(np.float64),
-        "node_bmax": border_z,
+        "node_key": node_key,
+        "node_z": zf[node_key].astype(np.float64),
+        "node_bmax": bmax,
         "node_nmin": nmin,
         "node_ismax": np.ones(n_max, bool),
         "ea": ea,
@@ -186,6 +228,95 @@ def saddle_graph(z: np.ndarray) -> dict[str, Any]:
         "shape": z.shape,
         "n_maxima": n_max,
     }
+
+
+def _join_strips(z: np.ndarray, bounds: list[tuple[int, int]], parts: list[tuple[Any, ...]]) -> tuple[Any, ...]:
+    """The basins' graph from the strips' terminals: ``(n_max, max_cell, bmax, nmin, ea, eb, ec)``.
+
+    ``parts[s]``: ``(m, max_cells, bmax, nmin, ea, eb, ec, first_row, last_row)`` of strip ``s``
+    over its terminal ids. Each exit goes to the terminal of its target cell in the next strip
+    up or down (that strip's last or first row), until a maximum (chains rise: no cycle).
+    """
+    H, W = z.shape
+    sizes = np.array([p[0] + 2 * W for p in parts], np.int64)
+    offs = np.concatenate([[0], np.cumsum(sizes)])
+    total = int(offs[-1])
+    nowhere = total  # the target of an exit no chain takes out of the raster or into NaN
+    nxt = np.arange(total + 1, dtype=np.int64)
+    is_max = np.zeros(total + 1, bool)
+    for s, p in enumerate(parts):
+        m, o = p[0], int(offs[s])
+        is_max[o:o + m] = True
+        for t, other in ((o + m, s - 1), (o + m + W, s + 1)):
+            if 0 <= other < len(parts):
+                row = parts[other][8] if other < s else parts[other][7]  # its last row, or its first
+                nxt[t:t + W] = np.where(row >= 0, offs[other] + row, nowhere)
+            else:
+                nxt[t:t + W] = nowhere
+    while True:  # pointer jumping to each chain's maximum
+        jumped = nxt[nxt]
+        if np.array_equal(jumped, nxt):
+            break
+        nxt = jumped
+    n_max = int(is_max.sum())
+    basin_of = np.full(total + 1, -1, np.int64)
+    basin_of[np.flatnonzero(is_max)] = np.arange(n_max)
+    term = basin_of[nxt]  # the basin of every terminal (-1: none)
+    del nxt, basin_of, is_max
+    node_key = np.concatenate([p[1] for p in parts]).astype(np.int64)
+    bmax = np.full(n_max, -np.inf)
+    nmin = np.full(n_max, np.inf)
+    # a basin pair is found twice only through an exit or across a seam (a strip's own maxima are its
+    # own, each pair of them once): the basins that exits and seam rows reach are the candidates
+    touched = np.zeros(n_max + 1, bool)  # [-1]: none
+    pieces_a, pieces_b, pieces_c = [], [], []
+    zf = z.ravel()
+    for s, p in enumerate(parts):
+        o, m = int(offs[s]), p[0]
+        tb = term[o:o + sizes[s]]
+        has = tb >= 0
+        np.maximum.at(bmax, tb[has], p[2][has])
+        np.minimum.at(nmin, tb[has], p[3][has])
+        touched[tb[m:]] = True
+        pieces_a.append(tb[p[4]])
+        pieces_b.append(tb[p[5]])
+        pieces_c.append(p[6])
+        if s + 1 < len(parts):  # the pairs across this strip's last row and the next strip's first
+            r = bounds[s][1]
+            up = np.where(p[8] >= 0, term[o + np.maximum(p[8], 0)], -1)
+            nx = parts[s + 1][7]
+            down = np.where(nx >= 0, term[int(offs[s + 1]) + np.maximum(nx, 0)], -1)
+            touched[up] = touched[down] = True
+            for dc in (-1, 0, 1):
+                c = np.arange(max(0, -dc), min(W, W - dc))
+                la, lb = up[c], down[c + dc]
+                ok = (la >= 0) & (lb >= 0) & (la != lb)
+                c, la, lb = c[ok], la[ok], lb[ok]
+                i = (r - 1) * W + c
+                j = r * W + c + dc
+                zi, zj = zf[i], zf[j]
+                i_above = (zi > zj) | ((zi == zj) & (i < j))
+                pieces_a.append(la)
+                pieces_b.append(lb)
+                pieces_c.append(np.where(i_above, j, i).astype(np.int64))  # the pass: the lower cell
+    a = np.concatenate(pieces_a)
+    b = np.concatenate(pieces_b)
+    c = np.concatenate(pieces_c).astype(np.int64, copy=False)
+    del pieces_a, pieces_b, pieces_c
+    keep = a != b  # both ends resolved to one basin: not a pass
+    lo, hi, c = np.minimum(a, b)[keep], np.maximum(a, b)[keep], c[keep]
+    del a, b, keep
+    touched[-1] = False
+    cand = np.flatnonzero(touched[lo] | touched[hi])
+    key = lo[cand] * np.int64(max(n_max, 1)) + hi[cand]
+    order = np.lexsort((c[cand], -zf[c[cand]], key))  # per basin pair: the highest pass first (elevation, then cell)
+    key = key[order]
+    dup = np.zeros(lo.size, bool)
+    dup[cand[order[1:][key[1:] == key[:-1]]]] = True
+    if dup.any():
+        keep = ~dup
+        lo, hi, c = lo[keep], hi[keep], c[keep]
+    return n_max, node_key, bmax, nmin, lo, hi, c
 
 
 def finalize_graph(

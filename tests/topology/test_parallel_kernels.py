@@ -47,6 +47,22 @@ def test_parallel_kernels_equal_sequential(label_dtype):
     assert n_tall >= 5  # several grids are split into row stripes
 
 
+def test_strip_graph_equals_sequential():
+    """``saddle_graph``'s row strips (terminals, exits resolved through the strips' first and last
+    rows, the pairs across each strip's last row) give the sequential kernels' graph for any count."""
+    n_split = 0
+    for z in _grids():
+        _, max_cell, bmax, nmin, edges = _sequential(z)
+        for strips in (1, 2, 3, 5, 7, z.shape[0]):
+            g = engine.saddle_graph(z, strips=strips)
+            np.testing.assert_array_equal(g["node_key"], max_cell)
+            np.testing.assert_array_equal(g["node_bmax"], bmax)
+            np.testing.assert_array_equal(g["node_nmin"], nmin)
+            assert sorted(zip(g["ea"].tolist(), g["eb"].tolist(), g["ekey"].tolist())) == edges
+            n_split += len(engine.strip_bounds(z.shape, strips)) > 1
+    assert n_split >= 100
+
+
 def _fields(core):
     return {k: v for k, v in vars(core).items()}
 
