@@ -294,8 +294,23 @@ def _same_disk(scheduler: Any) -> bool:
 
 def in_process(scheduler: Any) -> bool:
     """True when every task of ``scheduler`` runs in this process (threads, synchronous, or dask's
-    default without an active distributed client), so a task can fill an object of the caller."""
-    return _same_disk(scheduler) and scheduler not in ("processes",)
+    default without an active distributed client), so a task can fill an object of the caller.
+
+    ``None`` is dask's default, which a configured scheduler replaces (``dask.config.set(scheduler=...)``,
+    ``DASK_SCHEDULER=processes``): only a configured thread or synchronous scheduler counts.
+    """
+    if scheduler is None:
+        import dask
+
+        configured = dask.config.get("scheduler", None)
+        if configured is not None:
+            return isinstance(configured, str) and configured in _IN_PROCESS
+        return _same_disk(None)
+    return scheduler in _IN_PROCESS
+
+
+#: scheduler names whose tasks run in the caller's process
+_IN_PROCESS = ("threads", "threading", "synchronous", "sync")
 
 
 def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", scheduler: Any = None,

@@ -97,6 +97,29 @@ def test_the_finalize_puts_the_columns_the_search_does_not_read_in_the_store(tmp
     store.close()
 
 
+def test_dasks_configured_process_scheduler_gets_no_column_store(make_dem, tmp_path):
+    """``scheduler=None`` is dask's default, which ``dask.config`` (e.g. ``DASK_SCHEDULER=processes``)
+    replaces: the finalize then runs in a worker process and must not get the caller's store (before: it
+    filled a copy, the caller's columns stayed empty and ``orokit analyze --chunks`` failed with
+    "operands could not be broadcast together")."""
+    import dask
+
+    assert te.in_process(None) and te.in_process("threads") and not te.in_process("processes")
+    with dask.config.set(scheduler="processes"):
+        assert not te.in_process(None)
+    with dask.config.set(scheduler="synchronous"):
+        assert te.in_process(None)
+    dem = make_dem(_grid(), res=(30.0, 30.0))
+    a = orokit.analyze(dem, min_prominence_m=1.0, geometry=False, isolation=False)
+    with dask.config.set(scheduler="processes"):
+        b = orokit.analyze(dem, min_prominence_m=1.0, chunks=(40, 40), geometry=False, blocks=True,
+                           isolation=False)
+    b.attrs = dict(a.attrs)
+    orokit.write_analysis(a, tmp_path / "a")
+    orokit.write_analysis(b, tmp_path / "b")
+    assert_same_table_files(tmp_path / "a", tmp_path / "b")
+
+
 def test_chunked_analysis_with_spill_writes_the_in_memory_files(make_dem, tmp_path, monkeypatch):
     """Many chunks, isolation on, a void: the tables' files are the in-memory run's, byte for byte;
     while the isolation search runs, the engine output's columns it does not read are on disk."""
