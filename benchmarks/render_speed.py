@@ -9,7 +9,10 @@ under 3 GB.
    [--no-erosion] --no-progress`` as a whole process under ``/usr/bin/time -v`` (wall, CPU, peak
    RSS), variants alternating; the per-stage seconds come from the GeoTIFF's ``timings`` tag (the
    renderer's own clock), the load average is read before and after every run.
-3. The sha256 of each output's elevation band is recorded: the same seed must give the same
+3. Beside each run: the run-queue wait of its threads and the hypervisor's steal (``timed``), and a
+   fixed single-thread job's seconds just before it (the machine's speed; reps that differ in every
+   stage alike differ in it, not in the render).
+4. The sha256 of each output's elevation band is recorded: the same seed must give the same
    bytes in every repetition and across code changes that only claim speed.
 
 Run:  nice .venv/bin/python benchmarks/render_speed.py [--reps 3] [--dem appalachians] [--seed 0]
@@ -57,15 +60,34 @@ def band_sha256(path: Path) -> tuple[str, dict]:
     return hashlib.sha256(np.ascontiguousarray(z).tobytes()).hexdigest(), json.loads(tags.get("timings", "{}"))
 
 
+def calibrate() -> float:
+    """Seconds of a fixed single-thread job (Python loop + numpy sort, ~0.2 s): the machine's speed just
+    before a run, so a slow repetition can be told from a slow machine (a virtual machine's host may
+    lend it slower cores; the hypervisor's steal alone does not show that)."""
+    import time
+
+    import numpy as np
+
+    a = np.random.default_rng(0).random(1_000_000)
+    t0 = time.perf_counter()
+    acc = 0
+    for i in range(1_000_000):
+        acc += i & 7
+    np.sort(a)
+    return time.perf_counter() - t0
+
+
 def run_once(tree: Path, out: Path, seed: int, erosion: bool, res_m: float) -> dict:
     if out.exists():
         out.unlink()
+    calib = calibrate()
     load0 = os.getloadavg()[0]
     t = timed([ORO, "-q", "render", str(tree), "-o", str(out), "--resolution", f"{res_m:g}m", "--seed", str(seed),
                "--erosion" if erosion else "--no-erosion", "--no-progress"])
     sha, stages = band_sha256(out)
     return {"erosion": erosion, "seconds": round(t["seconds"], 2), "cpu_s": round(t["cpu_s"], 2),
             "peak_rss_gb": round(t["rss_mb"] / 1024, 3), "stages_s": stages, "sha256": sha,
+            "run_queue_wait_s": round(t["wait_s"], 2), "steal_s": round(t["steal_s"], 2), "calibration_s": round(calib, 3),
             "load_1min_before": round(load0, 2), "load_1min_after": round(os.getloadavg()[0], 2)}
 
 
@@ -94,7 +116,8 @@ def main() -> None:
                 st = " ".join(f"{k} {s:.2f}" for k, s in r["stages_s"].items())
                 print(f"{v:7s} rep {rep}: wall {r['seconds']:6.2f} s  CPU {r['cpu_s']:6.2f} s  peak RSS "
                       f"{r['peak_rss_gb']:.2f} GB  load {r['load_1min_before']:.1f}-{r['load_1min_after']:.1f}  "
-                      f"[{st}]  sha {r['sha256'][:12]}", flush=True)
+                      f"[{st}]  sha {r['sha256'][:12]}  wait {r['run_queue_wait_s']:.2f} s steal {r['steal_s']:.2f} s "
+                      f"calib {r['calibration_s']:.3f} s", flush=True)
         summary = {}
         for v in a.variants:
             rs = sorted((r for r in runs if r["erosion"] == (v == "eroded")), key=lambda r: r["seconds"])
