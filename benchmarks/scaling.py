@@ -194,6 +194,9 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
     """
     import threading
 
+    from orokit.tiling.memory import limit_gdal_cache
+
+    limit_gdal_cache()  # as `orokit analyze` (its entry point's setting since session 14; the library's before)
     rss = _PhaseRss(log=rss_log)
     rss.enter("imports")
     import orokit

@@ -184,7 +184,7 @@ def apply_process_settings(command: str) -> None:
     peak at 15 M cells, measured in session 12), and Arrow's buffers from malloc, not
     mimalloc, whose segments stayed resident (~20 MB of the writing's peak), unless the
     user set ``ARROW_DEFAULT_MEMORY_POOL``; GDAL's block cache bounded to 32 MB unless the user
-    set ``GDAL_CACHEMAX`` (:func:`orokit.io.dem.limit_gdal_cache`: a raster is read once; GDAL's
+    set ``GDAL_CACHEMAX`` (:func:`orokit.tiling.memory.limit_gdal_cache`: a raster is read once; GDAL's
     default, 5 % of the RAM, kept +16-20 MB of a whole read of 15.1 M cells, and a chunked
     run's blocks for good). Other commands run with the defaults (not measured).
     """
@@ -192,8 +192,7 @@ def apply_process_settings(command: str) -> None:
         return
     import os
 
-    from orokit.io.dem import limit_gdal_cache
-    from orokit.tiling.memory import limit_malloc_arenas
+    from orokit.tiling.memory import limit_gdal_cache, limit_malloc_arenas
 
     limit_malloc_arenas(2)
     os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")

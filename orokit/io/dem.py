@@ -36,8 +36,7 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["read_dem", "read_dem_array", "DemArray", "read_raster_band", "raster_cell_count",
-           "limit_gdal_cache"]
+__all__ = ["read_dem", "read_dem_array", "DemArray", "read_raster_band", "raster_cell_count"]
 
 ChunksLike = int | str | Sequence[int] | Mapping[str, int] | None
 CellSizeLike = float | tuple[float, float] | None
@@ -55,30 +54,11 @@ PLAUSIBLE_MAX_M = 9_000.0
 VOID_SENTINELS = (-9999.0, -32768.0, -32767.0, -99999.0)
 #: SRTM .hgt tiles: (rows, cols) for 2-byte samples
 _HGT_SHAPES = ((1201, 1201), (3601, 3601), (1801, 3601))
-#: GDAL block cache (bytes) of the ``orokit`` program (:func:`limit_gdal_cache`): by default GDAL caches up to
-#: 5 % of the RAM, and a whole-raster read kept its blocks in the cache (+16-20 MB peak at 15.1 M cells)
-READ_CACHE_BYTES = 32 * 2**20
 #: threads reading a whole raster (row stripes, one GDAL handle each) and rows a stripe has at least
 READ_THREADS = min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
 READ_MIN_ROWS = 512
 #: formats whose rows GDAL reads at any offset (a PNG or an ASCII grid is decoded from its start: one thread)
 READ_SPLIT_DRIVERS = frozenset({"GTiff", "COG", "SRTMHGT", "EHdr", "ENVI", "VRT"})
-
-
-def limit_gdal_cache(nbytes: int = READ_CACHE_BYTES) -> bool:
-    """Bound the block cache of rasterio's GDAL to ``nbytes`` for the rest of the process; False (nothing
-    done) when the user set ``GDAL_CACHEMAX`` (environment), which wins.
-
-    The cache size is global to the process (GDAL has no per-thread or per-dataset size), so
-    this is a process-wide setting: only the ``orokit`` program's entry point calls it
-    (``orokit.cli.main.apply_process_settings``), never library code run in a caller's process.
-    """
-    if "GDAL_CACHEMAX" in os.environ:
-        return False
-    from rasterio.env import set_gdal_config
-
-    set_gdal_config("GDAL_CACHEMAX", int(nbytes))
-    return True
 
 
 def _is_virtual(path: str) -> bool:
