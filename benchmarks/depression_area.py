@@ -33,6 +33,9 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str) -> dict:
     """One analysis with depressions (in a subprocess); the table is written to ``out``."""
     import psutil
 
+    from orokit.tiling.memory import limit_gdal_cache
+
+    limit_gdal_cache()  # as `orokit analyze` (its entry point's setting since session 14; the library's before)
     import orokit
     from orokit.io.dem import read_dem
     from orokit.tiling import depression_area
