@@ -169,6 +169,18 @@ def _detail_act(near: np.ndarray, flat: np.ndarray | None, w: np.ndarray | None)
     return act, (w * act).astype(np.float32, copy=False)
 
 
+def _replacing_noise(law: Future, shape: tuple[int, int], res: float, params: RenderParams,
+                     rng: np.random.Generator) -> np.ndarray | None:
+    """The replacing detail's noise (:func:`power_law_noise`) for the law ``(c, beta)`` that ``law`` holds;
+    None when no law was fitted (``c`` 0)."""
+    c, beta = law.result()
+    if c <= 0:
+        return None
+    return power_law_noise(shape, res, c=c * params.detail_gain ** 2, beta=beta, largest_m=params.detail_largest_m,
+                           steepen=params.detail_steepen, steepen_below_m=params.detail_fit_m[0],
+                           min_beta=params.detail_min_beta, sharp=True, rng=rng)
+
+
 def _median_relief(z: np.ndarray, res: float, window_m: float = 1000.0) -> float:
     """Median of ``max - min`` over non-overlapping ``window_m`` blocks of ``z`` (whole grid if smaller)."""
     f = max(int(round(window_m / res)), 1)
@@ -333,46 +345,53 @@ def render_elevation(
     # the detail draws from its own stream: turning it on leaves the texture and noise of the render as they were
     detail_rng = np.random.default_rng([seed, 1])
     c, beta = 0.0, 3.0
-    if params.detail_gain > 0:
-        # the skeleton's own power law, fitted where the TIN resolves the tree's relief
-        # (none on a grid narrower than the fit band: its few wavenumbers there give no law)
-        c, beta = (power_law_fit(z, grid.cell_size_m, fit_m=params.detail_fit_m)
-                   if min(grid.ny, grid.nx) * grid.cell_size_m >= params.detail_fit_m[1] else (0.0, 3.0))
+    # the skeleton's own power law is fitted where the TIN resolves the tree's relief (none on a grid
+    # narrower than the fit band: its few wavenumbers there give no law)
+    fits = min(grid.ny, grid.nx) * grid.cell_size_m >= params.detail_fit_m[1]
+    law_job: Future | None = None
+    detail_noise: Future | None = None
+    if params.detail_replace and params.detail_gain > 0 and fits:
+        # the replacing detail's law and noise on a second thread: the law is fitted there (it only reads
+        # z, and is joined before z changes), then its noise drawn and shaped (numpy's draws and the FFTs
+        # release the GIL) while the weights and the low-pass run here; the same draws from detail_rng,
+        # the same bytes
+        law_job = pool.submit(power_law_fit, z, grid.cell_size_m, fit_m=params.detail_fit_m)
+        detail_noise = pool.submit(_replacing_noise, law_job, z.shape, grid.cell_size_m, params, detail_rng)
+    elif params.detail_gain > 0:
+        c, beta = power_law_fit(z, grid.cell_size_m, fit_m=params.detail_fit_m) if fits else (0.0, 3.0)
         detail = {"detail_beta": round(beta, 3), "detail_log10_c": round(float(np.log10(c)), 3) if c > 0 else None}
-    detail_noise = None
-    if params.detail_replace and params.detail_gain > 0 and c > 0:
-        # the replacing detail's noise depends on the fitted law alone: drawn and shaped on a second
-        # thread (numpy's draws and the FFTs release the GIL) while the weights and the low-pass run
-        # here; the same draws from detail_rng, the same bytes
-        detail_noise = pool.submit(
-            power_law_noise, z.shape, grid.cell_size_m, c=c * params.detail_gain ** 2, beta=beta,
-            largest_m=params.detail_largest_m, steepen=params.detail_steepen, steepen_below_m=params.detail_fit_m[0],
-            min_beta=params.detail_min_beta, sharp=True, rng=detail_rng)
     pool.shutdown(wait=False)
     noise_amp = params.noise_ratio * params.min_prominence_m
     # the compensating uplift is only used by the erosion and the multi-fractal noise
     uplift = falloff(dist_job.result() / np.float32(params.uplift_radius)) if erosion or noise_amp > 0 else None
     if params.smooth_m > 0:
+        if law_job is not None:
+            law_job.result()  # the law is fitted before the smoothing
         # round the TIN's planar facets and creases below the meshing scale; peaks and saddles kept
         keep = falloff(dist_job.result() / np.float32(max(params.texture_clearance_m, grid.cell_size_m)))
         zs = ndimage.gaussian_filter(z, params.smooth_m / grid.cell_size_m, mode="nearest")
         z += (zs - z) * (1.0 - keep)
         del zs, keep
-    if detail_noise is not None:
+    if law_job is not None and detail_noise is not None:
         # the TIN carries nothing below its meshing distance but facets: its wavelengths below
         # detail_largest_m are replaced by the power law continued there (peaks and saddles kept)
         flat, w = _detail_slope(z, grid.cell_size_m, params.detail_largest_m, params.detail_slope_power,
                                 params.detail_flat_deg)
         low = lowpass(z, grid.cell_size_m, params.detail_largest_m)
-        act, weight = _detail_act(
-            falloff(dist_job.result() / np.float32(max(params.texture_clearance_m, grid.cell_size_m))), flat, w)
-        del flat, w
-        z += (low - z) * act
-        del low
-        d = detail_noise.result() * weight
-        detail["detail_rms_m"] = round(float(d.std()), 3)
-        z += d
-        del act, weight, d
+        c, beta = law_job.result()  # fitted: z may change
+        detail = {"detail_beta": round(beta, 3), "detail_log10_c": round(float(np.log10(c)), 3) if c > 0 else None}
+        if c > 0:
+            act, weight = _detail_act(
+                falloff(dist_job.result() / np.float32(max(params.texture_clearance_m, grid.cell_size_m))), flat, w)
+            del flat, w
+            z += (low - z) * act
+            del low
+            d = detail_noise.result() * weight
+            detail["detail_rms_m"] = round(float(d.std()), 3)
+            z += d
+            del act, weight, d
+        else:
+            del flat, w, low
     elif params.detail_gain > 0 and c > 0:
         # sub-lambda relief: the power law continued below detail_largest_m, minus what the
         # (smoothed) skeleton has there already, where the skeleton is steep, away from peaks and saddles

@@ -480,10 +480,11 @@ class _InlineExecutor:
         pass
 
 
-@pytest.mark.parametrize("params", [{}, {"detail_replace": False}, {"detail_gain": 0.0, "noise_ratio": 0.3}])
+@pytest.mark.parametrize("params", [{}, {"detail_replace": False}, {"detail_gain": 0.0, "noise_ratio": 0.3},
+                                    {"smooth_m": 60.0}])
 def test_render_jobs_on_threads_same_bytes(monkeypatch, params):
-    """The darts and the detail's noise on second threads give the bytes of the same jobs run in line
-    (the skeleton too: same samples, rivers and TIN)."""
+    """The darts, the detail's law and noise on second threads give the bytes and the recorded parameters
+    of the same jobs run in line (the skeleton too: same samples, rivers and TIN)."""
     from helpers.trees import small_tree
     from orokit.raster import render, skeleton
     from orokit.raster.params import RenderParams
@@ -496,6 +497,7 @@ def test_render_jobs_on_threads_same_bytes(monkeypatch, params):
     ref, rs = render.render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=5,
                                       return_skeleton=True)
     assert fast.values.tobytes() == ref.values.tobytes()
+    assert fast.attrs["parameters"] == ref.attrs["parameters"]
     assert fs.tin.xy.tobytes() == rs.tin.xy.tobytes() and fs.tin.z.tobytes() == rs.tin.z.tobytes()
 
 
