@@ -211,64 +211,6 @@ def ascent_labels(z, lab):
 
 
 @njit(cache=True, nogil=True)
-def basin_graph(z, lab, npk, r0, r1):
-    """Border maxima, minima and highest passes of the basins, over rows ``r0:r1``.
-
-    One pass of :func:`basin_border_max` (a border cell touches the raster edge or a
-    NaN cell), :func:`basin_min` and :func:`basin_passes` (cell pairs whose first cell
-    is in ``r0:r1``), so row stripes can run in parallel threads and be merged (see
-    ``engine.basin_graph``). Returns ``(bmax, nmin, ea, eb, ec)``.
-    """
-    H, W = z.shape
-    zf = z.ravel()
-    bmax = np.full(npk, -np.inf)
-    nmin = np.full(npk, np.inf)
-    size = 1024
-    while size < 8 * npk * (r1 - r0) // max(H, 1) + 1024:
-        size *= 2
-    keys = np.full(size, -1, np.int64)
-    vals = np.empty(size, lab.dtype)  # pass cells: int32 when the labels are (fewer than 2**31 cells)
-    count = 0
-    for r in range(r0, r1):
-        for c in range(W):
-            i = r * W + c
-            la = lab[i]
-            if la < 0:
-                continue
-            zi = zf[i]
-            if zi < nmin[la]:
-                nmin[la] = zi
-            if zi > bmax[la]:
-                isb = r == 0 or r == H - 1 or c == 0 or c == W - 1
-                if not isb:
-                    for d in _NEIGHBOURS_8:
-                        if lab[(r + d[0]) * W + c + d[1]] < 0:
-                            isb = True
-                            break
-                if isb:
-                    bmax[la] = zi
-            for d in _FORWARD_4:
-                rr = r + d[0]
-                cc = c + d[1]
-                if rr >= H or cc < 0 or cc >= W:
-                    continue
-                j = rr * W + cc
-                lb = lab[j]
-                if lb < 0 or lb == la:
-                    continue
-                p = j if above(zi, i, zf[j], j) else i
-                if la < lb:
-                    key = la * np.int64(npk) + lb
-                else:
-                    key = lb * np.int64(npk) + la
-                count += _insert(keys, vals, key, p, zf)
-                if 2 * count > keys.size:
-                    keys, vals = _grow_pass_table(keys, vals, zf)
-    ea, eb, ec = _unpack_pass_table(keys, vals, count, npk)
-    return bmax, nmin, ea, eb, ec
-
-
-@njit(cache=True, nogil=True)
 def basin_border_max(z, label, border, npk):
     """Highest border-cell elevation of every basin (-inf when it has none)."""
     out = np.full(npk, -np.inf)

@@ -95,8 +95,8 @@ def strip_ascent(z, r0, r1, lab):
 @njit(cache=True, nogil=True)
 def strip_graph(z, lab, nterm, r0, r1):
     """Border maxima, minima and highest passes of the terminals of rows ``r0:r1`` (``lab`` of
-    :func:`strip_ascent`): as ``_kernels.basin_graph``, for the cell pairs with both cells in
-    the strip (the pairs across a strip's last row are the caller's). A border cell touches the
+    :func:`strip_ascent`), for the cell pairs with both cells in the strip (the pairs across a strip's
+    last row are the caller's); each terminal pair keeps its highest pass, the lower cell of a pair. A border cell touches the
     raster's edge or a NaN cell (read in ``z``: outside the strip too). Returns
     ``(bmax, nmin, ea, eb, ec)`` over terminal ids, ``ec`` flat cells of the whole raster.
     """

@@ -89,57 +89,6 @@ def _threads() -> int:
     return int(numba.get_num_threads())
 
 
-def basin_graph(z: np.ndarray, label: np.ndarray, n_max: int) -> tuple[np.ndarray, ...]:
-    """Border maxima, minima and highest passes of the basins, in parallel row stripes.
-
-    Returns ``(bmax, nmin, ea, eb, ec)`` (see :func:`_kernels.basin_graph`); each basin
-    pair appears once, with the highest of its passes in the total order.
-    """
-    H = z.shape[0]
-    k = max(1, min(_threads(), H // 64))
-    bounds = [(t * H // k, (t + 1) * H // k) for t in range(k)]
-    if k == 1:
-        return _kernels.basin_graph(z, label, n_max, 0, H)
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(k) as pool:
-        parts = list(pool.map(lambda b: _kernels.basin_graph(z, label, n_max, b[0], b[1]), bounds))
-    bmax = np.maximum.reduce([p[0] for p in parts])
-    nmin = np.minimum.reduce([p[1] for p in parts])
-    edges = [list(p[2:]) for p in parts]
-    del parts
-    # one column at a time, each stripe's piece freed once copied (lower peak memory: the labels are alive)
-    ea, eb, ec = (_concatenate_freeing(edges, i) for i in range(3))
-    # A pair seen in several stripes keeps its highest pass (elevation, then raster order).
-    # Basins are 8-connected, so a pair found in two stripes has both basins on the first
-    # row of a later stripe: only the pairs of such seam basins are compared.
-    W = z.shape[1]
-    seam = np.zeros(n_max, bool)
-    for r0, _ in bounds[1:]:
-        rows = label[(r0 - 1) * W:(r0 + 1) * W]
-        seam[rows[rows >= 0]] = True
-    cand = np.flatnonzero(seam[ea] & seam[eb])
-    key = ea[cand] * np.int64(n_max) + eb[cand]
-    order = np.lexsort((ec[cand], -z.ravel()[ec[cand]], key))
-    key = key[order]
-    dup = np.zeros(ea.size, bool)
-    dup[cand[order[1:][key[1:] == key[:-1]]]] = True
-    if dup.any():  # one column at a time: each old column is freed as its copy is made
-        keep = ~dup
-        ea = ea[keep]
-        eb = eb[keep]
-        ec = ec[keep]
-    return bmax, nmin, ea, eb, ec
-
-
-def _concatenate_freeing(pieces: list[list[np.ndarray | None]], i: int) -> np.ndarray:
-    """``np.concatenate`` of column ``i`` of every stripe's pieces; the pieces are dropped as soon as copied."""
-    out = np.concatenate([p[i] for p in pieces])
-    for p in pieces:
-        p[i] = None
-    return out
-
-
 def orometry(z: np.ndarray, *, min_prominence_m: float, outside: str = "unknown") -> Orometry:
     """Exact peaks, prominences and pruned Divide Tree of a 2-D array (NaN = nodata).
 

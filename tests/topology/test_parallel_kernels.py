@@ -31,7 +31,7 @@ def _grids():
 
 
 @pytest.mark.parametrize("label_dtype", [np.int32, np.int64])
-def test_parallel_kernels_equal_sequential(label_dtype):
+def test_parallel_ascent_equals_sequential(label_dtype):
     n_tall = 0
     for z in _grids():
         label, max_cell, bmax, nmin, edges = _sequential(z)
@@ -39,10 +39,6 @@ def test_parallel_kernels_equal_sequential(label_dtype):
         got_max = _kernels.ascent_labels(z, lab)
         np.testing.assert_array_equal(lab, label)
         np.testing.assert_array_equal(got_max, max_cell)
-        gb, gn, ea, eb, ec = engine.basin_graph(z, lab, max_cell.size)
-        np.testing.assert_array_equal(gb, bmax)
-        np.testing.assert_array_equal(gn, nmin)
-        assert sorted(zip(ea.tolist(), eb.tolist(), ec.tolist())) == edges
         n_tall += z.shape[0] >= 128
     assert n_tall >= 5  # several grids are split into row stripes
 
