@@ -13,6 +13,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from orokit.topology._kernels import ascent_pointer
+
 
 @njit(cache=True, nogil=True)
 def poisson_disk(xmin: float, ymin: float, xmax: float, ymax: float, radius: float,
@@ -615,44 +617,14 @@ def border_pairs(owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ia, ib
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _ascent_pointer(z: np.ndarray, r: int, c: int) -> int:
-    """Flat index of the highest 8-neighbour of cell ``(r, c)`` in the engine's total order
-    (elevation, then raster order: earlier is higher), the cell itself when none is above it,
-    -1 for a NaN cell; outside the raster and NaN cells are skipped (the rule of
-    :func:`orokit.topology._kernels.ascent_labels`)."""
-    H, W = z.shape
-    zi = z[r, c]
-    if zi != zi:
-        return -1
-    best = r * W + c
-    bz = zi
-    for dr in range(-1, 2):
-        rr = r + dr
-        if rr < 0 or rr >= H:
-            continue
-        for dc in range(-1, 2):
-            cc = c + dc
-            if (dr == 0 and dc == 0) or cc < 0 or cc >= W:
-                continue
-            zn = z[rr, cc]
-            if zn != zn:
-                continue
-            j = rr * W + cc
-            if zn > bz or (zn == bz and j < best):
-                best = j
-                bz = zn
-    return best
-
-
 @njit(cache=True, nogil=True, parallel=True)
 def ascent_pointers(z: np.ndarray) -> np.ndarray:
-    """:func:`_ascent_pointer` of every cell (flat int64; row blocks on all threads)."""
+    """:func:`~orokit.topology._kernels.ascent_pointer` of every cell (flat int64; row blocks on all threads)."""
     H, W = z.shape
     ptr = np.empty(H * W, np.int64)
     for r in prange(H):
         for c in range(W):
-            ptr[r * W + c] = _ascent_pointer(z, r, c)
+            ptr[r * W + c] = ascent_pointer(z, r, c)
     return ptr
 
 
@@ -687,7 +659,7 @@ def update_basins(z: np.ndarray, ptr: np.ndarray, lab: np.ndarray, own: np.ndarr
                 if mark[j] != 0:
                     continue
                 mark[j] = 1
-                p = _ascent_pointer(z, r, c)
+                p = ascent_pointer(z, r, c)
                 if p != ptr[j]:
                     ptr[j] = p
                     mark[j] = 2
@@ -948,7 +920,7 @@ def relabel_basins(z: np.ndarray, ptr: np.ndarray, lab: np.ndarray, own: np.ndar
     for t in range(cells.size):
         j = cells[t]
         r = j // W
-        p = _ascent_pointer(z, r, j - r * W)
+        p = ascent_pointer(z, r, j - r * W)
         ptr[j] = p
         if p < 0:
             lab[j] = -1

@@ -27,6 +27,57 @@ def above(za, ka, zb, kb):
     return za > zb or (za == zb and ka < kb)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def ascent_pointer(z, r, c):
+    """Flat index of the highest 8-neighbour of cell ``(r, c)`` of ``z`` in the total order
+    (elevation, then raster order: earlier is higher), the cell itself when none is above it,
+    -1 for a NaN cell; cells outside the raster and NaN cells are skipped."""
+    H, W = z.shape
+    zi = z[r, c]
+    if zi != zi:
+        return -1
+    best = r * W + c
+    bz = zi
+    for dr in range(-1, 2):
+        rr = r + dr
+        if rr < 0 or rr >= H:
+            continue
+        for dc in range(-1, 2):
+            cc = c + dc
+            if (dr == 0 and dc == 0) or cc < 0 or cc >= W:
+                continue
+            zn = z[rr, cc]
+            if zn != zn:
+                continue
+            j = rr * W + cc
+            if zn > bz or (zn == bz and j < best):
+                best = j
+                bz = zn
+    return best
+
+
+@njit(cache=True, nogil=True, inline="always")
+def point_chain_at_end(lab, i, stack):
+    """Follow the pointers ``lab`` from cell ``i`` (``lab[i] >= 0``) to the chain's end (the first
+    negative value) and write that value into every cell on the way; ``stack`` is scratch space,
+    returned (grown when the chain is longer)."""
+    v = lab[i]
+    top = 0
+    j = i
+    while v >= 0:
+        if top == stack.size:
+            bigger = np.empty(stack.size * 2, np.int64)
+            bigger[:top] = stack[:top]
+            stack = bigger
+        stack[top] = j
+        top += 1
+        j = v
+        v = lab[j]
+    for t in range(top):
+        lab[stack[t]] = v
+    return stack
+
+
 @njit(cache=True, nogil=True)
 def steepest_ascent(zh):
     """Pointer of every cell to its highest 8-neighbour, exits and border flags.
@@ -149,24 +200,10 @@ def ascent_labels(z, lab):
         for r in range(r0, r1):
             for c in range(W):
                 i = r * W + c
-                zi = z[r, c]
-                if zi != zi:
+                best = ascent_pointer(z, r, c)
+                if best < 0:
                     lab[i] = -1
                     continue
-                best = i
-                bz = zi
-                for d in _NEIGHBOURS_8:
-                    rr = r + d[0]
-                    cc = c + d[1]
-                    if rr < 0 or rr >= H or cc < 0 or cc >= W:
-                        continue
-                    zn = z[rr, cc]
-                    if zn != zn:
-                        continue
-                    j = rr * W + cc
-                    if zn > bz or (zn == bz and j < best):
-                        best = j
-                        bz = zn
                 if best == i:
                     lab[i] = -2
                     cnt += 1
@@ -186,22 +223,8 @@ def ascent_labels(z, lab):
     for b in prange(nb):
         stack = np.empty(1024, np.int64)
         for i in range((b * H // nb) * W, ((b + 1) * H // nb) * W):
-            v = lab[i]
-            if v < 0:
-                continue
-            top = 0
-            j = i
-            while v >= 0:
-                if top == stack.size:
-                    bigger = np.empty(stack.size * 2, np.int64)
-                    bigger[:top] = stack[:top]
-                    stack = bigger
-                stack[top] = j
-                top += 1
-                j = v
-                v = lab[j]
-            for t in range(top):
-                lab[stack[t]] = v
+            if lab[i] >= 0:
+                stack = point_chain_at_end(lab, i, stack)
     for b in prange(nb):
         for i in range((b * H // nb) * W, ((b + 1) * H // nb) * W):
             v = lab[i]

@@ -14,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from orokit.topology._kernels import _FORWARD_4, _NEIGHBOURS_8, _grow_pass_table, _insert, _unpack_pass_table, above
+from orokit.topology._kernels import (_FORWARD_4, _NEIGHBOURS_8, _grow_pass_table, _insert, _unpack_pass_table, above,
+                                      ascent_pointer, point_chain_at_end)
 
 
 @njit(cache=True, nogil=True)
@@ -34,24 +35,10 @@ def strip_ascent(z, r0, r1, lab):
     for r in range(r0, r1):
         for c in range(W):
             i = r * W + c
-            zi = z[r, c]
-            if zi != zi:
+            best = ascent_pointer(z, r, c)
+            if best < 0:
                 lab[i - off] = -1
                 continue
-            best = i
-            bz = zi
-            for d in _NEIGHBOURS_8:
-                rr = r + d[0]
-                cc = c + d[1]
-                if rr < 0 or rr >= H or cc < 0 or cc >= W:
-                    continue
-                zn = z[rr, cc]
-                if zn != zn:
-                    continue
-                j = rr * W + cc
-                if zn > bz or (zn == bz and j < best):
-                    best = j
-                    bz = zn
             if best == i:
                 if m == cells.size:
                     bigger = np.empty(cells.size * 2, np.int64)
@@ -68,22 +55,8 @@ def strip_ascent(z, r0, r1, lab):
                 lab[i - off] = best - off
     stack = np.empty(1024, np.int64)
     for i in range(n):
-        v = lab[i]
-        if v < 0:
-            continue
-        top = 0
-        j = i
-        while v >= 0:
-            if top == stack.size:
-                bigger = np.empty(stack.size * 2, np.int64)
-                bigger[:top] = stack[:top]
-                stack = bigger
-            stack[top] = j
-            top += 1
-            j = v
-            v = lab[j]
-        for t in range(top):
-            lab[stack[t]] = v
+        if lab[i] >= 0:
+            stack = point_chain_at_end(lab, i, stack)
     for i in range(n):
         v = lab[i]
         if v <= -2:

@@ -100,8 +100,8 @@ def test_narrow_data_gives_no_disk_record(peak_factory):
                                           (0, 0, 15_000, 15_000))) is None
 
 
-def _top_rank_distance(tree, ttype) -> float:
-    """Wasserstein distance between the tree's per-disk top_rank and the type's record."""
+def _disk_distance(tree, ttype, column: str) -> float:
+    """Wasserstein distance between the tree's per-disk ``column`` (``top_rank``, ``peaks``) and the type's record."""
     from scipy.stats import wasserstein_distance
 
     pk = peaks_table(tree)
@@ -110,7 +110,7 @@ def _top_rank_distance(tree, ttype) -> float:
                         pk["prominence"].to_numpy(), (dom["x0"], dom["y0"], dom["x0"] + dom["width"],
                                                       dom["y0"] + dom["height"]),
                         min_prominence_m=ttype.min_prominence_m)
-    return float(wasserstein_distance(s["top_rank"], ttype.disks["top_rank"]))
+    return float(wasserstein_distance(s[column], ttype.disks[column]))
 
 
 def test_disk_weight_brings_the_per_disk_highest_peaks_to_the_type(peak_factory):
@@ -129,27 +129,13 @@ def test_disk_weight_brings_the_per_disk_highest_peaks_to_the_type(peak_factory)
     assert ttype.disks["top_rank"][10] < 0.05  # half of the disks hold one of the top 5 % peaks
     plain, target = [], []
     for seed in range(3):
-        plain.append(_top_rank_distance(synthesize_divide_tree(ttype, size_m=50_000, rng=seed,
-                                                             params=SynthesisParams(disk_weight=0.0,
-                                                                                    elevation_tolerance=0.05)), ttype))
+        p0 = SynthesisParams(disk_weight=0.0, elevation_tolerance=0.05)
+        plain.append(_disk_distance(synthesize_divide_tree(ttype, size_m=50_000, rng=seed, params=p0), ttype, "top_rank"))
         t = synthesize_divide_tree(ttype, size_m=50_000, rng=seed,
                                    params=SynthesisParams(disk_weight=32.0, elevation_tolerance=0.05))
         t.validate()
-        target.append(_top_rank_distance(t, ttype))
+        target.append(_disk_distance(t, ttype, "top_rank"))
     assert np.mean(target) < 0.6 * np.mean(plain)
-
-
-def _count_distance(tree, ttype) -> float:
-    """Wasserstein distance between the tree's per-disk peak counts and the type's record (its quantiles)."""
-    from scipy.stats import wasserstein_distance
-
-    pk = peaks_table(tree)
-    dom = tree.attrs["domain"]
-    s = disk_statistics(pk["x"].to_numpy(), pk["y"].to_numpy(), pk["elevation"].to_numpy(),
-                        pk["prominence"].to_numpy(), (dom["x0"], dom["y0"], dom["x0"] + dom["width"],
-                                                      dom["y0"] + dom["height"]),
-                        min_prominence_m=ttype.min_prominence_m)
-    return float(wasserstein_distance(s["peaks"], ttype.disks["peaks"]))
 
 
 def test_disk_count_targets_follow_the_record_and_the_border():
@@ -200,10 +186,10 @@ def test_disk_count_weight_brings_the_per_disk_peak_counts_to_the_type(peak_fact
     ttype = TerrainType.from_peaks(p, area_km2=3600.0, name="clustered")
     plain, target = [], []
     for seed in range(3):
-        plain.append(_count_distance(synthesize_divide_tree(ttype, size_m=60_000, rng=seed), ttype))
+        plain.append(_disk_distance(synthesize_divide_tree(ttype, size_m=60_000, rng=seed), ttype, "peaks"))
         t = synthesize_divide_tree(ttype, size_m=60_000, rng=seed, params=SynthesisParams(disk_count_weight=3.0))
         t.validate()
-        target.append(_count_distance(t, ttype))
+        target.append(_disk_distance(t, ttype, "peaks"))
     assert np.mean(target) < 0.75 * np.mean(plain)
     with pytest.raises(InputError, match="disk_count_weight"):
         SynthesisParams(disk_count_weight=-1)
