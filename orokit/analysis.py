@@ -205,6 +205,10 @@ def analyze(
                     store.put(name, iso[name].to_numpy(dtype))
                 iso = None
             t_iso = time.perf_counter()
+        except BaseException:
+            if store is not None:  # a failed or interrupted run leaves no column folder behind
+                store.close()
+            raise
         finally:
             if client is not None:
                 client.close()
