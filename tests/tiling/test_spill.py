@@ -133,9 +133,14 @@ def test_chunked_analysis_with_spill_writes_the_in_memory_files(make_dem, tmp_pa
     a = orokit.analyze(dem, min_prominence_m=1.0, geometry=False)
     held = []
     real_isolation = ti.tiled_isolation
+    # only the chunked run's own engine output counts: the in-memory run's (or an earlier test's in this
+    # worker) may still wait for the cycle collector; those alive are kept here so no new one takes their id
+    gc.collect()
+    earlier = [o for o in gc.get_objects() if isinstance(o, Orometry)]
+    earlier_ids = {id(o) for o in earlier}
 
     def isolation(*args, **kwargs):
-        cores = [o for o in gc.get_objects() if isinstance(o, Orometry)]
+        cores = [o for o in gc.get_objects() if isinstance(o, Orometry) and id(o) not in earlier_ids]
         held.append(sum(getattr(c, f).size for c in cores for f in SPILLED_OROMETRY))
         return real_isolation(*args, **kwargs)
 
