@@ -19,7 +19,7 @@ from orokit.errors import CRSError, InputError, OrokitWarning
 logger = logging.getLogger(__name__)
 
 __all__ = ["Domain", "make_domain", "ControlMaps", "load_control", "build_controls", "random_elevation_field",
-           "random_elevation_fields"]
+           "random_elevation_fields", "border_density_map"]
 
 
 @dataclass(frozen=True)
@@ -297,11 +297,15 @@ def random_elevation_field(domain: Domain, elevation_hist: Any, *, correlation_m
 
 def random_elevation_fields(domain: Domain, elevation_hist: Any, *, correlation_m: float, rng: Any,
                             border_rank: Sequence[float] | None = None, fine_m: float = 1000.0,
-                            fine_weights: Sequence[float] = (0.0,)) -> Iterator[np.ndarray]:
+                            fine_weights: Sequence[float] = (0.0,),
+                            density: np.ndarray | None = None) -> Iterator[np.ndarray]:
     """:func:`random_elevation_field` for each of ``fine_weights`` in turn, from the same two noises
     (lazily: a caller fitting the weight stops when it has what it needs).
 
     With weights all 0 the random draws are those of one field without the fine component.
+    ``density`` (the C_P, >= 0, of the domain's shape): ranks are weighted by it, so the field's
+    elevations at the places the peaks are drawn from (not per area) follow the histogram, and the
+    border trend's band means are those of the peaks; None: every cell weighs the same.
     """
     from scipy.ndimage import gaussian_filter
 
@@ -322,22 +326,31 @@ def random_elevation_fields(domain: Domain, elevation_hist: Any, *, correlation_
                 fine = fine / max(float(fine.std()), 1e-12)
             noise = base / max(float(base.std()), 1e-12) + float(w) * fine
         if border_rank is not None:
-            noise = _with_border_trend(noise, domain, np.asarray(border_rank, float))
-        ranks = np.argsort(np.argsort(noise.ravel(), kind="stable"), kind="stable")
-        q = (ranks + 0.5) / ranks.size
+            noise = _with_border_trend(noise, domain, np.asarray(border_rank, float), weights=density)
+        if density is None:
+            ranks = np.argsort(np.argsort(noise.ravel(), kind="stable"), kind="stable")
+            q = (ranks + 0.5) / ranks.size
+        else:
+            q = _weighted_ranks(noise.ravel(), np.asarray(density, float).ravel())
         p = elevation_hist.probabilities()
         cdf = np.concatenate([[0.0], np.cumsum(p)])
         e = np.asarray(elevation_hist.edges, float)
         yield np.interp(q, cdf, e).reshape(domain.shape)
 
 
-def _with_border_trend(noise: np.ndarray, domain: Domain, target: np.ndarray, iterations: int = 30) -> np.ndarray:
-    """``noise`` plus a trend in the distance to the border whose band mean ranks approach ``target``.
+def _weighted_ranks(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Mid-point ranks in [0, 1] of ``values`` where each counts with its weight (equal weights:
+    ``(i + 0.5) / n``)."""
+    order = np.argsort(values, kind="stable")
+    w = np.clip(weights[order], 0.0, None)
+    cw = np.cumsum(w)
+    q = np.empty(values.size)
+    q[order] = (cw - 0.5 * w) / max(float(cw[-1]), 1e-300)
+    return q
 
-    The trend is linear between the bands' centres (per band one offset, in units of the
-    noise's standard deviation), fitted by a damped fixed-point iteration on the grid. The
-    target is first shifted so its mean over the domain's cells is 0.5 (as every field's is).
-    """
+
+def _border_bands(domain: Domain) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Normalised border distance of every grid cell (flattened), its band and the bands' centres."""
     from orokit.synthesis.disks import BORDER_BANDS, border_distance
 
     ny, nx = domain.shape
@@ -349,17 +362,65 @@ def _with_border_trend(noise: np.ndarray, domain: Domain, target: np.ndarray, it
     edges = np.asarray(BORDER_BANDS)
     mids = 0.5 * (edges[1:] + edges[:-1])
     band = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, mids.size - 1)
+    return t, band, mids
+
+
+def border_density_map(domain: Domain, profile: Sequence[float], *, floor: float = 0.05,
+                       iterations: int = 50) -> np.ndarray:
+    """A C_P on the domain grid whose mean in each border band is ``profile`` (a type's
+    ``border_density``: relative peak density per :data:`~orokit.synthesis.disks.BORDER_BANDS` band).
+
+    Linear in the distance to the border between the bands' centres (flat beyond the outer
+    ones), fitted by a fixed-point iteration; at least ``floor`` times the profile's mean, so no
+    band is closed to peaks. Mean 1 over the domain's cells.
+    """
+    target = np.asarray(profile, float)
+    t, band, mids = _border_bands(domain)
     count = np.bincount(band, minlength=mids.size)
+    target = target / max(float(np.dot(count, target) / max(count.sum(), 1)), 1e-12)
+    low = floor * float(target.mean())
+    value = target.copy()
+    for _ in range(iterations):
+        dens = np.maximum(np.interp(t, mids, value), low)
+        mean = np.bincount(band, weights=dens, minlength=mids.size) / np.maximum(count, 1)
+        err = np.where(count > 0, target - mean, 0.0)
+        if np.abs(err).max() < 1e-3:
+            break
+        value = value + err
+    dens = np.maximum(np.interp(t, mids, value), low)
+    return (dens / dens.mean()).reshape(domain.shape)
+
+
+def _with_border_trend(noise: np.ndarray, domain: Domain, target: np.ndarray, iterations: int = 30,
+                       weights: np.ndarray | None = None) -> np.ndarray:
+    """``noise`` plus a trend in the distance to the border whose band mean ranks approach ``target``.
+
+    The trend is linear between the bands' centres (per band one offset, in units of the
+    noise's standard deviation), fitted by a damped fixed-point iteration on the grid. The
+    target is first shifted so its mean over the domain's cells is 0.5 (as every field's is).
+    With ``weights`` (the C_P) ranks and means are weighted by it (the peaks' view of the field).
+    """
+    t, band, mids = _border_bands(domain)
+    count = np.bincount(band, minlength=mids.size)
+    wflat = None if weights is None else np.clip(np.asarray(weights, float).ravel(), 0.0, None)
+    mass = count.astype(float) if wflat is None else np.bincount(band, weights=wflat, minlength=mids.size)
     z = (noise - noise.mean()) / max(float(noise.std()), 1e-12)
     z = z.ravel()
     # the field's mean rank is 0.5 whatever the trend: only the differences between bands can be
-    # met, so the target is shifted to a mean of 0.5 over the domain's own band areas
-    target = np.clip(target - (np.dot(count, target) / count.sum() - 0.5), 0.02, 0.98)
+    # met, so the target is shifted to a mean of 0.5 over the domain's own band areas (masses)
+    if wflat is None:
+        target = np.clip(target - (np.dot(count, target) / count.sum() - 0.5), 0.02, 0.98)
+    else:
+        target = np.clip(target - (np.dot(mass, target) / max(float(mass.sum()), 1e-300) - 0.5), 0.02, 0.98)
     offset = np.zeros(mids.size)
     for _ in range(iterations):
         score = z + np.interp(t, mids, offset)
-        q = (np.argsort(np.argsort(score, kind="stable"), kind="stable") + 0.5) / score.size
-        mean = np.bincount(band, weights=q, minlength=mids.size) / np.maximum(count, 1)
+        if wflat is None:
+            q = (np.argsort(np.argsort(score, kind="stable"), kind="stable") + 0.5) / score.size
+            mean = np.bincount(band, weights=q, minlength=mids.size) / np.maximum(count, 1)
+        else:
+            q = _weighted_ranks(score, wflat)
+            mean = np.bincount(band, weights=q * wflat, minlength=mids.size) / np.maximum(mass, 1e-300)
         err = np.where(count > 0, target - mean, 0.0)
         if np.abs(err).max() < 0.005:
             break

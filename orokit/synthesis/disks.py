@@ -24,7 +24,7 @@ from scipy.spatial import cKDTree
 from orokit.errors import SchemaError
 
 __all__ = ["DISK_RADIUS_M", "DISK_LEVELS", "BORDER_BANDS", "disk_centres", "disk_statistics", "disk_quantiles",
-           "check_disk_quantiles", "coverage_targets", "border_distance", "border_rank", "interior_share"]
+           "check_disk_quantiles", "coverage_targets", "border_distance", "border_rank", "border_density", "band_areas", "interior_share"]
 
 #: radius of the disks (the region classifier's R)
 DISK_RADIUS_M = 10_000.0
@@ -133,6 +133,44 @@ def border_rank(x: np.ndarray, y: np.ndarray, elevation: np.ndarray,
     return [float(t / c) if c else 0.5 for t, c in zip(total, count)]
 
 
+def band_areas(extent: tuple[float, float, float, float]) -> np.ndarray:
+    """Area of each :data:`BORDER_BANDS` band of ``extent`` (outermost first), exactly.
+
+    The cells at normalised border distance >= t form a rectangle of
+    ``(w - 2 t h) x (hgt - 2 t h)``, h half the shorter side.
+
+    >>> band_areas((0, 0, 100, 100)).round(0).tolist()
+    [2008.0, 1986.0, 2012.0, 1996.0, 1998.0]
+    """
+    xmin, ymin, xmax, ymax = (float(v) for v in extent)
+    w, hgt = xmax - xmin, ymax - ymin
+    half = 0.5 * min(w, hgt)
+    t = np.asarray(BORDER_BANDS)
+    inner = np.clip(w - 2 * t * half, 0.0, None) * np.clip(hgt - 2 * t * half, 0.0, None)
+    return inner[:-1] - inner[1:]
+
+
+def border_density(x: np.ndarray, y: np.ndarray, extent: tuple[float, float, float, float]) -> list[float]:
+    """Peak density in each :data:`BORDER_BANDS` band (outermost first) over the mean density of ``extent``.
+
+    1 in every band for peaks spread irrespective of the border; a crop centred on a
+    massif gives more than 1 in the middle. No peak: 1 everywhere.
+
+    >>> [round(v, 2) for v in border_density(np.array([1.0, 2.0, 50.0, 48.0]), np.array([1.0, 98.0, 50.0, 52.0]),
+    ...                                       (0, 0, 100, 100))]
+    [2.49, 0.0, 0.0, 0.0, 2.5]
+    """
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    area = band_areas(extent)
+    if x.size == 0 or area.sum() <= 0:
+        return [1.0] * (len(BORDER_BANDS) - 1)
+    band = np.clip(np.searchsorted(BORDER_BANDS, border_distance(x, y, extent), side="right") - 1,
+                   0, len(BORDER_BANDS) - 2)
+    count = np.bincount(band, minlength=len(BORDER_BANDS) - 1)
+    mean = x.size / area.sum()
+    return [float(c / (a * mean)) if a > 0 else 1.0 for c, a in zip(count, area)]
+
+
 def interior_share(x: np.ndarray, y: np.ndarray, elevation: np.ndarray, extent: tuple[float, float, float, float],
                    *, top: float = 0.02, margin_m: float = DISK_RADIUS_M) -> float:
     """Share of the highest ``top`` of the peaks (at least one) lying at least ``margin_m`` inside ``extent``.
@@ -199,6 +237,15 @@ def check_disk_quantiles(disks: Mapping[str, Any]) -> dict[str, Any]:
             raise SchemaError(f"terrain type disks record: border_rank needs {len(BORDER_BANDS) - 1} mean ranks "
                               f"in [0, 1] (one per border band), got {disks['border_rank']!r}")
         out["border_rank"] = br
+    if disks.get("border_density") is not None:  # optional: types made before session 15 lack it
+        try:
+            bd = [float(v) for v in disks["border_density"]]
+        except (TypeError, ValueError) as exc:
+            raise SchemaError(f"terrain type disks record: border_density must be a list of numbers ({exc})") from exc
+        if len(bd) != len(BORDER_BANDS) - 1 or not all(0.0 <= v < math.inf for v in bd) or not any(bd):
+            raise SchemaError(f"terrain type disks record: border_density needs {len(BORDER_BANDS) - 1} relative "
+                              f"densities >= 0, not all 0 (one per border band), got {disks['border_density']!r}")
+        out["border_density"] = bd
     return out
 
 

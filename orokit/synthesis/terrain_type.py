@@ -729,7 +729,7 @@ def _check_range(feature: str, h: FeatureHistogram) -> None:
 def _disk_record(x: np.ndarray, y: np.ndarray, z: np.ndarray, prom: np.ndarray, crs: Any,
                  extent: tuple[float, float, float, float] | None, min_prominence_m: float) -> dict[str, Any] | None:
     """The ``disks`` record of a type (None when the data holds no 10 km disk)."""
-    from orokit.synthesis.disks import border_rank, disk_quantiles, disk_statistics
+    from orokit.synthesis.disks import border_density, border_rank, disk_quantiles, disk_statistics
     from orokit.synthesis.orometry import planar_xy
 
     if extent is None:
@@ -745,6 +745,7 @@ def _disk_record(x: np.ndarray, y: np.ndarray, z: np.ndarray, prom: np.ndarray, 
     rec = disk_quantiles(disk_statistics(px[:k], py[:k], z, prom, box, min_prominence_m=min_prominence_m))
     if rec is not None:
         rec["border_rank"] = border_rank(px[:k], py[:k], z, box)
+        rec["border_density"] = border_density(px[:k], py[:k], box)
     return rec
 
 

@@ -119,6 +119,11 @@ class SynthesisParams:
         regions, seed 0): share of the twin's highest 2 % of peaks >= 10 km inside the border
         0.08-0.67 -> 0.33-1.00 against the real 0.11-1.00, TV distance of the disks' relative
         elevation 0.13-0.46 -> 0.06-0.45, landforms within target equal.
+    border_density : without a user C_P (and with one type), the density map follows the type's
+        ``border_density`` (relative peak density by distance to the data border, in its ``disks``
+        record; :func:`orokit.synthesis.controls.border_density_map`), and the automatic C_H is ranked
+        by it, so the twin of a DEM cropped around its relief holds as many of its peaks inside as the
+        DEM does (off, or a type without the record: a uniform C_P).
     elevation_tolerance : width of the C_H acceptance of the dart throwing, as a share of the C_H
         range (the paper: 1/20). Default 0.0125 (issue 11): with 0.05 neighbouring twin peaks differed
         twice as much in elevation as real ones (median |dz| / distance to the nearest peak 0.23-0.24
@@ -189,6 +194,7 @@ class SynthesisParams:
     disk_weight: float = 32.0
     disk_count_weight: float = 0.0
     border_trend: bool = True
+    border_density: bool = False
     elevation_tolerance: float = 0.0125
     saddle_slope_ratio: float | None = 1.5
     follow_gradient: bool = True
@@ -203,7 +209,7 @@ class SynthesisParams:
     def __post_init__(self) -> None:
         if self.use_bands not in ("auto", True, False):
             raise InputError(f"use_bands must be 'auto', True or False, got {self.use_bands!r}")
-        for name in ("border_trend", "follow_gradient", "follow_ridge_contrast", "follow_ridge_slope",
+        for name in ("border_trend", "border_density", "follow_gradient", "follow_ridge_contrast", "follow_ridge_slope",
                      "follow_neighbour_gradient", "fine_needs_reach"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise InputError(f"{name} must be True or False, got {getattr(self, name)!r}")
@@ -354,6 +360,13 @@ def synthesize_divide_tree(
     free_t = _free_peak_counts(types, controls, domain, n_peaks, fixed_xyz, fixed_type)
     # the default smooth C_H only once the counts are known to be sane (its smoothing is the
     # costly step on a tiny domain); nothing above draws from rng
+    profile = (types[0].disks or {}).get("border_density") if p.border_density and len(types) == 1 else None
+    if profile is not None and control_density is None:
+        from orokit.synthesis.controls import border_density_map
+
+        controls = replace(controls, density=border_density_map(domain, profile))
+    else:
+        profile = None
     auto_m = p.auto_elevation_m if controls.elevation is None and len(types) == 1 else None
     nn_target = types[0].neighbour_gradient if p.follow_neighbour_gradient else None
     fit_fine = auto_m is not None and nn_target is not None
@@ -366,7 +379,7 @@ def synthesize_divide_tree(
             domain, types[0].histograms["elevation"], correlation_m=float(auto_m),
             rng=rng.integers(2**63) if fit_fine else rng,
             border_rank=disks.get("border_rank") if p.border_trend else None, fine_m=float(p.fine_elevation_m),
-            fine_weights=FINE_WEIGHTS if fit_fine else (0.0,))
+            fine_weights=FINE_WEIGHTS if fit_fine else (0.0,), density=None if profile is None else controls.density)
         if not fit_fine:
             controls = replace(controls, elevation=next(fields))
     peaks = _peak_elevations(types, free_t, fixed_xyz, fixed_type, fragment, eps, rng)
