@@ -1,6 +1,7 @@
 """``orokit analyze``: peaks, prominence, isolation and the Divide Tree of one DEM."""
 from __future__ import annotations
 
+import threading
 import time
 from pathlib import Path
 from typing import Literal
@@ -99,16 +100,23 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         from concurrent.futures import ThreadPoolExecutor
 
         from orokit.cli.main import owns_process
-        from orokit.io.dem import read_dem_array
-        from orokit.tiling.memory import release_library_pages
+        from orokit.tiling.memory import GDAL_WHOLE_READ_CACHE_BYTES, limit_gdal_cache, release_library_pages
 
         # in memory: plain numpy (no xarray/rioxarray/dask imports: faster start, less memory); a
         # second thread imports numba and loads the kernels while GDAL reads (wall time). The read
         # stays in this thread: its freed buffers are reused later (a reader thread's malloc arena
-        # kept ~70 MB more resident at 15 M cells)
+        # kept ~70 MB more resident at 15 M cells). In orokit's own process the read waits for
+        # numba's target to start and LLVM's pages it touched to be dropped: the raster and those
+        # pages resident together were the process's peak at 15 M cells (+~55 MiB)
+        started = threading.Event() if owns_process() else None
         with ThreadPoolExecutor(1) as pool:
-            loading = pool.submit(_load_kernels, isolation=not no_isolation)
+            loading = pool.submit(_load_kernels, isolation=not no_isolation, started=started)
             try:
+                from orokit.io.dem import read_dem_array
+
+                if started is not None:
+                    limit_gdal_cache(GDAL_WHOLE_READ_CACHE_BYTES)  # a whole read (unless the user set it)
+                    started.wait()  # set by the loader in any case
                 da = read_dem_array(str(dem.path), z_units=z_units, cell_size_m=cell_size_m, band=band)
             finally:
                 loading.result()
@@ -145,10 +153,21 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
     )
 
 
-def _load_kernels(*, isolation: bool) -> None:
-    _numba_without_blas_probe()
-    from orokit.analysis import load_kernels
+def _load_kernels(*, isolation: bool, started: threading.Event | None = None) -> None:
+    """Import numba and load the engine's kernels. With ``started`` (orokit's own process): first
+    start numba's target, drop LLVM's pages that touched, then set ``started`` (set on failure too)."""
+    from orokit.analysis import load_kernels, start_numba_target
 
+    try:
+        _numba_without_blas_probe()
+        if started is not None:
+            from orokit.tiling.memory import release_library_pages
+
+            start_numba_target()
+            release_library_pages("libllvmlite")
+    finally:
+        if started is not None:
+            started.set()
     load_kernels(isolation=isolation)
 
 

@@ -166,7 +166,7 @@ class _BandReader:
         inplace = out is None
         n_bad = 0
         bad_values = []
-        step = max(1, (1 << 22) // max(1, raw.shape[-1]))
+        step = max(1, (1 << 20) // max(1, raw.shape[-1]))  # ~1 M cells: each bool temporary ~1 MB
         for r0 in range(0, raw.shape[0], step):
             blk = raw[r0:r0 + step]
             valid = np.ones(blk.shape, dtype=bool)
@@ -711,7 +711,7 @@ def _read_dem(
     # -- pixels -------------------------------------------------------------------
     if chunks is None:
         data: Any = reader.read()
-        if not np.isfinite(data).any():
+        if np.isnan(np.fmax.reduce(data, axis=None)):  # all NaN (read made +-inf NaN); no bool per cell
             raise InputError(_all_nodata_message(path, nd))
     else:
         import dask.array as dsa
