@@ -176,12 +176,17 @@ def owns_process() -> bool:
     return _CONSOLE["process"]
 
 
+#: ``orokit analyze``'s fixed malloc mmap threshold (:func:`orokit.tiling.memory.fix_mmap_threshold`)
+MMAP_THRESHOLD_BYTES = 1 << 20
+
+
 def apply_process_settings(command: str) -> None:
     """Process-wide settings for ``command``, applied by :func:`main` before the command runs.
 
     ``analyze``: at most two glibc malloc arenas (GDAL's reader, numba's loader and the
     writers' threads otherwise each keep an arena with its freed pages: ~10-20 MB of the
-    peak at 15 M cells, measured in session 12), and Arrow's buffers from malloc, not
+    peak at 15 M cells, measured in session 12), blocks of 1 MB or more always mapped on
+    their own (freed arrays leave no resident pages in the heap), and Arrow's buffers from malloc, not
     mimalloc, whose segments stayed resident (~20 MB of the writing's peak), unless the
     user set ``ARROW_DEFAULT_MEMORY_POOL``; GDAL's block cache bounded to 32 MB unless the user
     set ``GDAL_CACHEMAX`` (:func:`orokit.tiling.memory.limit_gdal_cache`: a raster is read once; GDAL's
@@ -192,9 +197,10 @@ def apply_process_settings(command: str) -> None:
         return
     import os
 
-    from orokit.tiling.memory import limit_gdal_cache, limit_malloc_arenas
+    from orokit.tiling.memory import fix_mmap_threshold, limit_gdal_cache, limit_malloc_arenas
 
     limit_malloc_arenas(2)
+    fix_mmap_threshold(MMAP_THRESHOLD_BYTES)
     os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
     limit_gdal_cache()
 

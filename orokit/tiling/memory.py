@@ -12,7 +12,7 @@ import ctypes
 import ctypes.util
 import functools
 
-__all__ = ["limit_gdal_cache", "limit_malloc_arenas", "release_free_heap", "release_library_pages"]
+__all__ = ["fix_mmap_threshold", "limit_gdal_cache", "limit_malloc_arenas", "release_free_heap", "release_library_pages"]
 
 #: GDAL's block cache (bytes) of the ``orokit`` program (:func:`limit_gdal_cache`): by default GDAL caches up
 #: to 5 % of the RAM, and a whole-raster read kept its blocks in the cache (+16-20 MB peak at 15.1 M cells)
@@ -124,8 +124,21 @@ def release_library_pages(name: str) -> int:
     return dropped
 
 
-#: ``mallopt`` parameter: the most malloc arenas glibc creates
+#: ``mallopt`` parameters: the most malloc arenas glibc creates; the size from which a block is its own mapping
 _M_ARENA_MAX = -8
+_M_MMAP_THRESHOLD = -3
+
+
+@functools.lru_cache(maxsize=1)
+def _mallopt():
+    name = ctypes.util.find_library("c")
+    try:
+        fn = ctypes.CDLL(name).mallopt if name else None
+    except (OSError, AttributeError):
+        return None
+    if fn is not None:
+        fn.restype, fn.argtypes = ctypes.c_int, [ctypes.c_int, ctypes.c_int]
+    return fn
 
 
 def limit_malloc_arenas(n: int) -> bool:
@@ -136,15 +149,21 @@ def limit_malloc_arenas(n: int) -> bool:
     loader, the writers' threads) that was ~15-20 MB of the peak (measured). It holds for the
     whole process: for a program's entry point (``orokit analyze``), never a library call.
     """
-    name = ctypes.util.find_library("c")
-    try:
-        mallopt = ctypes.CDLL(name).mallopt if name else None
-    except (OSError, AttributeError):
-        return False
-    if mallopt is None:
-        return False
-    mallopt.restype, mallopt.argtypes = ctypes.c_int, [ctypes.c_int, ctypes.c_int]
-    return bool(mallopt(_M_ARENA_MAX, int(n)))
+    mallopt = _mallopt()
+    return mallopt is not None and bool(mallopt(_M_ARENA_MAX, int(n)))
+
+
+def fix_mmap_threshold(nbytes: int) -> bool:
+    """Make every malloc block of ``nbytes`` or more its own mapping, handed back when freed; True when it
+    could be set (glibc only).
+
+    glibc starts at 128 kB but raises the threshold to the size of each mapped block freed (up to
+    32 MB), so after the first few the arrays of a few MB are served from the heap and their pages
+    stay resident once freed, under the phases that follow. A fixed threshold keeps them mappings.
+    For a program's entry point (``orokit analyze``), never a library call.
+    """
+    mallopt = _mallopt()
+    return mallopt is not None and bool(mallopt(_M_MMAP_THRESHOLD, int(nbytes)))
 
 
 def limit_gdal_cache(nbytes: int = GDAL_CACHE_BYTES) -> bool:

@@ -30,6 +30,7 @@ def _dem(path: Path) -> Path:
 def test_cli_runner_call_leaves_the_callers_process_alone(tmp_path, monkeypatch):
     calls: list[str] = []
     monkeypatch.setattr(memory, "limit_malloc_arenas", lambda n: calls.append(f"arenas {n}") or True)
+    monkeypatch.setattr(memory, "fix_mmap_threshold", lambda n: calls.append(f"mmap {n}") or True)
     monkeypatch.setattr(memory, "release_library_pages", lambda name: calls.append(f"drop {name}") or 0)
     monkeypatch.delenv("ARROW_DEFAULT_MEMORY_POOL", raising=False)
     res = CliRunner().invoke(cli, ["-q", "analyze", str(_dem(tmp_path / "dem.tif")), "-o", str(tmp_path / "out"),
@@ -46,6 +47,7 @@ import os, sys
 import orokit.tiling.memory as memory
 calls = []
 memory.limit_malloc_arenas = lambda n: calls.append(f"arenas {n}") or True
+memory.fix_mmap_threshold = lambda n: calls.append(f"mmap {n}") or True
 memory.release_library_pages = lambda name: calls.append(f"drop {name}") or 0
 import orokit.io.dem as dem
 _read = dem.read_dem_array
@@ -71,7 +73,7 @@ def test_console_script_applies_them_to_analyze(tmp_path):
     args = ["-q", "analyze", dem, "--no-progress", "--min-prominence", "5", "-o"]
     # LLVM's pages numba's start touched are dropped before the raster is read (together they were the
     # process's peak at 15.1 M cells, session 14), the ones the kernels' loading touched after it
-    assert _console(*args, str(tmp_path / "a")) == "['arenas 2', 'drop libllvmlite', 'read', 'drop libllvmlite'] system"
+    assert _console(*args, str(tmp_path / "a")) == "['arenas 2', 'mmap 1048576', 'drop libllvmlite', 'read', 'drop libllvmlite'] system"
     # a user's choice of Arrow's pool stays
     assert _console(*args, str(tmp_path / "b"), env={"ARROW_DEFAULT_MEMORY_POOL": "jemalloc"}).endswith("jemalloc")
 
@@ -111,4 +113,4 @@ def test_python_m_is_orokits_own_process_for_every_command_module(tmp_path):
     assert "runpy.run_module" in MODULE and "import main" not in MODULE
     dem = str(_dem(tmp_path / "dem.tif"))
     args = ["-q", "analyze", dem, "--no-progress", "--min-prominence", "5", "-o", str(tmp_path / "m")]
-    assert _console(*args, script=MODULE) == "['arenas 2', 'drop libllvmlite', 'read', 'drop libllvmlite'] system"
+    assert _console(*args, script=MODULE) == "['arenas 2', 'mmap 1048576', 'drop libllvmlite', 'read', 'drop libllvmlite'] system"

@@ -120,3 +120,39 @@ def test_malloc_arenas_are_limited_in_the_process_that_asks():
 
     assert arenas("default") > 2
     assert arenas("limit") == 2
+
+
+def test_fix_mmap_threshold_maps_large_blocks_in_a_fresh_process():
+    """After it, a freed block of a few MB leaves no resident heap pages (glibc otherwise raises its
+    threshold to the size of the first mapped block freed and serves the next ones from the heap)."""
+    code = """
+import ctypes, sys
+from orokit.tiling.memory import fix_mmap_threshold
+if sys.argv[1] == "fix":
+    assert fix_mmap_threshold(1 << 20)
+libc = ctypes.CDLL(None)
+libc.malloc.restype = ctypes.c_void_p
+libc.free.argtypes = [ctypes.c_void_p]
+libc.free(libc.malloc(8 << 20))  # mapped (above 128 kB); freeing it raises glibc's own threshold
+def heap_kb():
+    kb, name = 0, None
+    with open("/proc/self/smaps") as f:
+        for line in f:
+            p = line.split()
+            if not p[0].endswith(":"):
+                name = p[5] if len(p) > 5 else ""
+            elif p[0] == "Rss:" and name == "[heap]":
+                kb += int(p[1])
+    return kb
+before = heap_kb()
+p = libc.malloc(6 << 20)
+ctypes.memset(p, 1, 6 << 20)
+libc.free(p)
+print(heap_kb() - before)
+"""
+    if not sys.platform.startswith("linux"):
+        pytest.skip("glibc and /proc only")
+    grown = {mode: int(subprocess.run([sys.executable, "-c", code, mode], capture_output=True, text=True,
+                                      check=True).stdout) for mode in ("default", "fix")}
+    assert grown["default"] >= 5 << 10  # 6 MB stayed resident in the heap (what the fix is for)
+    assert grown["fix"] < 1 << 10
