@@ -219,8 +219,6 @@ def analyze(
         z = np.ascontiguousarray(z)
         # the pixels go once the isolation search is done (the caller asked; nothing after reads them)
         release = release_dem and hasattr(dem, "release") and dem_error_m is None and not depressions
-        from concurrent.futures import ThreadPoolExecutor
-
         from orokit.metrics.isolation import KernelMetric, finish_isolation, nearest_higher, search_pyramid
         from orokit.tiling.memory import release_free_heap
 
@@ -229,40 +227,33 @@ def analyze(
             del z
             dem.release()
             release = False
-        # the engine's peak memory is past: the libraries of the tables and files load in a second
-        # thread, and the isolation's pyramid is built in a third (numba, no GIL), while this one
-        # finishes the tree (wall time: the finalize is serial). With isolation, the libraries load
-        # once the tree is done, beside the search: beside the finalize (raster, pyramid and saddle
-        # graph held) they set the process's peak at 15 M cells
+        # the engine's peak memory is past: without isolation, the libraries of the tables and files
+        # load in a second thread while this one finishes the tree (wall time: the finalize is serial).
+        # With isolation, the raster is held until the search is done: the search's pyramid is built
+        # once the saddle graph is freed, and the libraries load once the raster is let go (beside the
+        # finalize, the pyramid, and beside the search, the libraries set the process's peak at 15 M cells)
         libraries = None if isolation else _import_in_thread(_table_libraries)
-        with ThreadPoolExecutor(1) as pool:
-            pyramid = pool.submit(search_pyramid, z) if isolation else None
-            core = engine.finalize_graph(**graph, min_prominence_m=min_prominence_m, outside=outside)
-            del graph
-            pyr = None if pyramid is None else pyramid.result()
-            del pyramid  # the future holds its result (the pyramid and z) as long as it lives
+        core = engine.finalize_graph(**graph, min_prominence_m=min_prominence_m, outside=outside)
+        del graph
         release_free_heap()  # the saddle graph's arrays, freed inside the heap, before the isolation's
-        if libraries is None:
-            libraries = _import_in_thread(_table_libraries)
         t_core = time.perf_counter()
         _advance(bar)
         iso = None
         if isolation and core.n_kept:
             metric = KernelMetric.from_grid(transform, crs)
             rows, cols = core.peak_row.astype(np.int64), core.peak_col.astype(np.int64)
-            best, cand, edge = nearest_higher(z, rows, cols, metric, pyr)
-            del pyr
+            best, cand, edge = nearest_higher(z, rows, cols, metric, search_pyramid(z))
             width = z.shape[1]
             if release:
                 del z
                 dem.release()
-            libraries.join()  # no import in this thread while that one imports (after the raster is let go)
             iso = finish_isolation(metric, rows, cols, best, cand, width, edge)
             del best, cand, edge
         elif release:
             del z
             dem.release()
-        libraries.join()
+        if libraries is not None:
+            libraries.join()
         t_iso = time.perf_counter()
         _advance(bar)
     result = engine.build_result(core, transform=transform, crs=crs, isolation=iso, geometry=geometry,
