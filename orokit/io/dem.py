@@ -41,10 +41,6 @@ __all__ = ["read_dem", "read_dem_array", "DemArray", "read_raster_band", "raster
 ChunksLike = int | str | Sequence[int] | Mapping[str, int] | None
 CellSizeLike = float | tuple[float, float] | None
 
-# rasterio warns (NotGeoreferencedWarning) when it opens a raster without any
-# georeference. ``warnings.catch_warnings`` is not thread-safe, so opening such
-# files from dask worker threads is serialised by this lock.
-_OPEN_LOCK = threading.Lock()
 
 #: elevations (metres) beyond these are not terrain anywhere on Earth (Challenger Deep is
 #: about -10,935 m, Everest 8,849 m): such cells are void markers and read as nodata
@@ -72,11 +68,44 @@ def _open(path: str, *, what: str = "") -> Iterator[rasterio.io.DatasetReader]:
         yield src
 
 
+class _OpeningHere:
+    """The message test of a warnings filter ignoring rasterio's ``NotGeoreferencedWarning`` only in a
+    thread inside :func:`_open_dataset` (a raster without georeference gets its grid from the caller).
+
+    ``warnings.catch_warnings`` would swap the process's filters and ``showwarning`` around each open:
+    not thread-safe (an open in a dask or reader thread could put back another thread's filters or
+    warning recorder for good, or drop them). This filter is put first in the list and left there; it
+    matches no warning of another thread or outside the open (a caller's own ``rasterio.open`` warns).
+    """
+
+    def __init__(self) -> None:
+        self._local = threading.local()
+        self.entry = ("ignore", self, rasterio.errors.NotGeoreferencedWarning, None, 0)
+
+    def match(self, text: str) -> bool:  # how the warnings module tests a filter's message
+        return bool(getattr(self._local, "active", False))
+
+    @contextlib.contextmanager
+    def active(self) -> Iterator[None]:
+        filters = cast("list[Any]", warnings.filters)  # a list (typeshed: a Sequence)
+        if not filters or filters[0] is not self.entry:  # first open, or filters added or reset since
+            with contextlib.suppress(ValueError):
+                filters.remove(self.entry)
+            filters.insert(0, self.entry)
+        self._local.active = True
+        try:
+            yield
+        finally:
+            self._local.active = False
+
+
+_NOT_GEOREFERENCED = _OpeningHere()
+
+
 def _open_dataset(path: str, *, what: str = "") -> rasterio.io.DatasetReader:
     """``rasterio.open(path)``, mapping GDAL failures to :class:`InputError`; the caller closes it."""
     try:
-        with _OPEN_LOCK, warnings.catch_warnings():
-            warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
+        with _NOT_GEOREFERENCED.active():
             src = rasterio.open(path)
     except rasterio.errors.RasterioIOError as exc:
         if path.lower().endswith(".hgt") and not _is_virtual(path) and Path(path).is_file():

@@ -1,0 +1,74 @@
+"""Opening a raster without georeference: rasterio's warning hidden in orokit's open only, from any thread,
+without touching another thread's warning filters or recorder (``warnings.catch_warnings`` is process-wide)."""
+from __future__ import annotations
+
+import threading
+import warnings
+
+import numpy as np
+import pytest
+import rasterio
+import rasterio.errors
+
+from orokit.io import dem
+
+
+def _plain_tif(path):
+    with warnings.catch_warnings():  # rasterio warns when it writes a raster without georeference
+        warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
+        with rasterio.open(path, "w", driver="GTiff", width=8, height=8, count=1, dtype="float32") as dst:
+            dst.write(np.arange(64, dtype=np.float32).reshape(1, 8, 8))
+    return str(path)
+
+
+def test_open_hides_the_warning_only_in_its_own_call(tmp_path):
+    path = _plain_tif(tmp_path / "plain.tif")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a filter added after orokit's: still no warning from its open
+        dem._open_dataset(path).close()
+        t = threading.Thread(target=lambda: dem._open_dataset(path).close())
+        t.start()
+        t.join()
+    with pytest.warns(rasterio.errors.NotGeoreferencedWarning):  # a caller's own open still warns
+        rasterio.open(path).close()
+
+
+def test_open_in_a_thread_leaves_the_other_threads_warning_state(tmp_path, monkeypatch):
+    """The main thread's recorder ends while a worker thread is opening a file: the open still warns
+    nothing, and afterwards a warning is not recorded in the ended recorder (before: the worker's
+    ``catch_warnings`` put that recorder back for good, and its open warned once the main thread's
+    filters were restored: an error under ``-W error``)."""
+    path = _plain_tif(tmp_path / "plain.tif")
+    dem._open_dataset(path).close()  # orokit's filter is in place before the main thread's recorder copies them
+    inside, go_on = threading.Event(), threading.Event()
+    real_open = rasterio.open
+
+    def slow_open(*args, **kwargs):
+        inside.set()
+        go_on.wait(30)
+        return real_open(*args, **kwargs)
+
+    monkeypatch.setattr(rasterio, "open", slow_open)
+    errors: list[BaseException] = []
+
+    def worker() -> None:
+        try:
+            dem._open_dataset(path).close()
+        except BaseException as exc:  # noqa: BLE001 - reported by the test
+            errors.append(exc)
+
+    with warnings.catch_warnings(record=True) as ended:
+        t = threading.Thread(target=worker)
+        t.start()
+        assert inside.wait(30)
+    go_on.set()
+    t.join(30)
+    assert not errors
+    with warnings.catch_warnings(record=True) as now:
+        warnings.simplefilter("always")
+        warnings.warn("after the open", UserWarning)
+    assert [str(w.message) for w in now] == ["after the open"]
+    with warnings.catch_warnings():  # the filters only: shown by whatever shows warnings now
+        warnings.simplefilter("always")
+        warnings.warn("after both", UserWarning)
+    assert ended == []  # not by the ended recorder
