@@ -26,7 +26,7 @@ from orokit.io.spill_io import read_spill, remove_stale_folders, spill_folder, w
 from orokit.tiling.isolation import block_stats, chunk_isolation
 from orokit.tiling.memory import release_free_heap
 from orokit.tiling.summary import ChunkSummary, chunk_summary, finalize_summary, merge_summaries
-from orokit.topology.engine import Orometry, saddle_order
+from orokit.topology.engine import Orometry
 
 logger = logging.getLogger(__name__)
 
@@ -237,15 +237,7 @@ def _finalize_task(root: _Part, min_prominence_m: float, outside: str, nby: int,
                 s.n_nodes, int(s.ismax.sum()), s.ea.size, s.nbytes() / 2**20,
                 0 if iso is None else iso["key"].size, 0 if iso is None else sum(v.nbytes for v in iso.values()) / 2**20)
     stats = np.array([[root[2][i, j] for j in range(nbx)] for i in range(nby)], dtype=float)
-    # the root's edges in the finalize's order, one array at a time (each unsorted one freed as
-    # its sorted copy replaces it), so finalize_graph needs no second copy of them
-    order = saddle_order(s.ea, s.eb, s.ez, s.ekey)
-    s.ea = s.ea[order]
-    s.eb = s.eb[order]
-    s.ez = s.ez[order]
-    s.ekey = s.ekey[order]
     s.nexit = np.empty(0, s.nexit.dtype)  # not used by the finalize (a view [:0] would keep it alive)
-    del order
     iso = root[1]
     del root  # the root summary is released by the finalize as it goes (dask holds its tuple till the end)
     return (finalize_summary(s, min_prominence_m=min_prominence_m, outside=outside, consume=True, store=store),

@@ -32,7 +32,7 @@ import numpy as np
 from numba import njit
 
 from orokit.topology import _kernels as _k
-from orokit.topology.engine import Orometry, finalize_graph
+from orokit.topology.engine import Orometry, finalize_graph, saddle_order
 
 __all__ = ["ChunkSummary", "chunk_summary", "merge_summaries", "finalize_summary", "settled_peaks"]
 
@@ -115,7 +115,7 @@ def _reduce(s: ChunkSummary, min_prominence_m: float, needed: np.ndarray) -> Chu
     s.ekey = s.ekey[order]
     del order
     ea, eb, ez, ekey = s.ea, s.eb, s.ez, s.ekey
-    _, key_edge, _, _ = _k.kruskal_sweep(s.z, s.key, ea, eb, ez, ekey, s.bmax)
+    _, key_edge, _, _ = _k.kruskal_sweep_like(s.z, s.key, ea, eb, ez, ekey, s.bmax, _k.index_like(n, ea.size))
     nonroot = np.flatnonzero(key_edge >= 0)
     prom = np.full(n, np.inf)
     prom[nonroot] = s.z[nonroot] - ez[key_edge[nonroot]]
@@ -127,7 +127,8 @@ def _reduce(s: ChunkSummary, min_prominence_m: float, needed: np.ndarray) -> Chu
                                               _k.index_like(n, ea.size))
     del ea, eb, ez, ekey
     s.ea = s.eb = s.bmax = s.nmin = _NO_EDGES
-    new_id = np.full(n, -1, np.int64)
+    # edge ends in the narrowest index type (int32 below 2**31 nodes: 8 bytes per edge less held)
+    new_id = np.full(n, -1, _k.index_like(n).dtype)
     kept = np.flatnonzero(keep)
     del keep
     new_id[kept] = np.arange(kept.size)
@@ -184,7 +185,7 @@ def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
     empty_i = np.empty(0, np.int64)
     if npk == 0:
         return ChunkSummary(region, (H, W), empty_i, np.empty(0), np.empty(0, bool), np.empty(0), np.empty(0),
-                            empty_i, empty_i, empty_i, np.empty(0), empty_i, 0)
+                            empty_i, empty_i, empty_i, np.empty(0, zh.dtype), empty_i, 0)
     zf = core.ravel()
     bz = _k.basin_border_max(core, label, border, npk)
     nmin = _k.basin_min(core, label, npk)
@@ -214,7 +215,9 @@ def chunk_summary(zh: np.ndarray, row0: int, col0: int, shape: tuple[int, int],
     # a side cell is part of its basin: an edge above every saddle; its key (-1 - cell) is
     # no saddle cell, so no sweep takes it for the same event as a real saddle
     xk = np.concatenate([glob(ec), -1 - glob(extra)])
-    xz = np.concatenate([zf[ec].astype(np.float64), np.full(ne, np.inf)])
+    # saddle values in the raster's type (float32 ones are exact: 4 bytes per edge less held); the
+    # kernels compare them with the nodes' float64 values and subtract in float64, so nothing changes
+    xz = np.concatenate([zf[ec], np.full(ne, np.inf, zf.dtype)])
     s = ChunkSummary(region, (H, W), key, z, ismax, bmax, nm, nx, xa, xb, xz, xk, int((~is_exit).sum()))
     return _reduce(s, min_prominence_m, _side_mask(key, region, shape))
 
@@ -265,15 +268,19 @@ def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence_m: float, *
     sk = np.where(a_lower, ka, kbb)
     sk = np.where(same_basin, -1 - sk, sk)
     del za, zb, ka, kbb, a_lower, same_basin, order_b, kb, sa, ra, ca
+    # edge ends in the narrowest index type of the merged graph, saddle values in the parts' type (a
+    # seam's value is a node's, a raster value, so exact in the raster's float32)
+    index = _k.index_like(na + b.n_nodes, a.ea.size + b.ea.size + sea.size).dtype
+    types = {"ea": index, "eb": index, "ez": np.result_type(a.ez, b.ez)}
     seam = {"ea": sea, "eb": seb + na, "ez": sz, "ekey": sk}
     del sea, seb, sz, sk
     n_maxima = a.n_maxima + b.n_maxima
     merged: dict[str, Any] = {}
     for f in _FIELDS:  # one field at a time; consumed inputs free each field once it is joined
-        parts = [getattr(a, f), getattr(b, f) + na if f in ("ea", "eb") else getattr(b, f)]
+        parts = [getattr(a, f), np.add(getattr(b, f), na, dtype=index) if f in ("ea", "eb") else getattr(b, f)]
         if f in seam:
             parts.append(seam.pop(f))
-        merged[f] = np.concatenate(parts)
+        merged[f] = np.concatenate(parts, dtype=types.get(f), casting="same_kind")
         del parts
         if consume:
             setattr(a, f, _NO_EDGES)
@@ -306,12 +313,18 @@ def finalize_summary(s: ChunkSummary, *, min_prominence_m: float, outside: str,
     arrays = {f: getattr(s, f) for f in ("key", "z", "bmax", "nmin", "ismax", "ea", "eb", "ez", "ekey")}
     if consume:
         s.release()
+    # the edges in the finalize's order once, here, one array at a time (with ``consume`` each unsorted
+    # one is freed as its sorted copy replaces it), so finalize_graph neither sorts nor copies them
+    order = saddle_order(arrays["ea"], arrays["eb"], arrays["ez"], arrays["ekey"])
+    for f in ("ea", "eb", "ez", "ekey"):
+        arrays[f] = arrays[f][order]
+    del order
     # popped as the call is made: this frame keeps no reference while finalize_graph runs
     return finalize_graph(
         node_key=arrays.pop("key"), node_z=arrays.pop("z"), node_bmax=arrays.pop("bmax"),
         node_nmin=arrays.pop("nmin"), node_ismax=arrays.pop("ismax"), ea=arrays.pop("ea"), eb=arrays.pop("eb"),
         ez=arrays.pop("ez"), ekey=arrays.pop("ekey"), min_prominence_m=min_prominence_m, outside=outside,
-        shape=shape, n_maxima=n_maxima, store=store,
+        shape=shape, n_maxima=n_maxima, store=store, edges_sorted=True,
     )
 
 

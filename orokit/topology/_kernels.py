@@ -355,20 +355,57 @@ def _find(parent, x):
 @njit(cache=True, nogil=True)
 def forest_components(n, ea, eb):
     """Component (a root node id) of every node of the graph with edges ``ea``-``eb``."""
-    uf = np.arange(n)
+    return forest_components_like(n, ea, eb, np.empty(0, np.bool_), np.empty(0, np.int64))
+
+
+@njit(cache=True, nogil=True)
+def forest_components_like(n, ea, eb, use, like):
+    """:func:`forest_components` of the edges where ``use`` is True (all when ``use`` is empty: no
+    copies of the edges taken), with the union-find state and the output in ``like``'s integer type
+    (:func:`index_like`)."""
+    uf = np.empty(n, like.dtype)
+    for i in range(n):
+        uf[i] = i
+    every = use.size == 0
     for e in range(ea.size):
+        if not every and not use[e]:
+            continue
         ra = _find(uf, ea[e])
         rb = _find(uf, eb[e])
         if ra != rb:
             uf[rb] = ra
-    out = np.empty(n, np.int64)
+    for i in range(n):  # in place: the roots first found stay roots
+        uf[i] = _find(uf, i)
+    return uf
+
+
+@njit(cache=True, nogil=True)
+def flat_roots(dom, nmin, z, is_root):
+    """Per node: a domain root (``is_root``) whose domain's lowest value (``nmin`` over the nodes of
+    its domain, ``dom`` from :func:`forest_components_like`) is not below its elevation ``z``: a flat
+    domain, whose cells all have the root's elevation (NaN propagates as in ``np.minimum``)."""
+    n = dom.size
+    dmin = np.full(n, np.inf)
     for i in range(n):
-        out[i] = _find(uf, i)
+        v = nmin[i]
+        d = dom[i]
+        if v < dmin[d] or v != v:
+            if dmin[d] == dmin[d]:
+                dmin[d] = v
+    out = np.zeros(n, np.bool_)
+    for i in range(n):
+        out[i] = is_root[i] and dmin[dom[i]] >= z[i]
     return out
 
 
 @njit(cache=True, nogil=True)
 def kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, border_z):
+    """:func:`kruskal_sweep_like` with int64 state and outputs."""
+    return kruskal_sweep_like(node_z, node_key, ea, eb, ez, ekey, border_z, np.empty(0, np.int64))
+
+
+@njit(cache=True, nogil=True)
+def kruskal_sweep_like(node_z, node_key, ea, eb, ez, ekey, border_z, like):
     """Maximum spanning forest and elder-rule prominence in one Kruskal sweep.
 
     Edges must be sorted from the highest to the lowest saddle in the total order
@@ -396,14 +433,22 @@ def kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, border_z):
     parent : per node, top of the group it merged into (-1 for roots).
     touched : per node, border flag described above (roots: True if their domain has
         any border cell).
+
+    ``like``: an empty array whose integer type the union-find state, ``key_edge`` and ``parent``
+    take (:func:`index_like`: int32 below 2**31 nodes and edges, 16 bytes per node less than int64).
     """
     n = node_z.size
     m = ea.size
-    uf = np.arange(n)
-    top = np.arange(n)
+    uf = np.empty(n, like.dtype)
+    top = np.empty(n, like.dtype)
+    key_edge = np.empty(n, like.dtype)
+    parent = np.empty(n, like.dtype)
+    for i in range(n):
+        uf[i] = i
+        top[i] = i
+        key_edge[i] = -1
+        parent[i] = -1
     bmax = border_z.copy()
-    key_edge = np.full(n, -1, np.int64)
-    parent = np.full(n, -1, np.int64)
     touched = np.zeros(n, np.bool_)
     in_tree = np.zeros(m, np.bool_)
     roots = np.empty(16, np.int64)
@@ -462,6 +507,62 @@ def kruskal_sweep(node_z, node_key, ea, eb, ez, ekey, border_z):
         if key_edge[i] < 0:
             touched[i] = bmax[_find(uf, i)] > -np.inf
     return in_tree, key_edge, parent, touched
+
+
+@njit(cache=True, nogil=True)
+def saddle_key(up, ekey, ez):
+    """One 64-bit sort key per edge of a saddle graph (elevation descending, then ``ekey``), or an
+    empty array when ``ekey`` does not fit in 32 bits.
+
+    ``up``: the elevations as float32 bits mapped to unsigned integers that increase with the
+    elevation. ``ekey`` must lie in ``[0, 2**32)``, except on the edges above every saddle
+    (``ez`` = +inf), which sort first and whose keys must all lie in ``[0, 2**32)`` or all in
+    ``[-2**32, 0)`` (a side cell's tie to its basin, key ``-1 - cell``): a key's low 32 bits
+    then keep their order.
+    """
+    m = ekey.size
+    lo = np.int64(0)
+    hi = np.int64(-1)
+    seen = False
+    for i in range(m):
+        k = ekey[i]
+        if ez[i] == np.inf:
+            if not seen or k < lo:
+                lo = k
+            if not seen or k > hi:
+                hi = k
+            seen = True
+        elif k < 0 or k >= 2**32:
+            return np.empty(0, np.uint64)
+    if seen and not ((lo >= 0 and hi < 2**32) or (lo >= -2**32 and hi < 0)):
+        return np.empty(0, np.uint64)
+    key = np.empty(m, np.uint64)
+    mask = np.int64(0xFFFFFFFF)
+    for i in range(m):
+        key[i] = (np.uint64(0xFFFFFFFF - up[i]) << np.uint64(32)) | np.uint64(ekey[i] & mask)
+    return key
+
+
+@njit(cache=True, nogil=True)
+def sort_saddle_ties(order, key, ea, eb):
+    """Within each run of equal ``key[order]`` (edges of one saddle cell), ``order`` rearranged in place
+    by ``(ea, eb)``, then by index (a stable lexsort's order); ``ea``, ``eb`` in ``[0, 2**31)``."""
+    m = order.size
+    i = 0
+    while i < m:
+        k = key[order[i]]
+        j = i + 1
+        while j < m and key[order[j]] == k:
+            j += 1
+        if j - i > 1:
+            sub = np.sort(order[i:j])
+            pair = np.empty(j - i, np.int64)
+            for t in range(j - i):
+                pair[t] = (np.int64(ea[sub[t]]) << 32) | np.int64(eb[sub[t]])
+            rank = np.argsort(pair, kind="mergesort")
+            for t in range(j - i):
+                order[i + t] = sub[rank[t]]
+        i = j
 
 
 @njit(cache=True, nogil=True, inline="always")

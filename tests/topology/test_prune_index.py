@@ -47,3 +47,37 @@ def test_int32_indices_prune_as_int64(seed, defer):
 def test_index_type_widens_at_two_to_the_31():
     assert _kernels.index_like(2**31 - 2).dtype == np.int32
     assert _kernels.index_like(10, 2**31).dtype == np.int64
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_int32_sweep_as_int64(seed):
+    """kruskal_sweep_like with int32 state: the int64 sweep's forest, key edges, parents and flags."""
+    n, a, b, ez, ekey, keep, bmax, nmin, z, key = _graph(seed)
+    want = _kernels.kruskal_sweep(z, key, a, b, ez, ekey, bmax)
+    got = _kernels.kruskal_sweep_like(z, key, a, b, ez, ekey, bmax, np.empty(0, np.int32))
+    assert got[1].dtype == got[2].dtype == np.int32
+    for w, g in zip(want, got):
+        np.testing.assert_array_equal(g, w)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_components_of_the_used_edges_and_flat_roots(seed):
+    """forest_components_like over the edges ``use`` marks (int32) is forest_components of those edges,
+    and flat_roots is the numpy formula it replaces (a domain's minimum, NaN propagated)."""
+    n, a, b, ez, ekey, keep, bmax, nmin, z, key = _graph(seed)
+    use = np.random.default_rng(seed).random(a.size) < 0.5
+    want = _kernels.forest_components(n, a[use], b[use])
+    got = _kernels.forest_components_like(n, a, b, use, np.empty(0, np.int32))
+    assert got.dtype == np.int32
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(_kernels.forest_components_like(n, a, b, np.empty(0, bool), np.empty(0, np.int32)),
+                                  _kernels.forest_components(n, a, b))
+    is_root = want == np.arange(n)
+    nmin = nmin.copy()
+    nmin[np.random.default_rng(seed).random(n) < 0.01] = np.nan
+    for lo in (nmin, nmin - 100, np.where(np.isnan(nmin), z, z + 1)):
+        dmin = np.full(n, np.inf)
+        with np.errstate(invalid="ignore"):
+            np.minimum.at(dmin, want, lo)
+            want_flat = is_root & (dmin[want] >= z)
+        np.testing.assert_array_equal(_kernels.flat_roots(want, lo, z, is_root), want_flat)

@@ -26,3 +26,41 @@ def test_saddle_order_is_the_lexsort():
         edges = np.stack([ea, eb, cells])
         np.testing.assert_array_equal(edges[:, got], edges[:, want], err_msg=f"case {t}")
     assert n_fast > 200
+
+
+def test_saddle_order_with_ties_to_side_cells_is_the_lexsort():
+    """The tiled engine's root: edges above every saddle (+inf) keyed ``-1 - cell`` sort first, by
+    one 64-bit key too; the order is the stable lexsort's, index for index."""
+    from orokit.topology._kernels import saddle_key
+
+    rng = np.random.default_rng(1)
+    for t in range(300):
+        m = int(rng.integers(1, 400))
+        cells = rng.integers(0, 2**32 - 1 if t % 3 == 0 else 40, m).astype(np.int64)
+        z = (rng.integers(-3, 4, m).astype(np.float32) * np.float32(0.5)).astype(np.float64)
+        side = rng.random(m) < 0.3
+        z[side] = np.inf
+        cells[side] = -1 - cells[side]
+        ea = rng.integers(0, 6, m)
+        eb = ea + rng.integers(1, 3, m)  # repeated (ea, eb, cell) edges: the index decides
+        want = np.lexsort((eb, ea, cells, -z))
+        np.testing.assert_array_equal(saddle_order(ea, eb, z, cells), want, err_msg=f"case {t}")
+        bits = z.astype(np.float32).view(np.uint32)
+        assert saddle_key(bits, cells, z).size == m  # the one-key path, not the lexsort
+
+
+def test_saddle_key_falls_back_outside_32_bits():
+    """Keys that do not fit (a finite saddle with a negative key, inf edges with keys of both signs,
+    a cell >= 2**32) take the lexsort: same order."""
+    from orokit.topology._kernels import saddle_key
+
+    up = np.arange(4, dtype=np.uint32)
+    cases = [
+        (np.array([1.0, 2.0, np.inf, 3.0]), np.array([0, -5, -1, 2])),
+        (np.array([1.0, np.inf, np.inf, 3.0]), np.array([0, -5, 4, 2])),
+        (np.array([1.0, 2.0, 2.0, 3.0]), np.array([0, 2**32, 4, 2])),
+    ]
+    for ez, ekey in cases:
+        assert saddle_key(up, ekey, ez).size == 0
+        ea, eb = np.array([0, 1, 2, 0]), np.array([1, 2, 3, 3])
+        np.testing.assert_array_equal(saddle_order(ea, eb, ez, ekey), np.lexsort((eb, ea, ekey, -ez)))
