@@ -77,6 +77,8 @@ def sample_elevation(
     valley_floor_slope: float = 0.0,
     profile: Callable[[np.ndarray], np.ndarray] | None = None,
     tree: cKDTree | None = None,
+    border_distance: np.ndarray | None = None,
+    beyond_slope: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elevation of ``points`` from the nearest ridge point q and river point r.
 
@@ -97,6 +99,11 @@ def sample_elevation(
     With ``valley_floor_slope`` > 0 the valley floor is not flat: it rises from the bed at that
     slope (m/m) across the floor, ``h(r) + valley_floor_slope * min(d(p, R), w)``, and the
     hillslope starts from its edge (floors that fall toward the river, not flat pools).
+    With ``beyond_slope`` and ``border_distance`` (each point's distance to the domain's border), a point
+    beyond its river seen from its ridge point (``(p - r) . (q - r) < 0``) and nearer the border than that
+    ridge point lies at ``h(r) - beyond_slope * (d(p, R) - w)``: past the last river toward the border the
+    paper's interpolation climbs again (``a`` tends to 1/2) into hills with no tree peak, which the orometry
+    enforcement then cuts into flat shelves; the ground now falls away to the border instead.
     Returns ``(h, d_ridge, d_river)``.
     """
     tree = tree if tree is not None else cKDTree(ridge_xy)
@@ -123,6 +130,13 @@ def sample_elevation(
         h = np.where(dR < w, hr, (1.0 - alpha) * hq + alpha * hr)
     else:
         h = np.where(dR < w, hr, hr + (hq - hr) * np.asarray(profile(1.0 - alpha), dtype=np.float64))
+    if beyond_slope is not None and border_distance is not None:
+        if not float(beyond_slope) >= 0.0:
+            raise ValueError(f"beyond_slope must be >= 0 (m/m), got {beyond_slope!r}")
+        rxy, qxy = river_xy[ir], ridge_xy[iq]
+        away = np.einsum("ij,ij->i", points - rxy, qxy - rxy) < 0.0
+        beyond = away & (np.asarray(border_distance, float) < dT) & (dR >= w)
+        h = np.where(beyond, hr - float(beyond_slope) * (dR - w), h)
     if ridge_slope is not None:
         assert near is not None
         env = _cone_envelope(*near, ridge_z, ridge_slope, ridge_floor)

@@ -312,11 +312,16 @@ def build_skeleton(
     vw = valley_width(va, coef=params.valley_coef, bed_slope=vslope, min_bed_slope=params.river_slope,
                       slope_exponent=params.valley_slope_exponent, ref_bed_slope=params.valley_slope_ref)
     pts = np.concatenate([samples, ring])
+    border = None
+    if params.border_beyond_slope is not None:
+        border = np.minimum(np.minimum(pts[:, 0] - xmin, xmax - pts[:, 0]),
+                            np.minimum(pts[:, 1] - ymin, ymax - pts[:, 1]))
     h, dT, dR = sample_elevation(pts, rxy, rz, vxy, vz, vw, ridge_slope=rs,
                                  ridge_floor=rfloor, profile=_hillslope(params),
                                  k_neighbours=params.flank_neighbours,
                                  floor_relief_ratio=params.floor_relief_ratio, floor_slope=params.floor_slope,
-                                 valley_floor_slope=params.valley_floor_slope, tree=rtree)
+                                 valley_floor_slope=params.valley_floor_slope, tree=rtree,
+                                 border_distance=border, beyond_slope=params.border_beyond_slope)
     if floor is not None:
         h = np.maximum(h, floor(pts))  # no ground below the tree's own floor (below every nearby saddle)
     far = (np.minimum(dT, dR) >= 0.5 * lam)

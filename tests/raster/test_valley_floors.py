@@ -177,3 +177,42 @@ def test_render_with_river_base_slope_keeps_the_orometry():
     res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
     comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
     assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+
+
+def test_border_beyond_slope_falls_past_the_river_toward_the_border():
+    """Hand-computed: ridge at x 0 (1000 m), river at x 1000 (bed 0, floor half-width 200 m). Past the river
+    (x > 1000) the paper's line climbs again toward 1/2 of the ridge; with ``beyond_slope`` a point there nearer
+    the border than the ridge falls from the bed at that slope; points before the river, or nearer the ridge
+    than the border, keep the paper's line."""
+    p = [[1600.0, 0.0], [2000.0, 0.0], [400.0, 0.0]]
+    plain = _h(p)
+    assert plain[0] > 100.0 and plain[1] > plain[0]  # the climb past the river
+    near_border = np.array([100.0, 10.0, 100.0])
+    np.testing.assert_allclose(_h(p, border_distance=near_border, beyond_slope=0.05),
+                               [-0.05 * 400.0, -0.05 * 800.0, plain[2]])
+    far = np.array([5000.0, 5000.0, 100.0])  # farther from the border than from the ridge: unchanged
+    np.testing.assert_array_equal(_h(p, border_distance=far, beyond_slope=0.05), plain)
+    np.testing.assert_array_equal(_h(p, border_distance=near_border), plain)  # no slope: off
+    with pytest.raises(ValueError, match="beyond_slope"):
+        _h(p, border_distance=near_border, beyond_slope=-0.1)
+    with pytest.raises(InputError, match="border_beyond_slope"):
+        RenderParams(border_beyond_slope=-0.1)
+
+
+def test_border_beyond_slope_off_by_default_and_on_only_lowers_samples():
+    assert RenderParams().border_beyond_slope is None
+    base = _skeleton()
+    np.testing.assert_array_equal(base.tin.z, _skeleton(border_beyond_slope=None).tin.z)
+    on = _skeleton(border_beyond_slope=0.05)
+    np.testing.assert_array_equal(on.river_network.elevation, base.river_network.elevation)
+    assert on.tin.z.shape == base.tin.z.shape
+    assert (on.tin.z <= base.tin.z + 1e-9).all() and (on.tin.z < base.tin.z - 1.0).any()
+
+
+def test_render_with_border_beyond_slope_keeps_the_orometry():
+    tree = small_tree()
+    dem = render_elevation(tree, cell_size_m=50.0, erosion=False,
+                           params=RenderParams(lam=200.0, border_beyond_slope=0.05), rng=7)
+    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
