@@ -106,8 +106,8 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         # second thread imports numba and loads the kernels while GDAL reads (wall time). The read
         # stays in this thread: its freed buffers are reused later (a reader thread's malloc arena
         # kept ~70 MB more resident at 15 M cells). In orokit's own process the read waits for
-        # numba's target to start and LLVM's pages it touched to be dropped: the raster and those
-        # pages resident together were the process's peak at 15 M cells (+~55 MiB)
+        # numba's target to start, then the pages of files touched so far are dropped (LLVM's, ~65 MB
+        # at 15 M cells, the imports'): resident with the raster they were the process's peak
         started = threading.Event() if owns_process() else None
         with ThreadPoolExecutor(1) as pool:
             loading = pool.submit(_load_kernels, isolation=not no_isolation, started=started)
@@ -117,14 +117,16 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
                 if started is not None:
                     limit_gdal_cache(GDAL_WHOLE_READ_CACHE_BYTES)  # a whole read (unless the user set it)
                     started.wait()  # set by the loader in any case
+                    release_library_pages("")
                 da = read_dem_array(str(dem.path), z_units=z_units, cell_size_m=cell_size_m, band=band)
             finally:
                 loading.result()
         # the kernels are loaded: LLVM's code (~65 MB resident at 15 M cells) is not needed until a
-        # kernel compiles again; its pages go back to the page cache before the engine's peak. Only in
+        # kernel compiles again, nor the reader's and the imports' code: the pages of every file go
+        # back to the page cache before the engine's peak (what the engine runs comes back). Only in
         # orokit's own process: a caller's (a CliRunner test, a script) may be compiling meanwhile
         if owns_process():
-            release_library_pages("libllvmlite")
+            release_library_pages("")
     else:
         _numba_without_blas_probe()
         da = dem.read_dem(z_units=z_units, cell_size_m=cell_size_m, chunks=chunks, band=band)
@@ -142,6 +144,12 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
     from orokit.tiling.memory import release_free_heap
 
     release_free_heap()  # what the engine and isolation freed inside the heap, before the writers' libraries
+    from orokit.cli.main import owns_process
+
+    if owns_process():  # the code of the read, the engine and the imports is done: the writers' comes back
+        from orokit.tiling.memory import release_library_pages
+
+        release_library_pages("")
     write_analysis(result, outdir, overwrite=True)
     n = len(result.peaks)
     if (ctx.find_root().obj or {}).get("quiet"):
@@ -155,16 +163,13 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
 
 def _load_kernels(*, isolation: bool, started: threading.Event | None = None) -> None:
     """Import numba and load the engine's kernels. With ``started`` (orokit's own process): first
-    start numba's target, drop LLVM's pages that touched, then set ``started`` (set on failure too)."""
+    start numba's target (most of LLVM's pages), then set ``started`` (set on failure too)."""
     from orokit.analysis import load_kernels, start_numba_target
 
     try:
         _numba_without_blas_probe()
         if started is not None:
-            from orokit.tiling.memory import release_library_pages
-
             start_numba_target()
-            release_library_pages("libllvmlite")
     finally:
         if started is not None:
             started.set()
