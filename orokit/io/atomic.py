@@ -19,7 +19,7 @@ import logging
 import os
 import shutil
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
@@ -30,7 +30,8 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["atomic_path", "atomic_open", "write_text_atomic", "write_bytes_atomic", "temp_path_for",
            "output_lock", "lock_path_for", "remove_stale_temps", "Staging", "staged_folder", "is_no_space_error", "no_space_error",
-           "check_free_space", "request_stop", "clear_stop", "stop_requested", "check_stop"]
+           "check_free_space", "request_stop", "clear_stop", "stop_requested", "check_stop", "hold_run_path",
+           "remove_unless_held"]
 
 #: signals received by the running command and not yet acted on (set by the CLI's handlers): once one
 #: is recorded, no output is replaced any more, even if the KeyboardInterrupt it raised was swallowed
@@ -116,8 +117,93 @@ def _remove(path: Path) -> None:
             path.unlink()
 
 
+# --- a run's temporary paths: locked while the run lives -----------------------------------
+
+def _try_lock(fd: int) -> bool | None:
+    """``flock(fd, LOCK_EX | LOCK_NB)``: True taken, False held through another open file (a running
+    process's, in any PID namespace of this machine), None when the filesystem refuses such locks."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - no flock on this platform
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    except OSError:  # e.g. NFS: no lock on a folder opened for reading (EBADF), or ENOLCK
+        return None
+    return True
+
+
+def _open_to_lock(path: Path) -> int:
+    if path.is_dir():
+        return os.open(path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    try:
+        return os.open(path, os.O_RDWR)  # NFS locks a file only if it is open for writing
+    except PermissionError:
+        return os.open(path, os.O_RDONLY)
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    try:
+        s = os.stat(path)
+    except FileNotFoundError:
+        return False
+    f = os.fstat(fd)
+    return (s.st_dev, s.st_ino) == (f.st_dev, f.st_ino)
+
+
+def hold_run_path(path: PathLike, *, create: bool = False) -> int | None:
+    """Lock ``path``, a temporary file or folder this run made (``create``: make the file), for as long as
+    the returned descriptor stays open: close it once the path is removed or renamed (None: a folder this
+    platform cannot open, not locked).
+
+    The kernel drops the lock when the process ends, however it ends (SIGKILL, out of memory), so
+    :func:`remove_unless_held` spares a running process's path whatever its host name or PID namespace
+    says. Raises FileNotFoundError when a cleaner removed the path first (make another).
+    """
+    p = Path(path)
+    try:
+        fd = os.open(p, os.O_RDWR | os.O_CREAT, 0o644) if create else _open_to_lock(p)
+    except FileNotFoundError:
+        raise
+    except OSError:  # pragma: no cover - e.g. Windows opens no folder
+        if create:
+            raise
+        return None
+    try:
+        if _try_lock(fd) is False or not _same_file(fd, p):  # a cleaner holds it, or removed it
+            raise FileNotFoundError(errno.ENOENT, "removed while it was being made", str(p))
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
+
+
+def remove_unless_held(path: PathLike, remove: Callable[[Path], None] | None = None) -> bool:
+    """Remove ``path``, a temporary file or folder whose name says its run ended, unless a process holds
+    it (:func:`hold_run_path`); True when removed. ``remove`` removes it (default: file or folder tree).
+
+    A name can be wrong about its run: the process id of another PID namespace (a container) with the same
+    host name looks ended. Where the filesystem has no such locks (some network filesystems) the name decides.
+    """
+    p = Path(path)
+    try:
+        fd = _open_to_lock(p)
+    except OSError:  # gone already, or not ours to open
+        return False
+    try:
+        if _try_lock(fd) is False:
+            return False
+        (_remove if remove is None else remove)(p)
+        return True
+    finally:
+        os.close(fd)
+
+
 @contextlib.contextmanager
-def atomic_path(final_path: PathLike, *, fsync: bool = True, parents: bool = True, tag: str = "") -> Iterator[Path]:
+def atomic_path(final_path: PathLike, *, fsync: bool = True, parents: bool = True, tag: str = "",
+                lock: bool = False) -> Iterator[Path]:
     """Yield a temporary path; on success move it to ``final_path`` atomically.
 
     Parameters
@@ -131,12 +217,16 @@ def atomic_path(final_path: PathLike, *, fsync: bool = True, parents: bool = Tru
         temporary folder a finished run has removed must not be made again).
     tag
         Put in the temporary name (:func:`temp_path_for`).
+    lock
+        Make the temporary file empty and hold its lock (:func:`hold_run_path`) until it is renamed or
+        removed, so a cleaner never takes it for a killed run's (the writer overwrites it; an empty file
+        counts as nothing written).
 
     Yields
     ------
     Path
-        A unique, not yet existing path in the same directory (same filesystem, so
-        :func:`os.replace` is atomic on POSIX) with the same suffix as ``final_path``.
+        A unique, not yet existing path (with ``lock``: an empty file) in the same directory (same
+        filesystem, so :func:`os.replace` is atomic on POSIX) with the same suffix as ``final_path``.
 
     Raises
     ------
@@ -163,9 +253,16 @@ def atomic_path(final_path: PathLike, *, fsync: bool = True, parents: bool = Tru
     if parents:
         final.parent.mkdir(parents=True, exist_ok=True)
     tmp = temp_path_for(final, tag)
+    held = None
     try:
+        while lock and held is None:
+            try:
+                held = hold_run_path(tmp, create=True)
+            except FileNotFoundError:  # again if a cleaner removed it before it was locked
+                if not tmp.parent.is_dir():
+                    raise
         yield tmp
-        if not tmp.exists():
+        if not tmp.exists() or (held is not None and tmp.stat().st_size == 0):
             raise OrokitError(
                 f"nothing was written for {final}: the writer did not create the temporary file {tmp.name}"
             )
@@ -179,6 +276,9 @@ def atomic_path(final_path: PathLike, *, fsync: bool = True, parents: bool = Tru
     except BaseException:
         _remove(tmp)
         raise
+    finally:
+        if held is not None:
+            os.close(held)
 
 
 @contextlib.contextmanager

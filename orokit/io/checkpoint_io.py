@@ -3,8 +3,8 @@
 ``checkpoint.json`` records the run the folder belongs to (input, chunks, threshold);
 a folder of another run is refused. Chunk files are written atomically, so a file
 that exists is complete and a rerun reuses it; the temporary file of a chunk that a
-killed run was writing holds that run's process (``.chunk_I_J.npz.tmp-PID@HOST-...``) and
-is removed when the folder is opened again.
+killed run was writing holds that run's process (``.chunk_I_J.npz.tmp-PID@HOST-...``), is
+locked by its writer until renamed, and is removed when the folder is opened again.
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import numpy as np
 
 from orokit._typing import PathLike
 from orokit.errors import TilingError
-from orokit.io.atomic import atomic_path
+from orokit.io.atomic import atomic_path, remove_unless_held
 from orokit.io.spill_io import run_ended, run_tag
 
 logger = logging.getLogger(__name__)
@@ -54,19 +54,19 @@ def open_checkpoint(folder: PathLike, fingerprint: dict[str, Any]) -> Path:
                 "use a new folder or delete it"
             )
     else:
-        with atomic_path(meta, tag=run_tag()) as tmp:
+        with atomic_path(meta, tag=run_tag(), lock=True) as tmp:
             tmp.write_text(json.dumps(fingerprint, indent=1), encoding="utf-8", newline="\n")
     _remove_stale_temps(root)
     return root
 
 
 def _remove_stale_temps(root: Path) -> None:
-    """Remove the folder's temporary files whose run has ended (:func:`~orokit.io.spill_io.run_ended`)."""
+    """Remove the folder's temporary files whose run has ended (:func:`~orokit.io.spill_io.run_ended`) and
+    whose writer does not hold them (:func:`~orokit.io.atomic.remove_unless_held`)."""
     for path in sorted(root.iterdir()):
         match = _TEMP.fullmatch(path.name)
-        if match and path.is_file() and run_ended(match.group(1).rpartition("-")[0]):
-            logger.info("removing %s, left by a run that was killed", path)
-            path.unlink(missing_ok=True)
+        if match and path.is_file() and run_ended(match.group(1).rpartition("-")[0]) and remove_unless_held(path):
+            logger.info("removed %s, left by a run that was killed", path)
 
 
 def chunk_path(root: PathLike, i: int, j: int) -> Path:
@@ -76,7 +76,7 @@ def chunk_path(root: PathLike, i: int, j: int) -> Path:
 
 def write_chunk(path: PathLike, arrays: dict[str, np.ndarray]) -> None:
     """Write the arrays of one chunk atomically (uncompressed npz)."""
-    with atomic_path(path, tag=run_tag()) as tmp:  # a killed run's temporary file is known as its own
+    with atomic_path(path, tag=run_tag(), lock=True) as tmp:  # a killed run's temporary file is known as its own
         with open(tmp, "wb") as fh:
             np.savez(fh, **cast("dict[str, Any]", arrays))  # not allow_pickle: only arrays
 

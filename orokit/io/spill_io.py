@@ -4,8 +4,8 @@ A spill folder is a temporary folder of one run (removed when the run ends, also
 error), in ``parent`` when given (a checkpoint folder, or dask's ``temporary-directory``),
 otherwise in ``TMPDIR``; each spill is an uncompressed ``.npz`` of arrays, written atomically, so a
 file that exists is complete. A folder's name holds the process id and host of its run
-(``orokit-spill-PID@HOST-XXXXXXXX``), so a later run can remove the folders of a run that was killed
-(:func:`remove_stale_folders`).
+(``orokit-spill-PID@HOST-XXXXXXXX``), and the run holds the folder's lock while it lives, so a later run
+can remove the folders of a run that was killed (:func:`remove_stale_folders`).
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ import numpy as np
 
 from orokit._typing import PathLike
 from orokit.errors import OutputError
-from orokit.io.atomic import atomic_path, is_no_space_error
+from orokit.io.atomic import atomic_path, hold_run_path, is_no_space_error, remove_unless_held
 
 logger = logging.getLogger(__name__)
 
@@ -52,10 +52,27 @@ def run_ended(owner: str) -> bool:
     return True
 
 
-def _make_folder(prefix: str, parent: PathLike | None) -> Path:
+def _make_folder(prefix: str, parent: PathLike | None) -> tuple[Path, int | None]:
+    """A new folder of this run and the descriptor that holds its lock (:func:`~orokit.io.atomic.hold_run_path`)."""
     if parent is not None:
         Path(parent).mkdir(parents=True, exist_ok=True)
-    return Path(tempfile.mkdtemp(prefix=prefix + run_tag(), dir=parent))
+    while True:
+        folder = Path(tempfile.mkdtemp(prefix=prefix + run_tag(), dir=parent))
+        try:
+            return folder, hold_run_path(folder)
+        except FileNotFoundError:  # a cleaner removed it before it was locked: another one
+            continue
+
+
+def _remove_and_close(folder: str, fd: int | None) -> None:
+    """Remove a run's folder, then let its lock go."""
+    import os
+
+    try:
+        remove_folder(folder)
+    finally:
+        if fd is not None:
+            os.close(fd)
 
 
 def _alive(pid: int) -> bool:
@@ -75,8 +92,9 @@ def remove_stale_folders(parent: PathLike) -> list[Path]:
     (a killed process: SIGKILL, out of memory, power loss); returns the folders removed.
 
     A folder is stale when its name's process id is not running on this host, or when its name holds
-    no process id (made before names held one). A folder of another host, or of a process that is
-    running, is left alone; nothing else in ``parent`` (a checkpoint's chunk files) is touched.
+    no process id (made before names held one), and no process holds its lock (a run in another PID
+    namespace with the same host name). A folder of another host, or of a process that is running, is
+    left alone; nothing else in ``parent`` (a checkpoint's chunk files) is touched.
     """
     root = Path(parent)
     if not root.is_dir():
@@ -86,8 +104,8 @@ def remove_stale_folders(parent: PathLike) -> list[Path]:
         prefix = next((p for p in (SPILL_PREFIX, COLUMNS_PREFIX) if folder.name.startswith(p)), None)
         if prefix is None or not folder.is_dir() or not run_ended(folder.name[len(prefix):].rpartition("-")[0]):
             continue
-        remove_folder(folder)
-        removed.append(folder)
+        if remove_unless_held(folder, remove_folder):
+            removed.append(folder)
     if removed:
         logger.info("removed %d temporary folders left in %s by runs that were killed", len(removed), root)
     return removed
@@ -97,11 +115,11 @@ def remove_stale_folders(parent: PathLike) -> list[Path]:
 def spill_folder(prefix: str = SPILL_PREFIX, parent: PathLike | None = None) -> Iterator[Path]:
     """A new temporary folder (in ``parent``, made if missing, else ``TMPDIR``) for the spills of
     one run, removed on exit (see :func:`remove_folder`)."""
-    folder = _make_folder(prefix, parent)
+    folder, held = _make_folder(prefix, parent)
     try:
         yield folder
     finally:
-        remove_folder(folder)
+        _remove_and_close(str(folder), held)
 
 
 def remove_folder(folder: PathLike, attempts: int = 20) -> None:
@@ -168,9 +186,9 @@ class SpilledColumns:
     def __init__(self, parent: PathLike | None = None, prefix: str = COLUMNS_PREFIX) -> None:
         import weakref
 
-        self.folder = _make_folder(prefix, parent)
+        self.folder, held = _make_folder(prefix, parent)
         self._columns: dict[str, tuple[Path, np.dtype, int]] = {}
-        self._finalizer = weakref.finalize(self, remove_folder, str(self.folder))
+        self._finalizer = weakref.finalize(self, _remove_and_close, str(self.folder), held)
 
     def __contains__(self, name: str) -> bool:
         return name in self._columns

@@ -396,3 +396,80 @@ def test_opening_a_checkpoint_removes_the_temporary_chunk_files_of_ended_runs_on
     assert open_checkpoint(tmp_path, fingerprint) == tmp_path
     kept = sorted(n for n, k in names.items() if k)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([*kept, "checkpoint.json", "chunk_00000_00000.npz"])
+
+
+_HOLD = """
+import fcntl, os, sys
+path = sys.argv[1]
+fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY if os.path.isdir(path) else os.O_RDWR)
+fcntl.flock(fd, fcntl.LOCK_EX)  # as the run that made it holds it
+print("held", flush=True)
+sys.stdin.read()  # until the test closes the pipe
+"""
+
+
+def test_a_live_runs_folder_or_temporary_file_is_kept_whatever_its_name_says(tmp_path):
+    """A name whose process looks ended on this host (a run in another PID namespace with the same host name,
+    e.g. a container on the host's network) is removed only when no process holds the path's lock: before,
+    the name alone decided and a running run's spill folder or chunk file went."""
+    import socket
+    import subprocess
+    import sys
+
+    from orokit.io.checkpoint_io import open_checkpoint
+    from orokit.io.spill_io import remove_stale_folders
+
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead, host = int(ended.stdout), socket.gethostname()
+    fingerprint = {"input": "x", "chunks": [13, 16]}
+    open_checkpoint(tmp_path, fingerprint)
+    folder = tmp_path / f"orokit-spill-{dead}@{host}-abc"
+    folder.mkdir()
+    (folder / "iso_00000_00000.npz").write_bytes(b"PK")
+    temp = tmp_path / f".chunk_00001_00002.npz.tmp-{dead}@{host}-0123456789ab.npz"
+    temp.write_bytes(b"PK")
+    holders = [subprocess.Popen([sys.executable, "-c", _HOLD, str(p)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                text=True) for p in (folder, temp)]
+    try:
+        assert [h.stdout.readline().strip() for h in holders] == ["held", "held"]
+        assert remove_stale_folders(tmp_path) == []
+        open_checkpoint(tmp_path, fingerprint)
+        assert folder.is_dir() and (folder / "iso_00000_00000.npz").exists() and temp.exists()
+    finally:
+        for h in holders:
+            h.communicate("")
+    assert remove_stale_folders(tmp_path) == [folder]  # their process ended: the kernel let the locks go
+    open_checkpoint(tmp_path, fingerprint)
+    assert not folder.exists() and not temp.exists()
+
+
+def test_a_runs_own_folders_and_chunk_temporaries_are_held_while_it_writes(tmp_path, monkeypatch):
+    """The spill and column folders are locked from their making to their removal, a chunk's temporary file
+    from before its first byte to its rename (so a cleaner in another PID namespace cannot take them)."""
+    import numpy as np
+
+    import orokit.io.atomic as atomic
+    from orokit.io.checkpoint_io import chunk_path, write_chunk
+    from orokit.io.spill_io import SpilledColumns, spill_folder
+
+    def locked(path) -> bool:
+        fd = atomic._open_to_lock(Path(path))
+        try:
+            return atomic._try_lock(fd) is False
+        finally:
+            atomic.os.close(fd)
+
+    with spill_folder(parent=tmp_path) as live:
+        store = SpilledColumns(parent=tmp_path)
+        assert locked(live) and locked(store.folder)
+        store.close()
+    seen = []
+    real_savez = np.savez
+
+    def savez(fh, **arrays):
+        seen.append(locked(fh.name))
+        return real_savez(fh, **arrays)
+
+    monkeypatch.setattr(np, "savez", savez)
+    write_chunk(chunk_path(tmp_path, 0, 0), {"a": np.arange(3)})
+    assert seen == [True] and not locked(chunk_path(tmp_path, 0, 0))
