@@ -85,6 +85,9 @@ class _OpeningHere:
     def match(self, text: str) -> bool:  # how the warnings module tests a filter's message
         return bool(getattr(self._local, "active", False))
 
+    def __deepcopy__(self, memo: dict[int, Any]) -> _OpeningHere:  # a copy of the filters keeps this one
+        return self
+
     @contextlib.contextmanager
     def active(self) -> Iterator[None]:
         filters = cast("list[Any]", warnings.filters)  # a list (typeshed: a Sequence)

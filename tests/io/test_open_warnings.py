@@ -72,3 +72,11 @@ def test_open_in_a_thread_leaves_the_other_threads_warning_state(tmp_path, monke
         warnings.simplefilter("always")
         warnings.warn("after both", UserWarning)
     assert ended == []  # not by the ended recorder
+
+
+def test_the_filters_can_still_be_deep_copied(tmp_path):
+    """orokit's filter (its thread-local flag cannot be copied) survives a caller's deep copy of the filters."""
+    import copy
+
+    dem._open_dataset(_plain_tif(tmp_path / "plain.tif")).close()
+    assert copy.deepcopy(warnings.filters) == warnings.filters
