@@ -163,17 +163,23 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
 
 def _load_kernels(*, isolation: bool, started: threading.Event | None = None) -> None:
     """Import numba and load the engine's kernels. With ``started`` (orokit's own process): first
-    start numba's target (most of LLVM's pages), then set ``started`` (set on failure too)."""
+    start numba's target (most of LLVM's pages), then set ``started`` (set on failure too); the pages
+    of files are dropped before the target starts (the imports touched them) and LLVM's after the loading."""
     from orokit.analysis import load_kernels, start_numba_target
+
+    from orokit.tiling.memory import release_library_pages
 
     try:
         _numba_without_blas_probe()
         if started is not None:
+            release_library_pages("")  # the imports' pages (LLVM's first 36 MB): not all touched again
             start_numba_target()
     finally:
         if started is not None:
             started.set()
     load_kernels(isolation=isolation)
+    if started is not None:
+        release_library_pages("libllvmlite")  # what the loading touched (12 MB), if the read is not done
 
 
 def _numba_without_blas_probe() -> None:
