@@ -322,15 +322,23 @@ def _heap_pop(hk: np.ndarray, hv: np.ndarray, n: int) -> int:
 
 
 @njit(cache=True, nogil=True)
-def mask_components(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """8-connected components of ``mask``: ``comp`` (int32 per cell, -1 outside the mask), the
-    flat cells of each component (``cells[offsets[k]:offsets[k + 1]]``, components in raster order
-    of their first cell) and ``offsets`` (numba: breadth-first search)."""
+def mask_components(mask: np.ndarray, z: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """8-connected components of ``mask`` and the finite cells of ``z`` beside each: ``comp`` (int32 per
+    cell, -1 outside the mask), the flat cells of each component (``cells[offsets[k]:offsets[k + 1]]``,
+    components in raster order of their first cell), ``offsets``, and the unmasked cells 8-adjacent to
+    component ``k`` where ``z`` is finite, each once (``seeds[seed_offsets[k]:seed_offsets[k + 1]]``, in
+    the order the search meets them) and ``seed_offsets`` (numba: one breadth-first search, which visits
+    every neighbour of every masked cell anyway; a seed is marked ``-2 - k`` in ``comp`` while component
+    ``k`` is searched)."""
     ny, nx = mask.shape
     comp = np.full((ny, nx), -1, np.int32)
     cells = np.empty(max(int(mask.sum()), 1), np.int64)
+    seeds = np.empty(1024, np.int64)
     offsets = [0]
+    seed_offsets = [0]
     n = 0
+    ns = 0
     k = 0
     for i0 in range(ny):
         for j0 in range(nx):
@@ -340,6 +348,7 @@ def mask_components(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
             head = n
             cells[n] = i0 * nx + j0
             n += 1
+            mark = -2 - k
             while head < n:
                 v = cells[head]
                 head += 1
@@ -347,37 +356,35 @@ def mask_components(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
                 j = v - i * nx
                 for ii in range(max(i - 1, 0), min(i + 2, ny)):
                     for jj in range(max(j - 1, 0), min(j + 2, nx)):
-                        if mask[ii, jj] and comp[ii, jj] < 0:
-                            comp[ii, jj] = k
-                            cells[n] = ii * nx + jj
-                            n += 1
+                        if mask[ii, jj]:
+                            if comp[ii, jj] < 0:
+                                comp[ii, jj] = k
+                                cells[n] = ii * nx + jj
+                                n += 1
+                        elif comp[ii, jj] != mark and np.isfinite(z[ii, jj]):
+                            comp[ii, jj] = mark
+                            seeds = _grow(seeds, ns)
+                            seeds[ns] = ii * nx + jj
+                            ns += 1
             k += 1
             offsets.append(n)
-    return comp, cells[:n], np.array(offsets, np.int64)
+            seed_offsets.append(ns)
+    for t in range(ns):
+        s = seeds[t]
+        i = s // nx
+        comp[i, s - i * nx] = -1
+    return comp, cells[:n], np.array(offsets, np.int64), seeds[:ns], np.array(seed_offsets, np.int64)
 
 
 @njit(cache=True, nogil=True)
-def _flood_component(z: np.ndarray, comp: np.ndarray, best: np.ndarray, base: np.ndarray, cells: np.ndarray,
+def _flood_component(z: np.ndarray, comp: np.ndarray, best: np.ndarray, base: np.ndarray, seeds: np.ndarray,
                      k: int, step: float, grade: float, max_depth: float) -> int:
-    """:func:`reconstruct_masked` on the component ``k`` of the mask (its ``cells``): only its cells
-    and the unmasked cells beside them take part, so components flood independently."""
+    """:func:`reconstruct_masked` on the component ``k`` of the mask: only its cells and the unmasked
+    cells beside them (``seeds``, each once) take part, so components flood independently. The heap
+    pops its entries (distinct ``(height, cell)`` pairs) in one order whatever order they were pushed
+    in."""
     ny, nx = z.shape
     graded = grade > 0.0
-    seeds = np.empty(max(16, cells.size), np.int64)
-    ns = 0
-    for t in range(cells.size):
-        i = cells[t] // nx
-        j = cells[t] - i * nx
-        for ii in range(max(i - 1, 0), min(i + 2, ny)):
-            for jj in range(max(j - 1, 0), min(j + 2, nx)):
-                if comp[ii, jj] < 0 and np.isfinite(z[ii, jj]):
-                    if ns == seeds.size:
-                        s2 = np.empty(2 * ns, np.int64)
-                        s2[:ns] = seeds
-                        seeds = s2
-                    seeds[ns] = ii * nx + jj
-                    ns += 1
-    seeds = np.unique(seeds[:ns])
     hk = np.empty(max(16, seeds.size), np.float32)
     hv = np.empty(max(16, seeds.size), np.int64)
     nh = 0
@@ -448,12 +455,13 @@ def reconstruct_masked(z: np.ndarray, mask: np.ndarray, step: float, grade: floa
     flood of the whole mask).
     """
     ny, nx = z.shape
-    comp, cells, offsets = mask_components(mask)
+    comp, _, offsets, seeds, seed_offsets = mask_components(mask, z)
     best = np.full((ny, nx), -np.inf, np.float32)  # the best offer so far; +inf once final
     base = np.zeros((ny, nx) if grade > 0.0 else (1, 1), np.float32)  # the pass a cut cell hangs from
     count = 0
     for k in prange(offsets.size - 1):
-        count += _flood_component(z, comp, best, base, cells[offsets[k]:offsets[k + 1]], k, step, grade, max_depth)
+        count += _flood_component(z, comp, best, base, seeds[seed_offsets[k]:seed_offsets[k + 1]], k, step, grade,
+                                  max_depth)
     return count
 
 
@@ -580,12 +588,12 @@ def flood_levels(z: np.ndarray, mask: np.ndarray, owner: np.ndarray) -> tuple[np
     return level, source
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, parallel=True)
 def basin_owner(lab: np.ndarray, tid: np.ndarray) -> np.ndarray:
     """``tid[lab]`` where ``lab >= 0``, else -2 (NaN cells): the tree peak owning each cell's
-    basin (one pass; same values as ``np.where(lab >= 0, tid[max(lab, 0)], -2)``)."""
+    basin (one pass on all threads; same values as ``np.where(lab >= 0, tid[max(lab, 0)], -2)``)."""
     out = np.empty(lab.size, np.int64)
-    for i in range(lab.size):
+    for i in prange(lab.size):
         v = lab[i]
         out[i] = tid[v] if v >= 0 else -2
     return out
@@ -617,27 +625,16 @@ def border_pairs(owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ia, ib
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def ascent_pointers(z: np.ndarray) -> np.ndarray:
-    """:func:`~orokit.topology._kernels.ascent_pointer` of every cell (flat int64; row blocks on all threads)."""
-    H, W = z.shape
-    ptr = np.empty(H * W, np.int64)
-    for r in prange(H):
-        for c in range(W):
-            ptr[r * W + c] = ascent_pointer(z, r, c)
-    return ptr
-
-
 @njit(cache=True, nogil=True)
 def update_basins(z: np.ndarray, ptr: np.ndarray, lab: np.ndarray, own: np.ndarray, tid: np.ndarray,
                   changed: np.ndarray, peak_cells: np.ndarray, peak_ids: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Basins of steepest ascent after the cells ``changed`` (flat) of ``z`` changed (in place).
 
-    ``ptr`` (:func:`ascent_pointers`), ``lab`` (basin id per cell) and ``own`` (``tid`` of the
-    basin: the tree peak owning it, -1 for a spurious maximum, -2 for NaN cells) held for the
-    raster before the change. Only the pointers of the changed cells and their neighbours can
-    change; only the cells whose ascent chain passes through a changed pointer (found backwards
+    ``ptr`` (every cell's :func:`~orokit.topology._kernels.ascent_pointer`), ``lab`` (basin id per
+    cell) and ``own`` (``tid`` of the basin: the tree peak owning it, -1 for a spurious maximum, -2
+    for NaN cells) held for the raster before the change. Only the pointers of the changed cells and
+    their neighbours can change; only the cells whose ascent chain passes through a changed pointer (found backwards
     from those cells) can change basin; they are relabelled by following their new chains. A new
     maximum gets the next basin id (``tid.size``, ...) and the tree peak of its cell
     (``peak_cells`` sorted, ``peak_ids`` beside them; -1 if none). Returns the new maxima's cells
@@ -909,15 +906,16 @@ def _resolve_basins(ptr: np.ndarray, lab: np.ndarray, own: np.ndarray, tid: np.n
     return new_top[:nn].copy(), new_tid[:nn].copy()
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, parallel=True)
 def relabel_basins(z: np.ndarray, ptr: np.ndarray, lab: np.ndarray, own: np.ndarray, tid: np.ndarray,
                    cells: np.ndarray, peak_cells: np.ndarray, peak_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`update_basins` when the caller knows the cells that may change basin: new pointers for
-    the ``cells`` (flat) and their basins by following them; every other cell must keep its pointer
-    and its chain must stay outside ``cells`` (true after cutting whole basins down: a cell outside
-    them points to a higher cell of its own basin, still higher)."""
+    the ``cells`` (flat, distinct; on all threads) and their basins by following them (one thread);
+    every other cell must keep its pointer and its chain must stay outside ``cells`` (true after
+    cutting whole basins down: a cell outside them points to a higher cell of its own basin, still
+    higher)."""
     H, W = z.shape
-    for t in range(cells.size):
+    for t in prange(cells.size):
         j = cells[t]
         r = j // W
         p = ascent_pointer(z, r, j - r * W)

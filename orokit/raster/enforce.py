@@ -9,7 +9,7 @@ import numpy as np
 from orokit.raster import _kernels
 from orokit.raster.rasterize import Grid, set_cells
 from orokit.raster.skeleton import TerrainSkeleton
-from orokit.topology.engine import steepest_ascent_basins
+from orokit.topology._kernels import ascent_labels
 
 logger = logging.getLogger(__name__)
 
@@ -117,7 +117,8 @@ def _cut_mask(sp: np.ndarray, keep: np.ndarray, lab: np.ndarray) -> np.ndarray:
 class _Basins:
     """Basins of steepest ascent of a raster and the tree peak owning each, kept up to date as cells change.
 
-    Labelled once with the orometry engine's kernels (:func:`steepest_ascent_basins`); after a change
+    Labelled once with the orometry engine's kernel (:func:`~orokit.topology._kernels.ascent_labels`, as
+    :func:`~orokit.topology.engine.steepest_ascent_basins`); after a change
     only the cells whose ascent chain the change can reach are relabelled
     (:func:`_kernels.update_basins`), so every cell keeps the owner a full relabelling gives
     (basin ids differ: a vanished maximum's id is left unused, a new one gets the next id).
@@ -125,11 +126,13 @@ class _Basins:
 
     def __init__(self, z: np.ndarray, cells: np.ndarray, pid: np.ndarray) -> None:
         self.z, self.cells, self.pid = z, np.ascontiguousarray(cells, np.int64), np.ascontiguousarray(pid, np.int64)
-        self.lab, self.top = steepest_ascent_basins(z)
+        # the engine's labels (:func:`steepest_ascent_basins`) and the pointers they follow, from one pass
+        self.lab = np.empty(z.size, np.int64)
+        self.ptr = np.empty(z.size, np.int64)
+        self.top = ascent_labels(np.ascontiguousarray(z), self.lab, self.ptr)
         k = np.minimum(np.searchsorted(cells, self.top), cells.size - 1)
         self.tid = np.where(cells[k] == self.top, pid[k], -1).astype(np.int64)
         self.own = _kernels.basin_owner(self.lab, self.tid)
-        self.ptr = _kernels.ascent_pointers(z)
 
     def relabel(self, cells: np.ndarray) -> np.ndarray:
         """Relabel after whole basins (``cells``, flat; tree peak cells never among them) were lowered;
@@ -166,7 +169,7 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
     """Rounds of spurious-hill cutting and pass capping on the raster's own basins (in place).
 
     The basins of steepest ascent are labelled once with the orometry engine's own
-    kernels (:func:`orokit.topology.engine.steepest_ascent_basins`, so the total order and
+    kernels (:func:`orokit.topology.engine.steepest_ascent_basins`' kernel, so the total order and
     tie-breaks are the engine's) and kept up to date after every cut and cap (:class:`_Basins`:
     only the cells whose ascent the change reaches are relabelled). A basin whose maximum is not a tree
     peak is a spurious hill: its pass (best path from tree-owned ground) and the tree

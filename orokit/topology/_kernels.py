@@ -179,7 +179,7 @@ def label_basins(ptr):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def ascent_labels(z, lab):
+def ascent_labels(z, lab, ptr=None):
     """Basins of steepest ascent of a whole raster, in place and in parallel row blocks.
 
     Same pointers as :func:`steepest_ascent` on the raster padded with NaN (outside the
@@ -188,7 +188,8 @@ def ascent_labels(z, lab):
     ``-2 - k`` of the maximum it reaches; threads may meet on a chain, and a cell holds
     either a pointer up its chain or that chain's final id, so every reader sees a
     valid state. On return ``lab`` holds basin ids 0..n-1 (maxima in raster order) and
-    -1 for NaN cells. Returns the flat cell of each maximum.
+    -1 for NaN cells. Returns the flat cell of each maximum. ``ptr`` (int64, size
+    ``z.size``), if given, receives every cell's :func:`ascent_pointer` as it is computed.
     """
     H, W = z.shape
     nb = min(H, 256)
@@ -201,6 +202,8 @@ def ascent_labels(z, lab):
             for c in range(W):
                 i = r * W + c
                 best = ascent_pointer(z, r, c)
+                if ptr is not None:
+                    ptr[i] = best
                 if best < 0:
                     lab[i] = -1
                     continue

@@ -173,14 +173,20 @@ def _raster_with_ties(shape, seed, nan_share=0.05):
 @pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (2, 3), (23, 31)])
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_ascent_pointers_equal_the_engine(shape, seed):
-    """The renderer's pointer of steepest ascent is the engine's (total order, ties, NaN)."""
-    from orokit.topology._kernels import steepest_ascent
+    """The renderer's pointers of steepest ascent (from the labelling pass) are the engine's (total order,
+    ties, NaN), and the labels are those of the engine's labelling without them."""
+    from orokit.topology._kernels import ascent_labels, steepest_ascent
+    from orokit.topology.engine import steepest_ascent_basins
 
     z = _raster_with_ties(shape, seed)
     zh = np.pad(z, 1, constant_values=np.nan)
     want, exit_to, _ = steepest_ascent(zh)
     assert (exit_to == -1).all()
-    assert np.array_equal(_kernels.ascent_pointers(z), want)
+    lab, ptr = np.empty(z.size, np.int64), np.full(z.size, -7, np.int64)
+    top = ascent_labels(z, lab, ptr)
+    assert np.array_equal(ptr, want)
+    want_lab, want_top = steepest_ascent_basins(z)
+    assert np.array_equal(lab, want_lab) and np.array_equal(top, want_top)
 
 
 def _same_basins(basins, z, cells, pid):
@@ -346,15 +352,24 @@ def test_reconstruct_masked_by_components_equals_the_global_flood(seed, grade):
     assert n_want > 0
 
 
-def test_mask_components_are_scipy_labels():
-    mask = np.random.default_rng(3).random((50, 60)) < 0.4
-    comp, cells, offsets = _kernels.mask_components(mask)
+@pytest.mark.parametrize("seed", range(4))
+def test_mask_components_are_scipy_labels(seed):
+    rng = np.random.default_rng(seed + 3)
+    mask = rng.random((50, 60)) < 0.4
+    z = rng.random(mask.shape).astype(np.float32)
+    z[rng.random(mask.shape) < 0.05] = np.nan
+    comp, cells, offsets, seeds, seed_offsets = _kernels.mask_components(mask, z)
     lab, n = ndimage.label(mask, structure=np.ones((3, 3)))
-    assert offsets.size - 1 == n and cells.size == mask.sum()
+    assert offsets.size - 1 == n and cells.size == mask.sum() and seed_offsets.size == n + 1
     # same partition; numbered in raster order of the first cell (as scipy does)
     assert np.array_equal(comp + 1, lab)
     for k in range(n):
         assert (comp.reshape(-1)[cells[offsets[k]:offsets[k + 1]]] == k).all()
+        # the seeds: the unmasked finite cells 8-adjacent to the component, each once (the flood's former np.unique)
+        near = ndimage.binary_dilation(lab == k + 1, structure=np.ones((3, 3))) & ~mask & np.isfinite(z)
+        got = seeds[seed_offsets[k]:seed_offsets[k + 1]]
+        assert got.size == np.unique(got).size
+        assert np.array_equal(np.sort(got), np.flatnonzero(near))
 
 
 @pytest.mark.parametrize("res", [30.0, 92.6, 0.7, 1.0 / 3.0])
