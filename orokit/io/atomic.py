@@ -255,11 +255,12 @@ def atomic_path(final_path: PathLike, *, fsync: bool = True, parents: bool = Tru
     tmp = temp_path_for(final, tag)
     held = None
     try:
-        while lock and held is None:
+        for attempt in range(100 if lock else 0):
             try:
                 held = hold_run_path(tmp, create=True)
+                break
             except FileNotFoundError:  # again if a cleaner removed it before it was locked
-                if not tmp.parent.is_dir():
+                if not tmp.parent.is_dir() or attempt == 99:
                     raise
         yield tmp
         if not tmp.exists() or (held is not None and tmp.stat().st_size == 0):

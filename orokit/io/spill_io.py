@@ -56,12 +56,15 @@ def _make_folder(prefix: str, parent: PathLike | None) -> tuple[Path, int | None
     """A new folder of this run and the descriptor that holds its lock (:func:`~orokit.io.atomic.hold_run_path`)."""
     if parent is not None:
         Path(parent).mkdir(parents=True, exist_ok=True)
-    while True:
+    for attempt in range(100):
         folder = Path(tempfile.mkdtemp(prefix=prefix + run_tag(), dir=parent))
         try:
             return folder, hold_run_path(folder)
         except FileNotFoundError:  # a cleaner removed it before it was locked: another one
-            continue
+            remove_folder(folder, attempts=1)  # (if it is still there)
+            if attempt == 99:
+                raise
+    raise AssertionError("unreachable")
 
 
 def _remove_and_close(folder: str, fd: int | None) -> None:

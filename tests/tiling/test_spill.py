@@ -473,3 +473,19 @@ def test_a_runs_own_folders_and_chunk_temporaries_are_held_while_it_writes(tmp_p
     monkeypatch.setattr(np, "savez", savez)
     write_chunk(chunk_path(tmp_path, 0, 0), {"a": np.arange(3)})
     assert seen == [True] and not locked(chunk_path(tmp_path, 0, 0))
+
+
+def test_making_a_held_path_gives_up_rather_than_loop(tmp_path, monkeypatch):
+    """A path that never reads as the one locked (its inode seen to change every time) ends in an error after a
+    bounded number of attempts, leaving nothing behind (not an endless loop)."""
+    import orokit.io.atomic as atomic
+    from orokit.io.spill_io import spill_folder
+
+    monkeypatch.setattr(atomic, "_same_file", lambda fd, path: False)
+    with pytest.raises(FileNotFoundError):
+        with spill_folder(parent=tmp_path):
+            pass
+    with pytest.raises(FileNotFoundError):
+        with atomic.atomic_path(tmp_path / "x.npz", lock=True) as tmp:
+            tmp.write_bytes(b"x")
+    assert list(tmp_path.iterdir()) == []
