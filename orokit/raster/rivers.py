@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import heapq
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -108,7 +109,9 @@ def local_relief(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
 
 def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *, ratio: float,
                  k: int = 16, relief_m: float | None = None, min_ratio: float = 0.0,
-                 spread_ratio: float | None = None) -> np.ndarray:
+                 spread_ratio: float | None = None,
+                 relief: Callable[[np.ndarray, int], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+                 ) -> np.ndarray:
     """Lowest ground the Divide Tree allows at ``xy``: ``s - ratio * (p - s)``, with ``s`` the lowest of the
     ``k`` nearest saddles and ``p`` the highest of the ``k`` nearest peaks (:func:`local_relief`).
 
@@ -125,6 +128,9 @@ def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
     With ``spread_ratio`` the floor lies at most ``spread_ratio`` times the spread of those saddles (their
     median minus their lowest) below the lowest: where the saddles all lie at one level (a field of domes on
     a plain) the ground between the hills stays near that level, whatever the hills' height.
+
+    ``relief(xy, k)``, if given, returns :func:`local_relief` ``(xy, peak_xyz, saddle_xyz, k=k)`` (a caller
+    that needs it for the same points elsewhere computes it once).
 
     >>> peaks = np.array([[0.0, 0.0, 150.0], [2000.0, 0.0, 120.0]])
     >>> saddles = np.array([[1000.0, 0.0, 100.0]])
@@ -143,7 +149,7 @@ def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
     if spread_ratio is not None and not float(spread_ratio) >= 0.0:
         raise ValueError(f"spread_ratio must be >= 0, got {spread_ratio!r}")
     if spread_ratio is None:
-        s, p, _ = local_relief(xy, peak_xyz, saddle_xyz, k=k)
+        s, p, _ = local_relief(xy, peak_xyz, saddle_xyz, k=k) if relief is None else relief(xy, k)
     else:  # the same k nearest saddles and peaks as local_relief, with the saddles' median
         from scipy.spatial import cKDTree
 

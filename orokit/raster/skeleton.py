@@ -269,18 +269,31 @@ def build_skeleton(
     def envelope(xy: np.ndarray) -> np.ndarray:
         return flank_envelope(xy, rxy, rz, rs, ridge_floor=rfloor, tree=rtree, k_neighbours=params.flank_neighbours)
 
+    # the rivers' base cap and floor ask for the tree's relief at the same river nodes (k 16 both by default):
+    # one search (the last points asked for are kept)
+    relief_memo: list[tuple[np.ndarray, int, tuple[np.ndarray, np.ndarray, np.ndarray]]] = []
+
+    def relief_at(xy: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        for mxy, mk, got in relief_memo:
+            if mk == k and np.array_equal(mxy, xy):
+                return got
+        got = local_relief(xy, p, s, k=k)
+        relief_memo[:] = [(xy, k, got)]
+        return got
+
     floor_ratio = params.saddle_floor_ratio
     floor = None if floor_ratio is None else (
         lambda xy: saddle_floor(xy, p, s, ratio=float(floor_ratio), k=params.saddle_floor_k,
                                 relief_m=params.saddle_floor_relief_m, min_ratio=params.saddle_floor_min_ratio,
-                                spread_ratio=params.saddle_floor_spread))
+                                spread_ratio=params.saddle_floor_spread, relief=relief_at))
     rivers = river_network(fine_ridges, ridge_lines.xy, extent, base_elevation=base,
                            margin_m=params.river_margin, slope=params.river_slope, cap=envelope,
                            max_sink_m=params.river_max_sink_m, relief_ratio=params.river_relief_ratio,
                            sink_relief_ratio=params.river_sink_relief_ratio,
                            floor=floor, graded=params.river_graded, base_slope=params.river_base_slope,
                            base_cap=None if params.river_base_saddle_k is None else
-                           (lambda xy: local_relief(xy, p, s, k=int(params.river_base_saddle_k))[0]))
+                           (lambda xy: relief_at(xy, int(params.river_base_saddle_k))[0]))
     t["rivers"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

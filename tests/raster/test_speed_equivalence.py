@@ -699,3 +699,37 @@ def test_gaussian_kernel_equals_scipy(shape, sigma, seed):
     want = ndimage.gaussian_filter(s, sigma, mode="nearest")
     got = _kernels.gaussian_nearest(s, _gaussian_weights(sigma))
     assert got.dtype == want.dtype and got.tobytes() == want.tobytes()
+
+
+def test_rivers_search_the_tree_relief_once_same_bytes(monkeypatch):
+    """The rivers' base cap and floor share one search of the tree's relief at the river nodes (each set of
+    points and k searched once), and the render is the one whose floor searches for itself."""
+    from helpers.trees import small_tree
+    from orokit.raster import render, rivers, skeleton
+    from orokit.raster.params import RenderParams
+
+    calls: list[tuple[np.ndarray, int]] = []
+    search = rivers.local_relief
+
+    def counting(xy, peak_xyz, saddle_xyz, *, k=16):
+        calls.append((np.array(xy, float), int(k)))
+        return search(xy, peak_xyz, saddle_xyz, k=k)
+
+    p = RenderParams(lam=200.0)
+    assert p.saddle_floor_ratio is not None and p.river_base_saddle_k == p.saddle_floor_k
+    monkeypatch.setattr(skeleton, "local_relief", counting)
+    monkeypatch.setattr(rivers, "local_relief", counting)  # saddle_floor's own search
+    shared = render.render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=5)
+    assert len(calls) >= 2
+    for i in range(len(calls)):
+        for j in range(i + 1, len(calls)):
+            assert not (calls[i][1] == calls[j][1] and np.array_equal(calls[i][0], calls[j][0]))
+
+    floor = rivers.saddle_floor
+
+    def own_search(xy, peak_xyz, saddle_xyz, *, relief=None, **kw):
+        return floor(xy, peak_xyz, saddle_xyz, **kw)
+
+    monkeypatch.setattr(skeleton, "saddle_floor", own_search)
+    ref = render.render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=5)
+    assert shared.values.tobytes() == ref.values.tobytes()
