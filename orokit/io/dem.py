@@ -88,6 +88,14 @@ class _OpeningHere:
     def __deepcopy__(self, memo: dict[int, Any]) -> _OpeningHere:  # a copy of the filters keeps this one
         return self
 
+    #: what scikit-learn's ``Parallel`` replays in its workers (``warnings.filterwarnings(message=
+    #: f.pattern)``; this attribute was missing: AttributeError): a regex matching no message, since no open
+    #: of this thread is active there
+    pattern = "(?!)"
+
+    def __reduce__(self) -> tuple[Any, ...]:  # sent to another process: that process's own filter
+        return (_not_georeferenced_filter, ())
+
     @contextlib.contextmanager
     def active(self) -> Iterator[None]:
         filters = cast("list[Any]", warnings.filters)  # a list (typeshed: a Sequence)
@@ -103,6 +111,10 @@ class _OpeningHere:
 
 
 _NOT_GEOREFERENCED = _OpeningHere()
+
+
+def _not_georeferenced_filter() -> _OpeningHere:
+    return _NOT_GEOREFERENCED
 
 
 def _open_dataset(path: str, *, what: str = "") -> rasterio.io.DatasetReader:

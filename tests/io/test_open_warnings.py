@@ -80,3 +80,18 @@ def test_the_filters_can_still_be_deep_copied(tmp_path):
 
     dem._open_dataset(_plain_tif(tmp_path / "plain.tif")).close()
     assert copy.deepcopy(warnings.filters) == warnings.filters
+
+
+def test_the_filters_survive_scikit_learns_parallel_and_pickling(tmp_path):
+    """scikit-learn's ``Parallel`` replays the caller's filters in each task with
+    ``filterwarnings(message=f.pattern)`` (the region classifier: AttributeError there, the realism
+    record of session 15 stopped), and a process pool pickles them."""
+    import pickle
+
+    from sklearn.utils.parallel import Parallel, delayed
+
+    dem._open_dataset(_plain_tif(tmp_path / "plain.tif")).close()
+    assert pickle.loads(pickle.dumps(warnings.filters)) == warnings.filters
+    assert Parallel(n_jobs=1)(delayed(abs)(v) for v in (-1, -2)) == [1, 2]
+    with pytest.warns(rasterio.errors.NotGeoreferencedWarning):  # in a task the filter matches nothing
+        Parallel(n_jobs=1)(delayed(warnings.warn)("x", rasterio.errors.NotGeoreferencedWarning) for _ in (0,))
