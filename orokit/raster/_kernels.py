@@ -103,38 +103,60 @@ def flood_from_outlets(start: np.ndarray, dst: np.ndarray, elen: np.ndarray, bnd
     return receiver, fd, order[:no].copy()
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True, parallel=True)
 def rasterize_triangles(vx: np.ndarray, vy: np.ndarray, vz: np.ndarray, tri: np.ndarray,
                         x0: float, y0: float, res: float, ny: int, nx: int) -> np.ndarray:
     """Barycentric scan conversion of a TIN onto cell centres.
 
     Cell ``(i, j)`` has centre ``(x0 + (j + 0.5) res, y0 - (i + 0.5) res)`` (``y0`` is
-    the top edge). Cells not covered by any triangle stay NaN (numba: per-triangle
-    loops over a variable number of cells).
+    the top edge). Cells not covered by any triangle stay NaN; a cell on a shared edge takes
+    the value of the last triangle that covers it (numba: per-triangle loops over a variable
+    number of cells; bands of rows on all threads, each taking the triangles in order, so
+    every cell gets the value of one pass over the triangles).
     """
     out = np.full((ny, nx), np.nan, np.float32)
     tol = -1e-9
-    for t in range(tri.shape[0]):
+    nt = tri.shape[0]
+    box = np.empty((nt, 4), np.int64)  # imin, imax, jmin, jmax (imin > imax: no cell)
+    for t in prange(nt):
         a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]
-        ax, ay, az = vx[a], vy[a], vz[a]
-        bx, by, bz = vx[b], vy[b], vz[b]
-        cx, cy, cz = vx[c], vy[c], vz[c]
+        ax, ay = vx[a], vy[a]
+        bx, by = vx[b], vy[b]
+        cx, cy = vx[c], vy[c]
         det = (by - cy) * (ax - cx) + (cx - bx) * (ay - cy)
         if det == 0.0:
+            box[t, 0] = 1
+            box[t, 1] = 0
             continue
-        jmin = max(int(np.floor((min(ax, bx, cx) - x0) / res - 0.5)), 0)
-        jmax = min(int(np.ceil((max(ax, bx, cx) - x0) / res - 0.5)), nx - 1)
-        imin = max(int(np.floor((y0 - max(ay, by, cy)) / res - 0.5)), 0)
-        imax = min(int(np.ceil((y0 - min(ay, by, cy)) / res - 0.5)), ny - 1)
-        for i in range(imin, imax + 1):
-            py = y0 - (i + 0.5) * res
-            for j in range(jmin, jmax + 1):
-                px = x0 + (j + 0.5) * res
-                l1 = ((by - cy) * (px - cx) + (cx - bx) * (py - cy)) / det
-                l2 = ((cy - ay) * (px - cx) + (ax - cx) * (py - cy)) / det
-                l3 = 1.0 - l1 - l2
-                if l1 >= tol and l2 >= tol and l3 >= tol:
-                    out[i, j] = l1 * az + l2 * bz + l3 * cz
+        box[t, 2] = max(int(np.floor((min(ax, bx, cx) - x0) / res - 0.5)), 0)
+        box[t, 3] = min(int(np.ceil((max(ax, bx, cx) - x0) / res - 0.5)), nx - 1)
+        box[t, 0] = max(int(np.floor((y0 - max(ay, by, cy)) / res - 0.5)), 0)
+        box[t, 1] = min(int(np.ceil((y0 - min(ay, by, cy)) / res - 0.5)), ny - 1)
+    nb = min(ny, 8)  # each band looks at every triangle's box: few bands
+    for bnd in prange(nb):
+        r0 = bnd * ny // nb
+        r1 = (bnd + 1) * ny // nb - 1
+        for t in range(nt):
+            imin = max(box[t, 0], r0)
+            imax = min(box[t, 1], r1)
+            if imin > imax:
+                continue
+            a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]
+            ax, ay, az = vx[a], vy[a], vz[a]
+            bx, by, bz = vx[b], vy[b], vz[b]
+            cx, cy, cz = vx[c], vy[c], vz[c]
+            det = (by - cy) * (ax - cx) + (cx - bx) * (ay - cy)
+            jmin = box[t, 2]
+            jmax = box[t, 3]
+            for i in range(imin, imax + 1):
+                py = y0 - (i + 0.5) * res
+                for j in range(jmin, jmax + 1):
+                    px = x0 + (j + 0.5) * res
+                    l1 = ((by - cy) * (px - cx) + (cx - bx) * (py - cy)) / det
+                    l2 = ((cy - ay) * (px - cx) + (ax - cx) * (py - cy)) / det
+                    l3 = 1.0 - l1 - l2
+                    if l1 >= tol and l2 >= tol and l3 >= tol:
+                        out[i, j] = l1 * az + l2 * bz + l3 * cz
     return out
 
 

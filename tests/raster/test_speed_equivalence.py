@@ -733,3 +733,67 @@ def test_rivers_search_the_tree_relief_once_same_bytes(monkeypatch):
     monkeypatch.setattr(skeleton, "saddle_floor", own_search)
     ref = render.render_elevation(small_tree(), cell_size_m=25.0, erosion=False, params=p, rng=5)
     assert shared.values.tobytes() == ref.values.tobytes()
+
+
+@njit(cache=True)
+def _rasterize_triangles_reference(vx, vy, vz, tri, x0, y0, res, ny, nx):
+    """The one-pass scan conversion replaced by :func:`_kernels.rasterize_triangles` (row bands on threads)."""
+    out = np.full((ny, nx), np.nan, np.float32)
+    tol = -1e-9
+    for t in range(tri.shape[0]):
+        a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]
+        ax, ay, az = vx[a], vy[a], vz[a]
+        bx, by, bz = vx[b], vy[b], vz[b]
+        cx, cy, cz = vx[c], vy[c], vz[c]
+        det = (by - cy) * (ax - cx) + (cx - bx) * (ay - cy)
+        if det == 0.0:
+            continue
+        jmin = max(int(np.floor((min(ax, bx, cx) - x0) / res - 0.5)), 0)
+        jmax = min(int(np.ceil((max(ax, bx, cx) - x0) / res - 0.5)), nx - 1)
+        imin = max(int(np.floor((y0 - max(ay, by, cy)) / res - 0.5)), 0)
+        imax = min(int(np.ceil((y0 - min(ay, by, cy)) / res - 0.5)), ny - 1)
+        for i in range(imin, imax + 1):
+            py = y0 - (i + 0.5) * res
+            for j in range(jmin, jmax + 1):
+                px = x0 + (j + 0.5) * res
+                l1 = ((by - cy) * (px - cx) + (cx - bx) * (py - cy)) / det
+                l2 = ((cy - ay) * (px - cx) + (ax - cx) * (py - cy)) / det
+                l3 = 1.0 - l1 - l2
+                if l1 >= tol and l2 >= tol and l3 >= tol:
+                    out[i, j] = l1 * az + l2 * bz + l3 * cz
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("shape", [(1, 1), (1, 9), (7, 1), (40, 33), (97, 61)])
+def test_rasterize_triangles_in_row_bands_equals_one_pass(seed, shape):
+    """Row bands on threads give every cell the value of one pass over the triangles in order, also on the
+    edges two triangles share (vertices on cell centres), with degenerate and overlapping triangles, and
+    cells outside every triangle NaN."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    ny, nx = shape
+    res, x0, y0 = 10.0, 100.0, 5000.0
+    n = 40 + 10 * seed
+    # half the vertices on cell centres (edges through centres: the shared-edge cells), some outside the grid
+    xy = np.column_stack([x0 + rng.uniform(-20.0, nx * res + 20.0, n), y0 - rng.uniform(-20.0, ny * res + 20.0, n)])
+    on = rng.random(n) < 0.5
+    xy[on, 0] = x0 + (np.floor((xy[on, 0] - x0) / res) + 0.5) * res
+    xy[on, 1] = y0 - (np.floor((y0 - xy[on, 1]) / res) + 0.5) * res
+    xy = np.unique(xy, axis=0)
+    tri = Delaunay(xy).simplices.astype(np.int64)
+    vz = rng.normal(0.0, 100.0, xy.shape[0])
+    # a degenerate triangle, and copies of some triangles on their own vertices at other heights, first and
+    # last (overlaps: the last triangle over a cell wins)
+    m = xy.shape[0]
+    first, last = tri[:4], tri[4:8]
+    xy = np.concatenate([xy, xy[first.ravel()], xy[last.ravel()]])
+    vz = np.concatenate([vz, rng.normal(500.0, 100.0, first.size + last.size)])
+    own = m + np.arange(first.size + last.size, dtype=np.int64).reshape(-1, 3)
+    tri = np.concatenate([own[:first.shape[0]], tri, [[0, 0, 1]], own[first.shape[0]:]])
+    args = (np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]), vz, tri, x0, y0, res, ny, nx)
+    got = _kernels.rasterize_triangles(*args)
+    want = _rasterize_triangles_reference(*args)
+    assert got.tobytes() == want.tobytes()
+    assert np.isfinite(want).any() or min(shape) == 1
