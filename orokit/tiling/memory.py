@@ -26,13 +26,21 @@ GDAL_WHOLE_READ_CACHE_BYTES = 4 * 2**20
 _GDAL_CACHE_SET: dict[str, str | None] = {"value": None}
 
 
-@functools.lru_cache(maxsize=1)
-def _trim():
-    name = ctypes.util.find_library("c")
+@functools.lru_cache(maxsize=None)
+def _libc_function(name: str, restype=None, argtypes: tuple = ()):
+    """glibc's function ``name`` with its ctypes signature, or None where the C library has none."""
+    lib = ctypes.util.find_library("c")
     try:
-        return ctypes.CDLL(name).malloc_trim if name else None
+        fn = getattr(ctypes.CDLL(lib), name) if lib else None
     except (OSError, AttributeError):
         return None
+    if fn is not None and argtypes:
+        fn.restype, fn.argtypes = restype, list(argtypes)
+    return fn
+
+
+def _trim():
+    return _libc_function("malloc_trim")
 
 
 def release_free_heap() -> bool:
@@ -52,16 +60,8 @@ def release_free_heap() -> bool:
 _MADV_DONTNEED = 4
 
 
-@functools.lru_cache(maxsize=1)
 def _madvise():
-    name = ctypes.util.find_library("c")
-    try:
-        fn = ctypes.CDLL(name).madvise if name else None
-    except (OSError, AttributeError):
-        return None
-    if fn is not None:
-        fn.restype, fn.argtypes = ctypes.c_int, [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
-    return fn
+    return _libc_function("madvise", ctypes.c_int, (ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int))
 
 
 def _library_mappings(name: str, smaps: str) -> list[tuple[int, int, int]]:
@@ -137,16 +137,8 @@ _M_ARENA_MAX = -8
 _M_MMAP_THRESHOLD = -3
 
 
-@functools.lru_cache(maxsize=1)
 def _mallopt():
-    name = ctypes.util.find_library("c")
-    try:
-        fn = ctypes.CDLL(name).mallopt if name else None
-    except (OSError, AttributeError):
-        return None
-    if fn is not None:
-        fn.restype, fn.argtypes = ctypes.c_int, [ctypes.c_int, ctypes.c_int]
-    return fn
+    return _libc_function("mallopt", ctypes.c_int, (ctypes.c_int, ctypes.c_int))
 
 
 def limit_malloc_arenas(n: int) -> bool:
