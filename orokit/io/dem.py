@@ -74,8 +74,9 @@ class _OpeningHere:
 
     ``warnings.catch_warnings`` would swap the process's filters and ``showwarning`` around each open:
     not thread-safe (an open in a dask or reader thread could put back another thread's filters or
-    warning recorder for good, or drop them). This filter is put first in the list and left there; it
-    matches no warning of another thread or outside the open (a caller's own ``rasterio.open`` warns).
+    warning recorder for good, or drop them). This filter is put in front of every filter that would
+    take the warning and left there; it matches no warning of another thread or outside the open (a
+    caller's own ``rasterio.open`` warns).
     """
 
     def __init__(self) -> None:
@@ -96,10 +97,22 @@ class _OpeningHere:
     def __reduce__(self) -> tuple[Any, ...]:  # sent to another process: that process's own filter
         return (_not_georeferenced_filter, ())
 
+    def _behind_a_catching_filter(self, filters: list[Any]) -> bool:
+        """Whether this filter is missing from ``filters`` or behind one whose category takes the warning."""
+        for entry in filters:
+            if entry is self.entry:
+                return False
+            if issubclass(rasterio.errors.NotGeoreferencedWarning, entry[2]):
+                return True
+        return True
+
     @contextlib.contextmanager
     def active(self) -> Iterator[None]:
         filters = cast("list[Any]", warnings.filters)  # a list (typeshed: a Sequence)
-        if not filters or filters[0] is not self.entry:  # first open, or filters added or reset since
+        # put first only when needed (first open, filters reset, or one added since that catches this
+        # warning): code that pushes a filter of another category and pops index 0 afterwards (POT's
+        # ``get_params``) then pops its own even when an open ran between the two
+        if self._behind_a_catching_filter(filters):
             with contextlib.suppress(ValueError):
                 filters.remove(self.entry)
             filters.insert(0, self.entry)

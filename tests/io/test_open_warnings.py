@@ -95,3 +95,20 @@ def test_the_filters_survive_scikit_learns_parallel_and_pickling(tmp_path):
     assert Parallel(n_jobs=1)(delayed(abs)(v) for v in (-1, -2)) == [1, 2]
     with pytest.warns(rasterio.errors.NotGeoreferencedWarning):  # in a task the filter matches nothing
         Parallel(n_jobs=1)(delayed(warnings.warn)("x", rasterio.errors.NotGeoreferencedWarning) for _ in (0,))
+
+
+def test_a_filter_pushed_and_popped_by_other_code_stays_its_own(tmp_path):
+    """Code that adds a filter of another category and pops index 0 afterwards (POT's ``get_params``)
+    pops its own filter even when an orokit open runs between the two (before: the open moved orokit's
+    filter to the front, the pop took it and the other filter stayed for good)."""
+    path = _plain_tif(tmp_path / "plain.tif")
+    with warnings.catch_warnings():
+        dem._open_dataset(path).close()
+        warnings.filterwarnings("always", category=DeprecationWarning)
+        dem._open_dataset(path).close()  # another thread's open, in real use
+        popped = warnings.filters.pop(0)
+        assert popped[2] is DeprecationWarning
+        assert dem._NOT_GEOREFERENCED.entry in warnings.filters
+        warnings.simplefilter("error", UserWarning)  # one that takes the warning: orokit's goes in front
+        dem._open_dataset(path).close()
+        assert warnings.filters[0] is dem._NOT_GEOREFERENCED.entry
