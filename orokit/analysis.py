@@ -16,7 +16,7 @@ import numpy as np
 
 from orokit import __version__
 from orokit.errors import InputError
-from orokit.geodesy import cell_size_key
+from orokit.geodesy import cell_size_attrs
 from orokit._typing import PathLike
 from orokit.topology.tables import PEAK_COLUMNS, AnalysisResult, upgrade_attrs
 
@@ -274,7 +274,7 @@ def analyze(
             "source": str(dem.attrs.get("source", "")),
             "dataset": str(dem.attrs.get("dataset", "")),
             "z_units_in": str(dem.attrs.get("z_units_in", "m")),
-            cell_size_key(crs is not None and crs.is_geographic): [abs(transform.a), abs(transform.e)],
+            **{key: list(size) for key, size in cell_size_attrs(transform, crs).items()},
             "transform": [transform.a, transform.b, transform.c, transform.d, transform.e, transform.f],
             "crs_geographic": bool(crs is not None and crs.is_geographic),
             "shape": list(dem.shape),
@@ -357,8 +357,7 @@ def _depressions(dem, transform, crs, *, min_prominence_m, outside, sea_level_m,
     t = transform
     gt = Affine(t.a, t.b, t.c - (t.a + t.b) * pad, t.d, t.e, t.f - (t.d + t.e) * pad)
     gda = xr.DataArray(g, dims=("y", "x"), attrs={"units": "m", "local_grid": crs is None,
-                                                   cell_size_key(crs is not None and crs.is_geographic):
-                                                       (abs(t.a), abs(t.e))})
+                                                   **cell_size_attrs(t, crs)})
     gda = gda.rio.write_transform(gt)
     if crs is not None:
         gda = gda.rio.write_crs(crs)

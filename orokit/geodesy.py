@@ -29,7 +29,7 @@ from orokit.errors import CRSError
 if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
 
-__all__ = ["CellMetric", "cell_distance", "point_distance", "parse_crs", "cell_size_key", "WGS84"]
+__all__ = ["CellMetric", "cell_distance", "point_distance", "parse_crs", "metric_crs", "cell_size_key", "cell_size_attrs", "WGS84"]
 
 #: The ellipsoid used for every geodesic computation in orokit.
 WGS84 = Geod(ellps="WGS84")
@@ -39,6 +39,19 @@ _EPSG4326 = CRS.from_epsg(4326)
 def cell_size_key(geographic: bool) -> str:
     """Attrs key of a grid's cell size (dx, dy): ``cell_size_deg`` on lon/lat grids, else ``cell_size_m``."""
     return "cell_size_deg" if geographic else "cell_size_m"
+
+
+def cell_size_attrs(transform: Affine, crs: Any) -> dict[str, tuple[float, float]]:
+    """A grid's cell size (dx, dy) under its attrs key (:func:`cell_size_key`): degrees on lon/lat grids,
+    else metres (a projected CRS's feet converted).
+
+    >>> cell_size_attrs(Affine(30, 0, 0, 0, -30, 0), "EPSG:32633"), cell_size_attrs(Affine(100, 0, 0, 0, -100, 0), "EPSG:2227")
+    ({'cell_size_m': (30.0, 30.0)}, {'cell_size_m': (30.480060960121925, 30.480060960121925)})
+    """
+    c = parse_crs(crs)
+    geographic = c is not None and c.is_geographic
+    unit = 1.0 if geographic else _linear_unit_m(c)
+    return {cell_size_key(geographic): (float(abs(transform.a)) * unit, float(abs(transform.e)) * unit)}
 
 
 @functools.lru_cache(maxsize=32)
@@ -65,6 +78,40 @@ def parse_crs(crs: Any) -> CRS | None:
         return CRS.from_user_input(crs)
     except Exception as exc:  # pyproj raises CRSError subclasses of its own
         raise CRSError(f"cannot interpret CRS {crs!r}: {exc}. Pass an EPSG code or WKT, e.g. 'EPSG:32633'.") from exc
+
+
+def metric_crs(crs: Any, what: str) -> CRS | None:
+    """``crs`` (None: a local metric frame) when its coordinates are metres; ``what`` (e.g. "the Divide
+    Tree") names the data in the message.
+
+    Raises
+    ------
+    CRSError
+        A geographic CRS, or a projected one in other units (US survey feet: a tree analysed from such a
+        DEM), whose coordinates would be taken for metres.
+
+    Examples
+    --------
+    >>> metric_crs("EPSG:32633", "the tree").name, metric_crs(None, "the tree")
+    ('WGS 84 / UTM zone 33N', None)
+    >>> metric_crs("EPSG:2227", "the tree")
+    Traceback (most recent call last):
+    ...
+    orokit.errors.CRSError: the tree is in the CRS 'NAD83 / California zone 3 (ftUS)', whose unit is the US survey foot (0.3048006 m); this needs metres: reproject it, or the DEM it came from (gdalwarp -t_srs), to a metric CRS (e.g. its UTM zone) first
+    """
+    c = parse_crs(crs)
+    if c is None:
+        return None
+    if c.is_geographic:
+        raise CRSError(f"{what} is in a geographic CRS ({c.name}); this needs metres: reproject it to a projected "
+                       "CRS (e.g. its UTM zone) first")
+    unit_m = _linear_unit_m(c)
+    if unit_m != 1.0:
+        unit = c.axis_info[0].unit_name
+        raise CRSError(f"{what} is in the CRS {c.name!r}, whose unit is the {unit} ({unit_m:.7g} m); this needs "
+                       "metres: reproject it, or the DEM it came from (gdalwarp -t_srs), to a metric CRS (e.g. its "
+                       "UTM zone) first")
+    return c
 
 
 def _linear_unit_m(crs: CRS | None) -> float:

@@ -40,6 +40,14 @@ def like_dem(like: str | Path | InputSource, *, cell_size_m: float | None = None
     if dem.rio.crs is not None and dem.rio.crs.is_geographic:
         raise click.BadParameter(f"{like} is in a geographic CRS; give --size and --resolution in metres",
                                  param_hint=hint)
+    if dem.rio.crs is not None and not dem.attrs.get("local_grid"):  # its grid is taken in metres
+        from orokit.errors import CRSError
+        from orokit.geodesy import metric_crs
+
+        try:
+            metric_crs(dem.rio.crs, str(like))
+        except CRSError as exc:
+            raise click.BadParameter(str(exc), param_hint=hint) from exc
     return dem
 
 

@@ -100,14 +100,20 @@ def _tree_area_km2(tree) -> float:
         parts.append(run[["x", "y"]])
     xy = pd.concat(parts)
     cell = float((tree.attrs or {}).get("cell_size_m") or 0.0)
-    if tree.crs is not None and tree.crs.is_geographic:  # lon/lat box: its area on the ellipsoid
+    from orokit.geodesy import parse_crs
+
+    crs = parse_crs(tree.crs)
+    if crs is not None and crs.is_geographic:  # lon/lat box: its area on the ellipsoid
         from affine import Affine
 
         from orokit.sampling.grid import grid_area_km2
 
         w, h = float(xy["x"].max() - xy["x"].min()), float(xy["y"].max() - xy["y"].min())
-        return grid_area_km2(Affine(w, 0.0, float(xy["x"].min()), 0.0, -h, float(xy["y"].max())), tree.crs, (1, 1))
-    return float((xy["x"].max() - xy["x"].min() + cell) * (xy["y"].max() - xy["y"].min() + cell)) / 1e6
+        return grid_area_km2(Affine(w, 0.0, float(xy["x"].min()), 0.0, -h, float(xy["y"].max())), crs, (1, 1))
+    from orokit.synthesis.orometry import planar_xy
+
+    x, y = planar_xy(xy["x"].to_numpy(), xy["y"].to_numpy(), crs)  # metres (a CRS in feet converted)
+    return float((x.max() - x.min() + cell) * (y.max() - y.min() + cell)) / 1e6
 
 
 def _with_texture(tt, dem):

@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from orokit.errors import CRSError, DivideTreeError, InputError
+from orokit.errors import DivideTreeError, InputError
+from orokit.geodesy import metric_crs
 from orokit.raster.rasterize import Grid
 from orokit.raster.rivers import RiverNetwork, ridge_segments, river_network
 
@@ -62,18 +63,9 @@ def tree_arrays(tree) -> TreeArrays:
 
 
 def check_crs(tree) -> Any:
-    """The tree's pyproj CRS (None for a local frame); refuses geographic CRSs."""
-    if tree.crs is None:
-        return None
-    from pyproj import CRS
-
-    crs = CRS.from_user_input(tree.crs)
-    if crs.is_geographic:
-        raise CRSError(
-            f"the Divide Tree is in a geographic CRS ({crs.name}); rendering needs metres: "
-            "reproject the tree to a projected CRS (e.g. its UTM zone) first"
-        )
-    return crs
+    """The tree's pyproj CRS (None for a local frame); refuses a CRS whose coordinates are not metres
+    (:func:`orokit.geodesy.metric_crs`)."""
+    return metric_crs(tree.crs, "the Divide Tree")
 
 
 def tree_sha256(tree) -> str:

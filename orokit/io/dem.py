@@ -28,7 +28,7 @@ from rasterio.windows import Window
 
 from orokit._typing import PathLike
 from orokit.errors import CRSError, InputError, OrokitWarning, UnitsError
-from orokit.geodesy import cell_size_key, parse_crs
+from orokit.geodesy import cell_size_attrs, parse_crs
 from orokit.io._units import TO_METRES, is_known_units, normalize_units
 
 if TYPE_CHECKING:
@@ -792,7 +792,7 @@ def _read_dem(
         "z_units_in": zu,
         "z_units_assumed": z_assumed,
         "local_grid": eff_crs is None,
-        cell_size_key(eff_crs is not None and eff_crs.is_geographic): (float(abs(t.a)), float(abs(t.e))),
+        **cell_size_attrs(t, eff_crs),
         "band": band,
         "nodata_in": nd,
         "long_name": "elevation",

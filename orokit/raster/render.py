@@ -20,7 +20,8 @@ from scipy import ndimage
 
 from orokit import __version__
 from orokit._typing import SeedLike
-from orokit.errors import CRSError, DivideTreeError, InputError, OrokitWarning
+from orokit.errors import DivideTreeError, InputError, OrokitWarning
+from orokit.geodesy import metric_crs
 from orokit.raster import _kernels
 from orokit.raster.enforce import enforce_orometry
 from orokit.raster.erosion import erode_multiscale
@@ -205,21 +206,6 @@ def _field(grid, rxy: np.ndarray, rz: np.ndarray, rivers, params: RenderParams) 
                            beyond_depth_m=params.min_prominence_m)
 
 
-def _check_crs(tree) -> Any:
-    crs = tree.crs
-    if crs is None:
-        return None
-    from pyproj import CRS
-
-    crs = CRS.from_user_input(crs)
-    if crs.is_geographic:
-        raise CRSError(
-            f"the Divide Tree is in a geographic CRS ({crs.name}); rendering needs metres: "
-            "reproject the tree to a projected CRS (e.g. its UTM zone) first"
-        )
-    return crs
-
-
 def render_elevation(
     tree,
     *,
@@ -255,7 +241,7 @@ def render_elevation(
     Raises
     ------
     InputError : bad resolution or extent (zero, negative, too large), no peak inside the extent.
-    CRSError : the tree is in a geographic CRS.
+    CRSError : the tree's coordinates are not metres (a geographic CRS, or a projected one in feet).
     DivideTreeError : empty or malformed tree.
 
     Notes
@@ -277,7 +263,7 @@ def render_elevation(
     params = params or RenderParams()
     seed = resolve_seed(rng)
     rng = np.random.default_rng(seed)
-    crs = _check_crs(tree)
+    crs = metric_crs(tree.crs, "the Divide Tree")
     xarray_job = _preload_xarray()
     if tree.n_peaks == 0:
         raise DivideTreeError("the Divide Tree has no peaks; nothing to render")

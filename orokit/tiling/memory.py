@@ -11,6 +11,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import functools
+from typing import Any
 
 __all__ = ["fix_mmap_threshold", "limit_gdal_cache", "limit_malloc_arenas", "release_free_heap", "release_library_pages"]
 
@@ -27,7 +28,7 @@ _GDAL_CACHE_SET: dict[str, str | None] = {"value": None}
 
 
 @functools.lru_cache(maxsize=None)
-def _libc_function(name: str, restype=None, argtypes: tuple = ()):
+def _libc_function(name: str, restype: Any = None, argtypes: tuple[Any, ...] = ()) -> Any:
     """glibc's function ``name`` with its ctypes signature, or None where the C library has none."""
     lib = ctypes.util.find_library("c")
     try:
@@ -39,7 +40,7 @@ def _libc_function(name: str, restype=None, argtypes: tuple = ()):
     return fn
 
 
-def _trim():
+def _trim() -> Any:
     return _libc_function("malloc_trim")
 
 
@@ -60,7 +61,7 @@ def release_free_heap() -> bool:
 _MADV_DONTNEED = 4
 
 
-def _madvise():
+def _madvise() -> Any:
     return _libc_function("madvise", ctypes.c_int, (ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int))
 
 
@@ -137,7 +138,7 @@ _M_ARENA_MAX = -8
 _M_MMAP_THRESHOLD = -3
 
 
-def _mallopt():
+def _mallopt() -> Any:
     return _libc_function("mallopt", ctypes.c_int, (ctypes.c_int, ctypes.c_int))
 
 
