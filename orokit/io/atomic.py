@@ -343,10 +343,18 @@ def _acquire(target: Path, wait_s: float = 0.0) -> Path:
     if held is not None:
         held[1] += 1
         return lock
-    lock.parent.mkdir(parents=True, exist_ok=True)
     deadline = time.monotonic() + wait_s
     while True:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            lock.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            if is_no_space_error(exc) or exc.errno not in (errno.EROFS, errno.EACCES, errno.EPERM):
+                raise
+            raise OutputError(
+                f"cannot write {target}: {exc.strerror.lower() if exc.strerror else exc} in {lock.parent}; write "
+                "to a folder you can write to (-o/--output)"
+            ) from exc
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -367,9 +375,12 @@ def _acquire(target: Path, wait_s: float = 0.0) -> Path:
         os.close(fd)
     import sys
 
-    os.ftruncate(fd, 0)
-    os.write(fd, f"pid {os.getpid()}: {' '.join(sys.argv[:3])}".encode())
     _HELD[lock] = [fd, 1]
+    try:  # who holds it, for another run's message; on a full disk the lock holds without it
+        os.ftruncate(fd, 0)
+        os.write(fd, f"pid {os.getpid()}: {' '.join(sys.argv[:3])}".encode())
+    except OSError:
+        pass
     return lock
 
 

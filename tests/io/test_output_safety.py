@@ -371,3 +371,40 @@ def test_waiting_lock_gets_it_once_the_holder_is_done(tmp_path):
     with output_lock(log, wait_s=60.0):  # would raise OutputError if the wait did not work
         assert lock_path_for(log).exists()
     assert not lock_path_for(log).exists()
+
+
+def _refuse(monkeypatch, error: int, *, op: str):
+    """``os.open`` (creating a lock file) or ``os.write`` (the holder's text) fails with ``error``."""
+    real = getattr(os, op)
+
+    def failing(*args, **kwargs):
+        if op == "open" and str(args[0]).endswith(".lock") and args[1] & os.O_CREAT:
+            raise OSError(error, os.strerror(error), str(args[0]))
+        if op == "write" and args[1].startswith(b"pid "):
+            raise OSError(error, os.strerror(error))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(os, op, failing)
+
+
+@pytest.mark.parametrize("error", [errno.EROFS, errno.EACCES])
+def test_an_output_in_a_folder_that_cannot_be_written_is_named_with_the_fix(tmp_path, dem_tif, monkeypatch, error):
+    """A read-only filesystem or a folder without write permission (before: a traceback from the lock's open)."""
+    out = tmp_path / "out"
+    _refuse(monkeypatch, error, op="open")
+    res = _analyze(dem_tif, out)
+    assert isinstance(res.exception, SystemExit) and res.exit_code == 1, res.output
+    assert f"cannot write {out}: {os.strerror(error).lower()}" in res.output and "--output" in res.output
+    assert not out.exists()
+
+
+def test_a_full_disk_leaves_no_lock_file_behind(tmp_path, dem_tif, monkeypatch):
+    """The lock's holder text cannot be written on a full disk: the lock still holds and its file goes at the
+    end (before: ENOSPC there, the descriptor leaked and the empty lock file stayed)."""
+    out = tmp_path / "out"
+    _refuse(monkeypatch, errno.ENOSPC, op="write")
+    with output_lock(out):
+        assert lock_path_for(out).exists()
+    assert _leftovers(tmp_path) == []
+    assert _analyze(dem_tif, out).exit_code == 0
+    assert _leftovers(tmp_path, out) == []
