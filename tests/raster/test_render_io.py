@@ -121,15 +121,18 @@ def test_cli_render_refuses_malformed_lengths(tmp_path, bad):
 
 def test_basins_come_from_the_engine_kernels(monkeypatch):
     """cap_basins labels the raster's basins with the orometry engine's kernels, not a copy."""
+    from orokit.raster import enforce
+
     assert not hasattr(raster_kernels, "basin_labels")
+    assert enforce.ascent_labels is engine_kernels.ascent_labels  # the engine's kernel itself
     calls = []
     real = engine_kernels.ascent_labels
 
-    def counting(z, label):
+    def counting(z, label, ptr=None):
         calls.append(z.size)
-        return real(z, label)
+        return real(z, label, ptr)
 
-    monkeypatch.setattr(engine_kernels, "ascent_labels", counting)
+    monkeypatch.setattr(enforce, "ascent_labels", counting)
     dem = render_elevation(two_peaks(), cell_size_m=100.0, erosion=False, params=FAST, rng=4)
     assert calls and calls[0] == dem.size
 
