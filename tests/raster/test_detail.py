@@ -154,9 +154,9 @@ def test_detail_leaves_the_flats_of_the_skeleton_flat():
     assert kept > everywhere
 
 
-@pytest.mark.parametrize("gain", [1.0, 60.0])
+@pytest.mark.parametrize("gain", [1.0, 100.0])
 def test_detail_never_makes_a_peak_of_the_tree_prominence(gain):
-    """Metamorphic: however strong the sub-lambda detail (at gain 60 it has more than 30 m RMS, more than eps,
+    """Metamorphic: however strong the sub-lambda detail (at gain 100 it has more than 30 m RMS, more than eps,
     and makes hundreds of hills), with sub-eps hills kept, the render's peaks of prominence >= eps are
     exactly the tree's, with the tree's prominences."""
     p = RenderParams(detail_gain=gain, detail_flat_deg=2.0, keep_hill_ratio=0.5, cut_slope=0.05)
@@ -171,3 +171,23 @@ def test_detail_never_makes_a_peak_of_the_tree_prominence(gain):
 
         assert json.loads(z.attrs["parameters"])["detail_rms_m"] > 30.0
         assert len(orokit.analyze(z, min_prominence_m=1.0, isolation=False).peaks) > 100
+
+
+def test_detail_weights_do_not_follow_the_slope_at_power_zero():
+    """``detail_slope_power`` 0 (the default since session 16): the detail is as strong on a gentle slope as on a
+    steep one (real DEMs' sub-200 m curvature hardly depends on the slope; the slope-weighted detail put the
+    render's curvature extremes on its steepest cells and left its gentle slopes too smooth)."""
+    from orokit.raster.render import _detail_weights
+
+    xx = np.mgrid[0:40, 0:60][1] * 30.0
+    z = np.where(xx < 900.0, np.tan(np.radians(5.0)) * xx,
+                 np.tan(np.radians(5.0)) * 900.0 + np.tan(np.radians(35.0)) * (xx - 900.0))
+    near = np.zeros(z.shape, np.float32)
+    gentle, steep = (slice(5, -5), slice(5, 20)), (slice(5, -5), slice(40, -5))
+    _, w0 = _detail_weights(z, 30.0, near, 200.0, 0.0, 2.0)
+    np.testing.assert_allclose(w0[gentle], 1.0)
+    np.testing.assert_allclose(w0[steep], 1.0)
+    _, w1 = _detail_weights(z, 30.0, near, 200.0, 1.0, 2.0)
+    ratio = float(w1[steep].mean() / w1[gentle].mean())
+    np.testing.assert_allclose(ratio, np.tan(np.radians(35.0)) / np.tan(np.radians(5.0)), rtol=0.02)
+    assert RenderParams().detail_slope_power == 0.0
