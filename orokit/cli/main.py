@@ -237,14 +237,62 @@ class _Terminated(KeyboardInterrupt):
     """SIGTERM (``kill``), raised like Ctrl-C so staged outputs are cleaned up the same way."""
 
 
+#: how often a signal put off while the main thread starts or joins threads looks again
+_JOIN_RETRY_S = 0.05
+#: a signal put off (:func:`_on_signal`): its number, and whether the handler's next call is its return
+_DEFERRED: dict[str, int | bool | None] = {"signum": None, "again": False}
+
+
+def _joining(frame) -> bool:  # noqa: ANN001 - a frame object
+    """Whether the main thread was interrupted while starting or joining a thread (``Thread.start`` waits
+    for the thread to begin, ``Thread.join`` for it to end)."""
+    import threading
+
+    waits = {w.__code__ for w in (threading.Thread.start, threading.Thread.join,
+                                  getattr(threading.Thread, "_wait_for_tstate_lock", threading.Thread.join))}
+    while frame is not None and frame.f_code.co_filename == threading.__file__:
+        if frame.f_code in waits:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _deliver_deferred() -> None:
+    import signal
+    import threading
+
+    signum = _DEFERRED["signum"]
+    if signum is not None:  # still catching (not restored since): the main thread's wait is woken, the handler runs
+        _DEFERRED["again"] = True
+        signal.pthread_kill(threading.main_thread().ident or 0, int(signum))
+
+
 def _on_signal(signum, frame):  # noqa: ANN001 - signal handler signature
     """SIGINT / SIGTERM: recorded first (so no output is replaced after it, even if the exception
-    below is swallowed somewhere), then raised as KeyboardInterrupt / :class:`_Terminated`."""
+    below is swallowed somewhere), then raised as KeyboardInterrupt / :class:`_Terminated`.
+
+    Not while the main thread starts or joins threads: the signal comes back every 50 ms until it is
+    out (a second Ctrl-C raises at once). scipy's ``cKDTree.query(workers=-1)`` starts and joins threads
+    that keep a bare pointer to the tree: raised there, the interrupt freed a temporary tree under them
+    and Ctrl-C in ``orokit render`` crashed the process (segmentation fault, exit 139).
+    """
     import signal
+    import threading
 
     from orokit.io.atomic import request_stop
 
     request_stop(signum)
+    again, _DEFERRED["again"] = bool(_DEFERRED["again"]), False
+    first = _DEFERRED["signum"] is None
+    if _joining(frame) and (first or again):
+        if first:
+            print("stopping once the running threads are done (Ctrl-C again: at once)", file=sys.stderr, flush=True)
+        _DEFERRED["signum"] = signum
+        timer = threading.Timer(_JOIN_RETRY_S, _deliver_deferred)
+        timer.daemon = True
+        timer.start()
+        return
+    _DEFERRED["signum"] = None
     raise _Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
@@ -263,6 +311,7 @@ def _catch_signals():
 def _restore_signals(previous) -> None:  # noqa: ANN001
     import signal
 
+    _DEFERRED["signum"], _DEFERRED["again"] = None, False  # a signal put off is not sent again
     if previous is not None:
         for s, handler in previous.items():
             signal.signal(s, handler)

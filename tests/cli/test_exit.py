@@ -5,6 +5,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
+
 #: a process running the CLI as the console script does (``cli()`` without arguments); an object
 #: whose finalizer prints shows whether the interpreter was torn down
 SCRIPT = """
@@ -59,3 +61,46 @@ def _version() -> str:
     from orokit import __version__
 
     return __version__
+
+
+#: the main thread starts or joins a thread that still works (as scipy's ``cKDTree.query(workers=-1)`` does, its
+#: threads searching a tree the caller frees once that raises) when one or two signals come; prints what the
+#: thread had done by then
+JOIN = """
+import os, signal, sys, threading, time
+from orokit.cli import main
+done = []
+class SlowStart(threading.Thread):  # Thread.start waits for the thread to begin
+    def _bootstrap_inner(self):
+        time.sleep(1.5)
+        done.append(1)
+        super()._bootstrap_inner()
+main._catch_signals()
+for at in (0.3, 0.6)[:int(sys.argv[3])]:  # a second signal: at once
+    threading.Timer(at, os.kill, (os.getpid(), getattr(signal, sys.argv[1]))).start()
+try:
+    if sys.argv[2] == "join":
+        worker = threading.Thread(target=lambda: (time.sleep(1.5), done.append(1)), daemon=True)
+        worker.start()
+        worker.join()
+    else:
+        SlowStart(target=time.sleep, args=(0,), daemon=True).start()
+    time.sleep(2)  # the interrupt comes after the join
+    print("no interrupt")
+except KeyboardInterrupt as exc:
+    print(type(exc).__name__, "thread done" if done else "thread running", flush=True)
+"""
+
+
+@pytest.mark.parametrize("wait", ["join", "start"])
+def test_a_signal_waits_for_the_threads_being_started_or_joined(wait):
+    """Ctrl-C in ``orokit render`` while scipy's query started or joined its threads crashed the process
+    (segmentation fault, exit 139: the threads searched a freed tree); the interrupt now comes after, and a
+    second one at once."""
+    for name, kind in (("SIGINT", "KeyboardInterrupt"), ("SIGTERM", "_Terminated")):
+        for signals, state in ((1, "done"), (2, "running")):
+            res = subprocess.run([sys.executable, "-c", JOIN, name, wait, str(signals)], capture_output=True,
+                                 text=True, timeout=120)
+            assert res.returncode == 0, res.stderr
+            assert res.stdout.split() == [kind, "thread", state]
+            assert "stopping once the running threads are done" in res.stderr
