@@ -155,6 +155,10 @@ class RenderParams:
         ``flank_depth_saddle_k`` saddles nearest to it (the tree's own quantities): a volcano whose saddle lies at the
         level of the saddles around it (a plateau) gets shallow cones; None = off. Session 13: 1 gets
         andes-chile's slope 7.19 -> 4.61 but makes the steep ranges too gentle (their low cols look the same).
+    ridge_max_slope : a ridge piece's crest falls from its peak at most this steeply (m/m) and then at 0.02 to its
+        saddle, never above the straight line (:func:`orokit.raster.skeleton.steep_ridge_profile`): a long gentle
+        piece (a volcano's ridge to a saddle far out on its plateau) no longer stands as a spoke km out over the
+        plain; None = the straight line.
     smooth_m : Gaussian sigma (metres) that rounds the skeleton raster's planar facets and creases
         (the TIN carries no information below its meshing distance ``lam``), faded to 0 within
         ``texture_clearance_m`` of peaks and saddles; 0 = off.
@@ -231,6 +235,7 @@ class RenderParams:
     field_weight: float = 1.0
     flank_depth: float | None = 1.0
     flank_depth_saddle_ratio: float | None = None
+    ridge_max_slope: float | None = None
     flank_depth_saddle_k: int = 16
     keep_hill_ratio: float = 0.0
     cut_slope: float = 0.0
@@ -284,6 +289,8 @@ class RenderParams:
             raise InputError(f"border_beyond_slope must be >= 0 (m/m) or None, got {self.border_beyond_slope!r}")
         if self.river_base_saddle_k is not None and not int(self.river_base_saddle_k) >= 1:
             raise InputError(f"river_base_saddle_k must be >= 1 or None, got {self.river_base_saddle_k!r}")
+        if self.ridge_max_slope is not None and not float(self.ridge_max_slope) > 0.0:
+            raise InputError(f"ridge_max_slope must be > 0 or None, got {self.ridge_max_slope!r}")
         if self.flank_depth_saddle_ratio is not None and not float(self.flank_depth_saddle_ratio) >= 0.0:
             raise InputError(f"flank_depth_saddle_ratio must be >= 0 or None, got {self.flank_depth_saddle_ratio!r}")
         if not int(self.flank_depth_saddle_k) >= 1:

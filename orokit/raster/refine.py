@@ -32,6 +32,7 @@ def refine_segments(
     jitter: float = 0.25,
     node_a: np.ndarray | None = None,
     profile: Callable[[np.ndarray], np.ndarray] | None = None,
+    segment_profile: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
     rng: SeedLike = None,
 ) -> Polylines:
     """Split each segment ``seg[i] = (u, v)`` into pieces shorter than ``lam``.
@@ -39,7 +40,8 @@ def refine_segments(
     Interior points are displaced in the plane by a random vector of length at most
     ``jitter * piece length`` perpendicular to the segment; their elevation (and value
     ``a``) is interpolated along the original segment: linearly, or with weight
-    ``profile(t)`` of the end node (t = 0 at ``u``, 1 at ``v``) for the elevation. End
+    ``profile(t)`` of the end node (t = 0 at ``u``, 1 at ``v``) for the elevation, or
+    ``segment_profile(t, i)`` (``i`` the segment of each point; instead of ``profile``). End
     points (the original nodes) do not move.
     """
     rng = np.random.default_rng(rng)
@@ -59,7 +61,10 @@ def refine_segments(
     normal = np.column_stack([-d[sid, 1], d[sid, 0]]) / np.maximum(length[sid], 1e-12)[:, None]
     piece = (length / k)[sid]
     base = base + normal * (rng.uniform(-jitter, jitter, tot) * piece)[:, None]
-    wz = t if profile is None else np.asarray(profile(t), dtype=np.float64)
+    if segment_profile is not None:
+        wz = np.asarray(segment_profile(t, sid), dtype=np.float64)
+    else:
+        wz = t if profile is None else np.asarray(profile(t), dtype=np.float64)
     z = node_z[seg[sid, 0]] + wz * (node_z[seg[sid, 1]] - node_z[seg[sid, 0]])
     a = node_a[seg[sid, 0]] + t * (node_a[seg[sid, 1]] - node_a[seg[sid, 0]])
     n0 = node_xy.shape[0]

@@ -173,6 +173,36 @@ def _cone_floor(lines: Polylines, point_origin: np.ndarray, pieces: RidgeSegment
     return out
 
 
+#: slope (m/m) at which a steep ridge's crest still falls to its saddle past its steep part
+RIDGE_TAIL_SLOPE = 0.02
+
+
+def steep_ridge_profile(peak: np.ndarray, saddle: np.ndarray, max_slope: float
+                        ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """Weight of the saddle's elevation at ``t`` along each ridge piece (0 at the peak, 1 at the saddle;
+    ``peak``, ``saddle`` (m, 3) xyz of each piece's ends) for crests that fall from the peak at ``max_slope``
+    and then at :data:`RIDGE_TAIL_SLOPE` to the saddle, never above the straight line: a long, gentle piece
+    (a volcano's ridge to a saddle far out on its plateau) drops where the edifice stands and runs low over
+    the plain, a short or steep one keeps its straight line.
+
+    >>> f = steep_ridge_profile(np.array([[0.0, 0.0, 1000.0]]), np.array([[10000.0, 0.0, 0.0]]), 0.5)
+    >>> (1000.0 * (1.0 - f(np.array([0.0, 0.1, 0.5, 1.0]), np.zeros(4, int)))).round(1).tolist()
+    [1000.0, 500.0, 100.0, 0.0]
+    """
+    if not float(max_slope) > 0.0:
+        raise ValueError(f"max_slope must be > 0, got {max_slope!r}")
+    length = np.hypot(*(saddle[:, :2] - peak[:, :2]).T)
+    drop = peak[:, 2] - saddle[:, 2]
+
+    def weight(t: np.ndarray, sid: np.ndarray) -> np.ndarray:
+        d, L, h = t * length[sid], length[sid], drop[sid]
+        above = np.maximum(h - float(max_slope) * d, np.minimum(RIDGE_TAIL_SLOPE, h / np.maximum(L, 1e-9)) * (L - d))
+        above = np.minimum(above, h * (1.0 - t))  # never above the straight line
+        return np.where(h > 0, 1.0 - above / np.where(h > 0, h, 1.0), t)
+
+    return weight
+
+
 def _hillslope(params: RenderParams):
     """The ridge-to-river profile of the samples (None: linear)."""
     if params.profiles == "learned":
@@ -218,9 +248,13 @@ def build_skeleton(
     if zmin >= 0 > base:
         base = 0.5 * zmin
     learned = params.profiles == "learned"
+    seg_profile = None
+    if params.ridge_max_slope is not None:
+        seg_profile = steep_ridge_profile(nodes[ridges.node0], nodes[ridges.node1], params.ridge_max_slope)
     ridge_lines = refine_segments(nodes[:, :2], nodes[:, 2], np.column_stack([ridges.node0, ridges.node1]),
                                   lam=lam, jitter=params.jitter, rng=rng,
-                                  profile=(lambda t: 1.0 - ridge_profile(t)) if learned else None)
+                                  profile=(lambda t: 1.0 - ridge_profile(t)) if learned else None,
+                                  segment_profile=seg_profile)
     t["refine"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
