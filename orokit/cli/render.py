@@ -65,15 +65,17 @@ def like_grid(like: str | Path | InputSource, *, cell_size_m: float | None = Non
     return (min(xs), min(ys), max(xs), max(ys)), abs(float(t.a))
 
 
-def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None, skeleton=None) -> None:
+def write_outputs(dem, out: Path, *, preview: Path | None, tin_path: Path | None, skeleton=None,
+                  name: str | None = None) -> None:
     """Write the raster, then the TIN, then the hillshade preview (each atomically; the
-    preview last, so it marks a complete set)."""
+    preview last, so it marks a complete set). ``name``: the raster's name in messages (``out``
+    may be a staged temporary file)."""
     from orokit.cli.generator_options import EXTRA_TAGS
     from orokit.io.atomic import check_free_space
     from orokit.io.raster_io import write_cog, write_hillshade_png, write_tin_ply
 
     # float32 cells + overviews + the COG driver's temporary copy (about a third)
-    check_free_space(out, dem.size * 4 * 1.7, what=f"{Path(out).name} ({dem.shape[1]} x {dem.shape[0]} cells)")
+    check_free_space(out, dem.size * 4 * 1.7, what=f"{name or Path(out).name} ({dem.shape[1]} x {dem.shape[0]} cells)")
     write_cog(dem, out, tags={k: v for k, v in dem.attrs.items() if k in EXTRA_TAGS})
     if tin_path is not None and skeleton is not None:
         write_tin_ply(skeleton.tin, tin_path)
@@ -173,7 +175,7 @@ def render(tree, out, resolution, erosion, seed, extent, like, min_prominence_m,
         bar.advance()
         # staged: the old outputs are replaced only once every new one is written
         write_outputs(dem, stage.file(out), preview=None if preview is None else stage.file(preview),
-                      tin_path=None if tin_path is None else stage.file(tin_path), skeleton=skel)
+                      tin_path=None if tin_path is None else stage.file(tin_path), skeleton=skel, name=out.name)
         stage.commit()
         bar.advance()
     click.echo(f"{dem.shape[1]} x {dem.shape[0]} cells at {res:g} m from {t.n_peaks} peaks "

@@ -587,6 +587,15 @@ def check_free_space(target: PathLike, need_bytes: float, *, what: str = "the ou
     free = shutil.disk_usage(folder).free
     if free < need_bytes:
         raise OutputError(
-            f"no space left on {folder}: {what} needs about {need_bytes / 1e6:.0f} MB, "
-            f"{free / 1e6:.0f} MB are free. Free some space (or write elsewhere) and run again."
+            f"no space left on {folder}: {what} needs about {_megabytes(need_bytes)}, "
+            f"{_megabytes(free)} are free. Free some space (or write elsewhere) and run again."
         )
+
+
+def _megabytes(n: float) -> str:
+    """``n`` bytes in MB, one decimal below 10 MB (0.74 MB needed and 0.6 MB free both read "1 MB" before).
+
+    >>> _megabytes(740_000), _megabytes(1000), _megabytes(123_456_789)
+    ('0.7 MB', '0.0 MB', '123 MB')
+    """
+    return f"{n / 1e6:.1f} MB" if n < 10e6 else f"{n / 1e6:.0f} MB"

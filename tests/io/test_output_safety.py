@@ -308,8 +308,32 @@ def test_render_checks_free_space_before_writing(tmp_path, monkeypatch):
 
     usage = namedtuple("usage", "total used free")
     monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**9, 10**9 - 1000, 1000))
-    with pytest.raises(OutputError, match=r"no space left on .*needs about 2 MB, 0 MB are free"):
+    with pytest.raises(OutputError, match=r"no space left on .*needs about 2.0 MB, 0.0 MB are free"):
         check_free_space(tmp_path / "x.tif", 2e6, what="x.tif")
+
+
+def test_render_on_a_nearly_full_disk_names_its_raster_and_the_sizes(tmp_path, monkeypatch):
+    """A 600 kB tmpfs: the message said '.r.tif.tmp-....tif needs about 1 MB, 1 MB are free' (the staged file's
+    name, and sizes rounded to whole MB)."""
+    import shutil
+    from collections import namedtuple
+
+    from orokit.io.divide_tree_io import write_divide_tree_gpkg
+    from orokit.topology.divide_tree import DivideTree
+
+    tree = DivideTree.from_arrays([[1000.0, 1000.0, 600.0], [3000.0, 1000.0, 550.0]], [[2000.0, 1000.0, 450.0]],
+                                  [[0, 1, 0]], crs=None, attrs={"extent": [0.0, 0.0, 4000.0, 2000.0]})
+    gpkg = tmp_path / "tree.gpkg"
+    write_divide_tree_gpkg(tree, gpkg)
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**9, 10**9 - 600_000, 600_000))
+    out = tmp_path / "r.tif"
+    res = CliRunner().invoke(cli, ["render", str(gpkg), "-o", str(out), "--resolution", "5m", "--no-erosion",
+                                   "--seed", "1"])
+    assert res.exit_code == 1, res.output
+    assert "r.tif (8" in res.output and ".tmp-" not in res.output, res.output  # 800 x 400 cells: 2.2 MB
+    assert "needs about 2.2 MB, 0.6 MB are free" in res.output, res.output
+    assert not out.exists() and _leftovers(tmp_path) == []
 
 
 # --- Ctrl-C ---------------------------------------------------------------------------------
