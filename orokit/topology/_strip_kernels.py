@@ -122,3 +122,111 @@ def strip_graph(z, lab, nterm, r0, r1):
                     keys, vals = _grow_pass_table(keys, vals, zf)
     ea, eb, ec = _unpack_pass_table(keys, vals, count, nterm)
     return bmax, nmin, ea, eb, ec
+
+
+@njit(cache=True, nogil=True)
+def terminal_extremes(bmax, nmin, term, tmax, tmin):
+    """``bmax[t] = max(bmax[t], tmax[i])`` and ``nmin[t] = min(nmin[t], tmin[i])`` for every ``t = term[i] >= 0``
+    (``np.maximum.at`` / ``np.minimum.at`` over the terminals that reach a basin; NaN propagates as there)."""
+    for i in range(term.size):
+        t = term[i]
+        if t < 0:
+            continue
+        v = tmax[i]
+        b = bmax[t]
+        if b == b and (v != v or v > b):
+            bmax[t] = v
+        v = tmin[i]
+        b = nmin[t]
+        if b == b and (v != v or v < b):
+            nmin[t] = v
+
+
+@njit(cache=True, nogil=True)
+def _higher_pass(zf, c1, c2):
+    """Whether pass cell ``c1`` comes before ``c2`` in ``np.lexsort((c, -zf[c]))``: higher first (NaN
+    last), then the lower cell; False when both keys are equal."""
+    z1 = zf[c1]
+    z2 = zf[c2]
+    if z1 != z1:
+        if z2 == z2:
+            return False
+    elif z2 != z2 or z1 > z2:
+        return True
+    elif z1 < z2:
+        return False
+    return c1 < c2
+
+
+@njit(cache=True, nogil=True)
+def basin_pairs(a, b, c, zf, touched, n_max):
+    """The saddle graph's edges from the strips' pairs ``(a, b)`` of basins with pass cell ``c``.
+
+    Pairs within one basin are dropped; each edge is ``(min, max)`` of its basins. Of the edges
+    of a basin pair, only the highest pass is kept (elevation ``zf[c]``, then the lower cell,
+    then the first found), among the candidates: edges with a basin in ``touched`` (size
+    ``n_max + 1``; basin -1 reads its last entry). Returns ``(lo, hi, c)`` in the input's order:
+    the first of each pair in ``np.lexsort((c, -zf[c], key))`` over the candidates' pair keys.
+    """
+    n = a.size
+    cnt = 0
+    for i in range(n):
+        if a[i] != b[i]:
+            cnt += 1
+    lo = np.empty(cnt, np.int64)
+    hi = np.empty(cnt, np.int64)
+    cc = np.empty(cnt, np.int64)
+    nt = touched.size
+    ncand = 0
+    j = 0
+    for i in range(n):
+        if a[i] != b[i]:
+            lo[j] = min(a[i], b[i])
+            hi[j] = max(a[i], b[i])
+            cc[j] = c[i]
+            if touched[lo[j] if lo[j] >= 0 else nt + lo[j]] or touched[hi[j] if hi[j] >= 0 else nt + hi[j]]:
+                ncand += 1
+            j += 1
+    # the candidates' pair keys in an open-addressing table (slot: the pair's best edge so far), in
+    # the input's order: a later edge of a pair replaces the kept one only when its pass is higher
+    bits = 1
+    while (1 << bits) < 2 * ncand:
+        bits += 1
+    size = 1 << bits
+    slot_key = np.empty(size, np.int64)
+    slot_edge = np.full(size, -1, np.int64)
+    mult = np.int64(max(n_max, 1))
+    dup = np.zeros(cnt, np.bool_)
+    ndup = 0
+    for j in range(cnt):
+        if not (touched[lo[j] if lo[j] >= 0 else nt + lo[j]] or touched[hi[j] if hi[j] >= 0 else nt + hi[j]]):
+            continue
+        key = lo[j] * mult + hi[j]
+        h = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(64 - bits))  # Fibonacci hashing
+        while slot_edge[h] >= 0 and slot_key[h] != key:
+            h = (h + 1) & (size - 1)
+        best = slot_edge[h]
+        if best < 0:
+            slot_key[h] = key
+            slot_edge[h] = j
+        elif _higher_pass(zf, cc[j], cc[best]):
+            dup[best] = True
+            slot_edge[h] = j
+            ndup += 1
+        else:
+            dup[j] = True
+            ndup += 1
+    if ndup == 0:
+        return lo, hi, cc
+    m = cnt - ndup
+    lo2 = np.empty(m, np.int64)
+    hi2 = np.empty(m, np.int64)
+    cc2 = np.empty(m, np.int64)
+    j = 0
+    for i in range(cnt):
+        if not dup[i]:
+            lo2[j] = lo[i]
+            hi2[j] = hi[i]
+            cc2[j] = cc[i]
+            j += 1
+    return lo2, hi2, cc2

@@ -223,9 +223,7 @@ def _join_strips(z: np.ndarray, bounds: list[tuple[int, int]], parts: list[tuple
     for s, p in enumerate(parts):
         o, m = int(offs[s]), p[0]
         tb = term[o:o + sizes[s]]
-        has = tb >= 0
-        np.maximum.at(bmax, tb[has], p[2][has])
-        np.minimum.at(nmin, tb[has], p[3][has])
+        _strip_kernels.terminal_extremes(bmax, nmin, tb, p[2], p[3])
         touched[tb[m:]] = True
         pieces_a.append(tb[p[4]])
         pieces_b.append(tb[p[5]])
@@ -252,19 +250,9 @@ def _join_strips(z: np.ndarray, bounds: list[tuple[int, int]], parts: list[tuple
     b = np.concatenate(pieces_b)
     c = np.concatenate(pieces_c).astype(np.int64, copy=False)
     del pieces_a, pieces_b, pieces_c
-    keep = a != b  # both ends resolved to one basin: not a pass
-    lo, hi, c = np.minimum(a, b)[keep], np.maximum(a, b)[keep], c[keep]
-    del a, b, keep
     touched[-1] = False
-    cand = np.flatnonzero(touched[lo] | touched[hi])
-    key = lo[cand] * np.int64(max(n_max, 1)) + hi[cand]
-    order = np.lexsort((c[cand], -zf[c[cand]], key))  # per basin pair: the highest pass first (elevation, then cell)
-    key = key[order]
-    dup = np.zeros(lo.size, bool)
-    dup[cand[order[1:][key[1:] == key[:-1]]]] = True
-    if dup.any():
-        keep = ~dup
-        lo, hi, c = lo[keep], hi[keep], c[keep]
+    # both ends resolved to one basin: not a pass; per basin pair among the candidates, the highest pass
+    lo, hi, c = _strip_kernels.basin_pairs(a, b, c, zf, touched, n_max)
     return n_max, node_key, bmax, nmin, lo, hi, c
 
 

@@ -102,3 +102,55 @@ def test_pass_table_growth_keeps_every_pair_and_its_highest_pass(cell_dtype):
     assert keys.size >= 64  # it grew
     got = {int(k): int(v) for k, v in zip(keys, vals) if k != -1}
     assert got == best and count == len(best)
+
+
+def _basin_pairs_reference(a, b, c, zf, touched, n_max):
+    """The strips' join before its kernel (numpy): the first of each candidate pair in a lexsort."""
+    keep = a != b
+    lo, hi, c = np.minimum(a, b)[keep], np.maximum(a, b)[keep], c[keep]
+    cand = np.flatnonzero(touched[lo] | touched[hi])
+    key = lo[cand] * np.int64(max(n_max, 1)) + hi[cand]
+    order = np.lexsort((c[cand], -zf[c[cand]], key))
+    key = key[order]
+    dup = np.zeros(lo.size, bool)
+    dup[cand[order[1:][key[1:] == key[:-1]]]] = True
+    return lo[~dup], hi[~dup], c[~dup]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_basin_pairs_keep_each_candidate_pairs_highest_pass_in_input_order(seed):
+    """Equal pairs, equal passes (one cell found twice), equal elevations at other cells, NaN passes,
+    unresolved basins (-1) and non-candidates kept twice: the kernel keeps the reference's edges, in its order."""
+    from orokit.topology import _strip_kernels
+
+    rng = np.random.default_rng(seed)
+    n_max, n = int(rng.integers(1, 30)), int(rng.integers(0, 400))
+    a = rng.integers(-1, n_max, n).astype(np.int64)
+    b = rng.integers(-1, n_max, n).astype(np.int64)
+    zf = rng.integers(0, 4, 60).astype(np.float32)
+    zf[rng.random(60) < 0.1] = np.nan
+    c = rng.integers(0, 60, n).astype(np.int64)
+    touched = rng.random(n_max + 1) < 0.6
+    touched[-1] = False
+    got = _strip_kernels.basin_pairs(a, b, c, zf, touched, n_max)
+    want = _basin_pairs_reference(a, b, c, zf, touched, n_max)
+    for g, w in zip(got, want):
+        assert g.dtype == np.int64
+        np.testing.assert_array_equal(g, w)
+    assert want[0].size < (a != b).sum() or n < 50  # some pairs were dropped as lower passes
+
+
+def test_terminal_extremes_equal_ufunc_at():
+    from orokit.topology import _strip_kernels
+
+    rng = np.random.default_rng(3)
+    term = rng.integers(-1, 20, 500).astype(np.int64)
+    tmax, tmin = rng.normal(size=500), rng.normal(size=500)
+    bmax, nmin = np.full(20, -np.inf), np.full(20, np.inf)
+    _strip_kernels.terminal_extremes(bmax, nmin, term, tmax, tmin)
+    want_max, want_min = np.full(20, -np.inf), np.full(20, np.inf)
+    has = term >= 0
+    np.maximum.at(want_max, term[has], tmax[has])
+    np.minimum.at(want_min, term[has], tmin[has])
+    np.testing.assert_array_equal(bmax, want_max)
+    np.testing.assert_array_equal(nmin, want_min)
