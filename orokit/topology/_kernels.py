@@ -546,16 +546,65 @@ def saddle_key(up, ekey, ez):
     return key
 
 
+#: bits per digit of :func:`radix_argsort` (2048 buckets: the counts and the write positions stay in cache)
+_RADIX_BITS = 11
+
+
 @njit(cache=True, nogil=True)
-def sort_saddle_ties(order, key, ea, eb):
+def radix_argsort(key):
+    """Stable argsort of the uint64 ``key`` (least significant digit first, digits of
+    :data:`_RADIX_BITS` bits; a digit every key shares is skipped); ``key`` is sorted in place.
+    Two buffers of ``key``'s size (16 bytes per key) are held meanwhile."""
+    n = key.size
+    order = np.arange(n)
+    if n < 2:
+        return order
+    nbits = _RADIX_BITS
+    radix = 1 << nbits
+    npass = (64 + nbits - 1) // nbits
+    mask = np.uint64(radix - 1)
+    hist = np.zeros((npass, radix), np.int64)
+    for i in range(n):
+        k = key[i]
+        for p in range(npass):
+            hist[p, np.int64((k >> np.uint64(p * nbits)) & mask)] += 1
+    buf_k = np.empty(n, np.uint64)
+    buf_o = np.empty(n, np.int64)
+    src_k, src_o, dst_k, dst_o = key, order, buf_k, buf_o
+    pos = np.empty(radix, np.int64)
+    for p in range(npass):
+        shift = np.uint64(p * nbits)
+        if hist[p, np.int64((src_k[0] >> shift) & mask)] == n:
+            continue
+        total = 0
+        for d in range(radix):
+            pos[d] = total
+            total += hist[p, d]
+        for i in range(n):
+            k = src_k[i]
+            d = np.int64((k >> shift) & mask)
+            j = pos[d]
+            pos[d] = j + 1
+            dst_k[j] = k
+            dst_o[j] = src_o[i]
+        src_k, dst_k = dst_k, src_k
+        src_o, dst_o = dst_o, src_o
+    if src_k is not key:
+        key[:] = src_k
+    return src_o
+
+
+@njit(cache=True, nogil=True)
+def sort_saddle_ties(order, key, ea, eb, in_order=False):
     """Within each run of equal ``key[order]`` (edges of one saddle cell), ``order`` rearranged in place
-    by ``(ea, eb)``, then by index (a stable lexsort's order); ``ea``, ``eb`` in ``[0, 2**31)``."""
+    by ``(ea, eb)``, then by index (a stable lexsort's order); ``ea``, ``eb`` in ``[0, 2**31)``.
+    ``in_order``: ``key`` is already in ``order``'s order (sorted)."""
     m = order.size
     i = 0
     while i < m:
-        k = key[order[i]]
+        k = key[i] if in_order else key[order[i]]
         j = i + 1
-        while j < m and key[order[j]] == k:
+        while j < m and (key[j] if in_order else key[order[j]]) == k:
             j += 1
         if j - i > 1:
             sub = np.sort(order[i:j])

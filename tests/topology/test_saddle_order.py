@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from orokit.topology.engine import saddle_order
 
 
-def test_saddle_order_is_the_lexsort():
+@pytest.mark.parametrize("radix", [False, True])
+def test_saddle_order_is_the_lexsort(radix):
     rng = np.random.default_rng(0)
     n_fast = 0
     for t in range(300):
@@ -22,13 +24,14 @@ def test_saddle_order_is_the_lexsort():
         ea = rng.integers(0, 10, m)
         eb = ea + rng.integers(1, 5, m)
         want = np.lexsort((eb, ea, cells, -ez))
-        got = saddle_order(ea, eb, ez, cells)
+        got = saddle_order(ea, eb, ez, cells, radix=radix)
         edges = np.stack([ea, eb, cells])
         np.testing.assert_array_equal(edges[:, got], edges[:, want], err_msg=f"case {t}")
     assert n_fast > 200
 
 
-def test_saddle_order_with_ties_to_side_cells_is_the_lexsort():
+@pytest.mark.parametrize("radix", [False, True])
+def test_saddle_order_with_ties_to_side_cells_is_the_lexsort(radix):
     """The tiled engine's root: edges above every saddle (+inf) keyed ``-1 - cell`` sort first, by
     one 64-bit key too; the order is the stable lexsort's, index for index."""
     from orokit.topology._kernels import saddle_key
@@ -44,7 +47,7 @@ def test_saddle_order_with_ties_to_side_cells_is_the_lexsort():
         ea = rng.integers(0, 6, m)
         eb = ea + rng.integers(1, 3, m)  # repeated (ea, eb, cell) edges: the index decides
         want = np.lexsort((eb, ea, cells, -z))
-        np.testing.assert_array_equal(saddle_order(ea, eb, z, cells), want, err_msg=f"case {t}")
+        np.testing.assert_array_equal(saddle_order(ea, eb, z, cells, radix=radix), want, err_msg=f"case {t}")
         bits = z.astype(np.float32).view(np.uint32)
         assert saddle_key(bits, cells, z).size == m  # the one-key path, not the lexsort
 
@@ -64,3 +67,24 @@ def test_saddle_key_falls_back_outside_32_bits():
         assert saddle_key(up, ekey, ez).size == 0
         ea, eb = np.array([0, 1, 2, 0]), np.array([1, 2, 3, 3])
         np.testing.assert_array_equal(saddle_order(ea, eb, ez, ekey), np.lexsort((eb, ea, ekey, -ez)))
+
+
+def test_radix_argsort_is_a_stable_argsort_and_sorts_the_keys():
+    """Keys spread over all 64 bits, in a narrow range (digits every key shares: skipped passes),
+    with many repeats (stability), and the sizes 0, 1 and 2."""
+    from orokit.topology._kernels import radix_argsort
+
+    rng = np.random.default_rng(2)
+    for t in range(60):
+        m = [0, 1, 2][t] if t < 3 else int(rng.integers(3, 3000))
+        if t % 3 == 0:
+            key = rng.integers(0, 2**63, m, dtype=np.uint64) * np.uint64(2) + rng.integers(0, 2, m, dtype=np.uint64)
+        elif t % 3 == 1:
+            key = np.uint64(0xFFFF0000_00000000) + rng.integers(0, 3000, m, dtype=np.uint64)
+        else:
+            key = rng.integers(0, 7, m, dtype=np.uint64) << np.uint64(40)
+        want = np.argsort(key, kind="stable")
+        sorted_key = key.copy()
+        got = radix_argsort(sorted_key)
+        np.testing.assert_array_equal(got, want, err_msg=f"case {t}")
+        np.testing.assert_array_equal(sorted_key, key[want])
