@@ -15,7 +15,7 @@ from click.testing import CliRunner
 from rasterio.transform import Affine
 
 import orokit.tiling.memory as memory
-from orokit.cli.main import cli
+from orokit.cli.main import SWITCH_INTERVAL_S, cli
 
 
 def _dem(path: Path) -> Path:
@@ -33,12 +33,14 @@ def test_cli_runner_call_leaves_the_callers_process_alone(tmp_path, monkeypatch)
     monkeypatch.setattr(memory, "fix_mmap_threshold", lambda n: calls.append(f"mmap {n}") or True)
     monkeypatch.setattr(memory, "release_library_pages", lambda name: calls.append(f"drop {name}") or 0)
     monkeypatch.delenv("ARROW_DEFAULT_MEMORY_POOL", raising=False)
+    interval = sys.getswitchinterval()
     res = CliRunner().invoke(cli, ["-q", "analyze", str(_dem(tmp_path / "dem.tif")), "-o", str(tmp_path / "out"),
                                    "--no-progress", "--min-prominence", "5"])
     assert res.exit_code == 0, res.output
     assert (tmp_path / "out" / "peaks.csv").exists()
     assert calls == []
     assert "ARROW_DEFAULT_MEMORY_POOL" not in os.environ
+    assert sys.getswitchinterval() == interval
 
 
 #: the console script's process, with the settings' functions recorded (they would act the same)
@@ -53,7 +55,7 @@ import orokit.io.dem as dem
 _read = dem.read_dem_array
 dem.read_dem_array = lambda *a, **k: calls.append("read") or _read(*a, **k)
 import atexit
-atexit.register(lambda: print(calls, os.environ.get("ARROW_DEFAULT_MEMORY_POOL")))
+atexit.register(lambda: print(sys.getswitchinterval(), calls, os.environ.get("ARROW_DEFAULT_MEMORY_POOL")))
 from orokit.cli.main import main
 sys.argv = ["orokit", *sys.argv[1:]]
 main()
@@ -78,6 +80,8 @@ def _analyze_calls(line: str) -> tuple[list[str], str]:
     import ast
 
     head, _, pool = line.rpartition("] ")
+    interval, _, head = head.partition(" ")
+    assert float(interval) == SWITCH_INTERVAL_S
     calls = ast.literal_eval(head + "]")
     loader = [i for i, c in enumerate(calls) if c == "drop libllvmlite"]
     assert len(loader) == 1 and loader[0] < len(calls) - 2, calls
@@ -96,7 +100,7 @@ def test_console_script_applies_them_to_analyze(tmp_path):
 
 
 #: the console script's process, printing the size of GDAL's block cache at its end (rasterio asks GDAL)
-GDAL_CACHE = SCRIPT.replace('print(calls, os.environ.get("ARROW_DEFAULT_MEMORY_POOL"))',
+GDAL_CACHE = SCRIPT.replace('print(sys.getswitchinterval(), calls, os.environ.get("ARROW_DEFAULT_MEMORY_POOL"))',
                             'print(__import__("rasterio.env").env.get_gdal_config("GDAL_CACHEMAX"))')
 
 
@@ -115,7 +119,7 @@ def test_console_script_bounds_gdals_cache_for_analyze(tmp_path):
 
 @pytest.mark.parametrize("args", [["--version"], ["data", "list"]])
 def test_console_script_other_commands_keep_the_defaults(args):
-    assert _console(*args) == "[] None"
+    assert _console(*args) == f"{sys.getswitchinterval()} [] None"  # this process's: Python's default
 
 
 #: ``python -m orokit.cli.main``: runpy runs the module as ``__main__``, a second copy of ``orokit.cli.main``
