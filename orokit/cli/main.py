@@ -179,7 +179,7 @@ def owns_process() -> bool:
 #: ``orokit analyze``'s fixed malloc mmap threshold (:func:`orokit.tiling.memory.fix_mmap_threshold`)
 MMAP_THRESHOLD_BYTES = 1 << 20
 #: ``orokit analyze``'s GIL switch interval (seconds; Python's default is 0.005)
-SWITCH_INTERVAL_S = 0.001
+SWITCH_INTERVAL_S = 0.0005
 
 
 def apply_process_settings(command: str) -> None:
@@ -197,8 +197,8 @@ def apply_process_settings(command: str) -> None:
     thread back from a call that released the GIL (numpy, GDAL, a kernel) waited up to the interval
     while a Python-bound thread (numba's loader, an import) held it, at each call (measured, session 16:
     the read's conversion of 60.5 M cells beside a Python thread 0.15-0.23 s of such waits per stripe
-    thread against 0.04-0.08 at 1 ms; the finalize beside the tables' imports 0.10-0.23 against
-    0.03-0.08). Other commands run with the defaults (not measured).
+    thread against 0.03-0.09 at 0.5 ms; the finalize beside the tables' imports, median of 6, 0.21 s
+    against 0.07). Other commands run with the defaults (not measured).
     """
     if command != "analyze":
         return

@@ -167,66 +167,58 @@ def basin_pairs(a, b, c, zf, touched, n_max):
     then the first found), among the candidates: edges with a basin in ``touched`` (size
     ``n_max + 1``; basin -1 reads its last entry). Returns ``(lo, hi, c)`` in the input's order:
     the first of each pair in ``np.lexsort((c, -zf[c], key))`` over the candidates' pair keys.
+    ``a``, ``b`` and ``c`` (int64) are overwritten (the edges are compacted in place; 8 bytes per
+    candidate for the pairs' table, then the result's copies).
     """
     n = a.size
-    cnt = 0
-    for i in range(n):
-        if a[i] != b[i]:
-            cnt += 1
-    lo = np.empty(cnt, np.int64)
-    hi = np.empty(cnt, np.int64)
-    cc = np.empty(cnt, np.int64)
     nt = touched.size
+    cnt = 0
     ncand = 0
-    j = 0
-    for i in range(n):
-        if a[i] != b[i]:
-            lo[j] = min(a[i], b[i])
-            hi[j] = max(a[i], b[i])
-            cc[j] = c[i]
-            if touched[lo[j] if lo[j] >= 0 else nt + lo[j]] or touched[hi[j] if hi[j] >= 0 else nt + hi[j]]:
-                ncand += 1
-            j += 1
-    # the candidates' pair keys in an open-addressing table (slot: the pair's best edge so far), in
-    # the input's order: a later edge of a pair replaces the kept one only when its pass is higher
+    for i in range(n):  # in place: the j-th kept pair is written at j <= i
+        x = a[i]
+        y = b[i]
+        if x == y:
+            continue
+        lo = min(x, y)
+        hi = max(x, y)
+        a[cnt] = lo
+        b[cnt] = hi
+        c[cnt] = c[i]
+        if touched[lo if lo >= 0 else nt + lo] or touched[hi if hi >= 0 else nt + hi]:
+            ncand += 1
+        cnt += 1
+    # the candidates' pairs in an open-addressing table (a slot holds the pair's best edge so far;
+    # its key is read from the edge), in the input's order: a later edge of a pair replaces the
+    # kept one only when its pass is higher
     bits = 1
     while (1 << bits) < 2 * ncand:
         bits += 1
     size = 1 << bits
-    slot_key = np.empty(size, np.int64)
-    slot_edge = np.full(size, -1, np.int64)
+    slot = np.full(size, -1, np.int64)
     mult = np.int64(max(n_max, 1))
     dup = np.zeros(cnt, np.bool_)
-    ndup = 0
     for j in range(cnt):
-        if not (touched[lo[j] if lo[j] >= 0 else nt + lo[j]] or touched[hi[j] if hi[j] >= 0 else nt + hi[j]]):
+        lo = a[j]
+        hi = b[j]
+        if not (touched[lo if lo >= 0 else nt + lo] or touched[hi if hi >= 0 else nt + hi]):
             continue
-        key = lo[j] * mult + hi[j]
+        key = lo * mult + hi
         h = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(64 - bits))  # Fibonacci hashing
-        while slot_edge[h] >= 0 and slot_key[h] != key:
+        while slot[h] >= 0 and a[slot[h]] * mult + b[slot[h]] != key:
             h = (h + 1) & (size - 1)
-        best = slot_edge[h]
+        best = slot[h]
         if best < 0:
-            slot_key[h] = key
-            slot_edge[h] = j
-        elif _higher_pass(zf, cc[j], cc[best]):
+            slot[h] = j
+        elif _higher_pass(zf, c[j], c[best]):
             dup[best] = True
-            slot_edge[h] = j
-            ndup += 1
+            slot[h] = j
         else:
             dup[j] = True
-            ndup += 1
-    if ndup == 0:
-        return lo, hi, cc
-    m = cnt - ndup
-    lo2 = np.empty(m, np.int64)
-    hi2 = np.empty(m, np.int64)
-    cc2 = np.empty(m, np.int64)
-    j = 0
-    for i in range(cnt):
-        if not dup[i]:
-            lo2[j] = lo[i]
-            hi2[j] = hi[i]
-            cc2[j] = cc[i]
-            j += 1
-    return lo2, hi2, cc2
+    m = 0
+    for j in range(cnt):
+        if not dup[j]:
+            a[m] = a[j]
+            b[m] = b[j]
+            c[m] = c[j]
+            m += 1
+    return a[:m].copy(), b[:m].copy(), c[:m].copy()

@@ -113,14 +113,17 @@ STRIP_CELLS = 1 << 21
 
 def strip_bounds(shape: tuple[int, int], strips: int | None = None) -> list[tuple[int, int]]:
     """The row strips ``(r0, r1)`` of :func:`saddle_graph`: ``strips`` of them (at most one per row), by
-    default enough for :data:`STRIP_CELLS` cells each and at least two per numba thread.
+    default enough for :data:`STRIP_CELLS` cells each, at least two per numba thread and a multiple of
+    the threads (strips of equal work end together: with 29 strips on two threads, the last ran alone).
 
     >>> strip_bounds((10, 4), 3)
     [(0, 3), (3, 6), (6, 10)]
     """
     H, W = shape
     if strips is None:
-        strips = max(2 * _threads(), -(-H * W // STRIP_CELLS))
+        threads = _threads()
+        strips = max(2 * threads, -(-H * W // STRIP_CELLS))
+        strips = -(-strips // threads) * threads
     k = max(1, min(int(strips), H))
     return [(t * H // k, (t + 1) * H // k) for t in range(k)]
 
@@ -252,7 +255,8 @@ def _join_strips(z: np.ndarray, bounds: list[tuple[int, int]], parts: list[tuple
     del pieces_a, pieces_b, pieces_c
     touched[-1] = False
     # both ends resolved to one basin: not a pass; per basin pair among the candidates, the highest pass
-    lo, hi, c = _strip_kernels.basin_pairs(a, b, c, zf, touched, n_max)
+    lo, hi, c = _strip_kernels.basin_pairs(a, b, c, zf, touched, n_max)  # a, b, c overwritten
+    del a, b
     return n_max, node_key, bmax, nmin, lo, hi, c
 
 

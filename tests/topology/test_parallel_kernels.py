@@ -132,8 +132,8 @@ def test_basin_pairs_keep_each_candidate_pairs_highest_pass_in_input_order(seed)
     c = rng.integers(0, 60, n).astype(np.int64)
     touched = rng.random(n_max + 1) < 0.6
     touched[-1] = False
-    got = _strip_kernels.basin_pairs(a, b, c, zf, touched, n_max)
     want = _basin_pairs_reference(a, b, c, zf, touched, n_max)
+    got = _strip_kernels.basin_pairs(a.copy(), b.copy(), c.copy(), zf, touched, n_max)
     for g, w in zip(got, want):
         assert g.dtype == np.int64
         np.testing.assert_array_equal(g, w)
@@ -154,3 +154,13 @@ def test_terminal_extremes_equal_ufunc_at():
     np.minimum.at(want_min, term[has], tmin[has])
     np.testing.assert_array_equal(bmax, want_max)
     np.testing.assert_array_equal(nmin, want_min)
+
+
+def test_default_strips_are_a_multiple_of_the_threads(monkeypatch):
+    """Strips of equal work end together: 29 strips on two threads left the last one running alone."""
+    for threads in (1, 2, 3, 4):
+        monkeypatch.setattr(engine, "_threads", lambda: threads)
+        for shape in ((7776, 7776), (3888, 3888), (100, 50), (5000, 3001)):
+            k = len(engine.strip_bounds(shape))
+            assert k % threads == 0 and k >= 2 * threads, (threads, shape, k)
+            assert k * engine.STRIP_CELLS >= shape[0] * shape[1]
