@@ -147,9 +147,13 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
     from orokit.cli.main import owns_process
 
     if owns_process():  # the code of the read, the engine and the imports is done: the writers' comes back
+        import sys
+
+        from orokit.cli.main import WRITING_SWITCH_INTERVAL_S
         from orokit.tiling.memory import release_library_pages
 
         release_library_pages("")
+        sys.setswitchinterval(WRITING_SWITCH_INTERVAL_S)
     write_analysis(result, outdir, overwrite=True)
     n = len(result.peaks)
     if (ctx.find_root().obj or {}).get("quiet"):

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 from rasterio.transform import Affine
 
 import orokit.tiling.memory as memory
-from orokit.cli.main import SWITCH_INTERVAL_S, cli
+from orokit.cli.main import SWITCH_INTERVAL_S, WRITING_SWITCH_INTERVAL_S, cli
 
 
 def _dem(path: Path) -> Path:
@@ -53,9 +53,11 @@ memory.fix_mmap_threshold = lambda n: calls.append(f"mmap {n}") or True
 memory.release_library_pages = lambda name: calls.append(f"drop {name}") or 0
 import orokit.io.dem as dem
 _read = dem.read_dem_array
-dem.read_dem_array = lambda *a, **k: calls.append("read") or _read(*a, **k)
+read_interval = []
+dem.read_dem_array = lambda *a, **k: (read_interval.append(sys.getswitchinterval()), calls.append("read")) and _read(*a, **k)
 import atexit
-atexit.register(lambda: print(sys.getswitchinterval(), calls, os.environ.get("ARROW_DEFAULT_MEMORY_POOL")))
+atexit.register(lambda: print((read_interval or [None])[0], sys.getswitchinterval(), calls,
+                              os.environ.get("ARROW_DEFAULT_MEMORY_POOL")))
 from orokit.cli.main import main
 sys.argv = ["orokit", *sys.argv[1:]]
 main()
@@ -80,8 +82,9 @@ def _analyze_calls(line: str) -> tuple[list[str], str]:
     import ast
 
     head, _, pool = line.rpartition("] ")
-    interval, _, head = head.partition(" ")
-    assert float(interval) == SWITCH_INTERVAL_S
+    read_interval, end_interval, head = head.split(" ", 2)
+    # the GIL's switch interval: short through the read and the engine, Python's default for the writing
+    assert (float(read_interval), float(end_interval)) == (SWITCH_INTERVAL_S, WRITING_SWITCH_INTERVAL_S)
     calls = ast.literal_eval(head + "]")
     loader = [i for i, c in enumerate(calls) if c == "drop libllvmlite"]
     assert len(loader) == 1 and loader[0] < len(calls) - 2, calls
@@ -100,7 +103,8 @@ def test_console_script_applies_them_to_analyze(tmp_path):
 
 
 #: the console script's process, printing the size of GDAL's block cache at its end (rasterio asks GDAL)
-GDAL_CACHE = SCRIPT.replace('print(sys.getswitchinterval(), calls, os.environ.get("ARROW_DEFAULT_MEMORY_POOL"))',
+GDAL_CACHE = SCRIPT.replace("""print((read_interval or [None])[0], sys.getswitchinterval(), calls,
+                              os.environ.get("ARROW_DEFAULT_MEMORY_POOL"))""",
                             'print(__import__("rasterio.env").env.get_gdal_config("GDAL_CACHEMAX"))')
 
 
@@ -119,7 +123,7 @@ def test_console_script_bounds_gdals_cache_for_analyze(tmp_path):
 
 @pytest.mark.parametrize("args", [["--version"], ["data", "list"]])
 def test_console_script_other_commands_keep_the_defaults(args):
-    assert _console(*args) == f"{sys.getswitchinterval()} [] None"  # this process's: Python's default
+    assert _console(*args) == f"None {sys.getswitchinterval()} [] None"  # this process's: Python's default
 
 
 #: ``python -m orokit.cli.main``: runpy runs the module as ``__main__``, a second copy of ``orokit.cli.main``
