@@ -84,10 +84,15 @@ def coarsen_dem(dem: xr.DataArray, cell_size_m: float | None) -> xr.DataArray:
     t = dem.rio.transform() * Affine.scale(f)
     import xarray as xr
 
-    out = xr.DataArray(zc, dims=("y", "x"), attrs=dict(dem.attrs),
+    crs = dem.rio.crs
+    from orokit.geodesy import cell_size_attrs
+
+    # the coarse cell size in the attrs (not the input's)
+    attrs = {k: v for k, v in dem.attrs.items() if k not in ("cell_size_m", "cell_size_deg")}
+    attrs.update(cell_size_attrs(t, None if dem.attrs.get("local_grid") else crs))
+    out = xr.DataArray(zc, dims=("y", "x"), attrs=attrs,
                        coords={"y": t.f + t.e * (np.arange(zc.shape[0]) + 0.5),
                                "x": t.c + t.a * (np.arange(zc.shape[1]) + 0.5)})
-    crs = dem.rio.crs
     if crs is not None:
         out = out.rio.write_crs(crs)
     return out.rio.write_transform(t)

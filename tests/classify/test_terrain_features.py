@@ -112,7 +112,11 @@ def test_a_30m_dem_is_averaged_to_90m_before_the_terrain_features():
     z30 = np.cumsum(np.cumsum(rng.normal(size=(363, 363)), 0), 1) + 3.0 * rng.normal(size=(363, 363))
     z90 = z30.reshape(121, 3, 121, 3).mean(axis=(1, 3))
     assert coarsen_dem(dem(z90, 90.0), 90.0) is not None
-    np.testing.assert_allclose(coarsen_dem(dem(z30, 30.0), 90.0).values, z90)
+    fine30 = dem(z30, 30.0)
+    fine30.attrs["cell_size_m"] = (30.0, 30.0)  # as read_dem sets it
+    coarse = coarsen_dem(fine30, 90.0)
+    np.testing.assert_allclose(coarse.values, z90)
+    assert coarse.attrs["cell_size_m"] == (90.0, 90.0)  # the coarse cells' (was the input's 30 m)
     disks = pd.DataFrame({"x": [5e5 + 5400.0, 5e5 + 4000.0], "y": [4e6 - 5400.0, 4e6 - 6000.0],
                           "radius_m": [3000.0, 2500.0]})
     fine = terrain_matrix(dem(z30, 30.0), disks, cell_size_m=90.0)
