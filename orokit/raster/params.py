@@ -159,6 +159,9 @@ class RenderParams:
         saddle, never above the straight line (:func:`orokit.raster.skeleton.steep_ridge_profile`): a long gentle
         piece (a volcano's ridge to a saddle far out on its plateau) no longer stands as a spoke km out over the
         plain; None = the straight line.
+    ridge_plateau_drop : ``ridge_max_slope`` applies only to the pieces whose saddle lies where the tree's base level
+        stays level (:func:`orokit.raster.skeleton.plateau_pieces`: the median, over the 16 saddles nearest to it, of
+        each saddle's (lowest of 16 - lowest of 64 nearest saddles) / local relief is below this); None = all pieces.
     smooth_m : Gaussian sigma (metres) that rounds the skeleton raster's planar facets and creases
         (the TIN carries no information below its meshing distance ``lam``), faded to 0 within
         ``texture_clearance_m`` of peaks and saddles; 0 = off.
@@ -236,6 +239,7 @@ class RenderParams:
     flank_depth: float | None = 1.0
     flank_depth_saddle_ratio: float | None = None
     ridge_max_slope: float | None = None
+    ridge_plateau_drop: float | None = None
     flank_depth_saddle_k: int = 16
     keep_hill_ratio: float = 0.0
     cut_slope: float = 0.0

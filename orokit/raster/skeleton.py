@@ -177,13 +177,28 @@ def _cone_floor(lines: Polylines, point_origin: np.ndarray, pieces: RidgeSegment
 RIDGE_TAIL_SLOPE = 0.02
 
 
-def steep_ridge_profile(peak: np.ndarray, saddle: np.ndarray, max_slope: float
+def plateau_pieces(piece_saddle: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, max_drop: float,
+                   *, k: int = 16, k_far: int = 64) -> np.ndarray:
+    """Pieces whose saddle lies where the tree's base level stays flat: at every saddle the drop of the lowest of
+    its ``k_far`` nearest saddles below the lowest of its ``k`` nearest, over the local relief (highest of the ``k``
+    nearest peaks - lowest of the ``k`` nearest saddles, :func:`local_relief`); its median over the ``k`` saddles
+    nearest to the piece's saddle is below ``max_drop`` (a plateau's base level stays level for tens of km, a
+    range's falls on to its main valleys)."""
+    s16, p16, _ = local_relief(saddle_xyz[:, :2], peak_xyz, saddle_xyz, k=k)
+    s64, _, _ = local_relief(saddle_xyz[:, :2], peak_xyz, saddle_xyz, k=k_far)
+    ratio = (s16 - s64) / np.maximum(p16 - s16, 1.0)
+    _, j = cKDTree(saddle_xyz[:, :2]).query(piece_saddle[:, :2], k=min(int(k), saddle_xyz.shape[0]), workers=-1)
+    return np.asarray(np.median(ratio[j.reshape(piece_saddle.shape[0], -1)], axis=1) < float(max_drop))
+
+
+def steep_ridge_profile(peak: np.ndarray, saddle: np.ndarray, max_slope: float, *, only: np.ndarray | None = None
                         ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
     """Weight of the saddle's elevation at ``t`` along each ridge piece (0 at the peak, 1 at the saddle;
     ``peak``, ``saddle`` (m, 3) xyz of each piece's ends) for crests that fall from the peak at ``max_slope``
     and then at :data:`RIDGE_TAIL_SLOPE` to the saddle, never above the straight line: a long, gentle piece
     (a volcano's ridge to a saddle far out on its plateau) drops where the edifice stands and runs low over
-    the plain, a short or steep one keeps its straight line.
+    the plain, a short or steep one keeps its straight line. With ``only`` (one bool per piece) the other
+    pieces keep their line.
 
     >>> f = steep_ridge_profile(np.array([[0.0, 0.0, 1000.0]]), np.array([[10000.0, 0.0, 0.0]]), 0.5)
     >>> (1000.0 * (1.0 - f(np.array([0.0, 0.1, 0.5, 1.0]), np.zeros(4, int)))).round(1).tolist()
@@ -198,7 +213,8 @@ def steep_ridge_profile(peak: np.ndarray, saddle: np.ndarray, max_slope: float
         d, L, h = t * length[sid], length[sid], drop[sid]
         above = np.maximum(h - float(max_slope) * d, np.minimum(RIDGE_TAIL_SLOPE, h / np.maximum(L, 1e-9)) * (L - d))
         above = np.minimum(above, h * (1.0 - t))  # never above the straight line
-        return np.where(h > 0, 1.0 - above / np.where(h > 0, h, 1.0), t)
+        w = np.where(h > 0, 1.0 - above / np.where(h > 0, h, 1.0), t)
+        return w if only is None else np.where(only[sid], w, t)
 
     return weight
 
@@ -250,7 +266,11 @@ def build_skeleton(
     learned = params.profiles == "learned"
     seg_profile = None
     if params.ridge_max_slope is not None:
-        seg_profile = steep_ridge_profile(nodes[ridges.node0], nodes[ridges.node1], params.ridge_max_slope)
+        only = None
+        if params.ridge_plateau_drop is not None and n < nodes.shape[0]:
+            only = plateau_pieces(nodes[ridges.node1], p, s, params.ridge_plateau_drop)
+        seg_profile = steep_ridge_profile(nodes[ridges.node0], nodes[ridges.node1], params.ridge_max_slope,
+                                          only=only)
     ridge_lines = refine_segments(nodes[:, :2], nodes[:, 2], np.column_stack([ridges.node0, ridges.node1]),
                                   lam=lam, jitter=params.jitter, rng=rng,
                                   profile=(lambda t: 1.0 - ridge_profile(t)) if learned else None,

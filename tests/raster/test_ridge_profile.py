@@ -59,3 +59,21 @@ def test_steep_ridges_lie_at_or_below_the_straight_crests_and_keep_the_tree_orom
     assert comp.recovered_share == 1.0 and len(comp.extra) == 0
     np.testing.assert_allclose(comp.peaks["raster_prominence"].to_numpy(), [1500.0, 200.0, 200.0, 150.0, 100.0],
                                atol=6.0)
+
+
+def test_plateau_pieces_tell_a_level_base_from_a_falling_one():
+    """Saddles all at one level under high peaks (volcanoes on a plain): every piece is a plateau's; the same
+    field tilted so the base level falls 1 km over the domain (a range draining to its main valleys): none."""
+    from orokit.raster.skeleton import plateau_pieces
+
+    rng = np.random.default_rng(1)
+    sxy = rng.uniform(0.0, 50000.0, (300, 2))
+    pxy = rng.uniform(0.0, 50000.0, (300, 2))
+    peaks = np.column_stack([pxy, 4000.0 + rng.uniform(200.0, 1500.0, 300)])
+    level = np.column_stack([sxy, 4000.0 + rng.uniform(0.0, 20.0, 300)])
+    assert plateau_pieces(level, peaks, level, 0.05).all()
+    tilt = level.copy()
+    tilt[:, 2] -= 2.0 * sxy[:, 0] / 50.0  # 2 km over 50 km, saddles and peaks alike
+    peaks_t = peaks.copy()
+    peaks_t[:, 2] -= 2.0 * pxy[:, 0] / 50.0
+    assert plateau_pieces(tilt, peaks_t, tilt, 0.05).mean() < 0.2
