@@ -58,6 +58,11 @@ class RenderParams:
     saddle_floor_spread : the floor lies at most this times the spread of the ``saddle_floor_k`` nearest
         saddles (median - lowest) below the lowest (:func:`orokit.raster.rivers.saddle_floor`): where the
         saddles lie at one level (domes on a plain) the ground between the hills stays near it; None = off.
+    saddle_floor_level : the floor's depth below ``s`` shrinks where the nearby saddles lie at one level under taller
+        peaks: times ``min(1, (L / saddle_floor_level)^2)``, ``L`` = the saddles' spread over the local relief ``R``
+        (:func:`orokit.raster.rivers.saddle_floor` ``level_ratio``): a field of domes on a plain (sahara's tree: L
+        0.08 at the median, the ranges 0.32-0.59) keeps the ground between its hills near the plain instead of a
+        network of channels sunk half its relief below it; None = off.
     valley_slope_exponent : the valley floor narrows on steep river beds,
         ``w * min(1, (S / river_slope)^-valley_slope_exponent)`` (S the bed slope;
         :func:`orokit.raster.interpolate.valley_width`); 0 = off.
@@ -211,6 +216,7 @@ class RenderParams:
     saddle_floor_relief_m: float | None = 800.0
     saddle_floor_min_ratio: float = 0.5
     saddle_floor_spread: float | None = None
+    saddle_floor_level: float | None = None
     floor_relief_ratio: float = 0.0
     floor_slope: float = 0.05
     valley_floor_slope: float = 0.0
@@ -280,6 +286,8 @@ class RenderParams:
             raise InputError(f"saddle_floor_relief_m must be > 0 metres or None, got {self.saddle_floor_relief_m!r}")
         if self.saddle_floor_spread is not None and not float(self.saddle_floor_spread) >= 0.0:
             raise InputError(f"saddle_floor_spread must be >= 0 or None, got {self.saddle_floor_spread!r}")
+        if self.saddle_floor_level is not None and not float(self.saddle_floor_level) > 0.0:
+            raise InputError(f"saddle_floor_level must be > 0 or None, got {self.saddle_floor_level!r}")
         if self.flank_slope_gradient is not None and not float(self.flank_slope_gradient) > 0.0:
             raise InputError(f"flank_slope_gradient must be > 0 or None, got {self.flank_slope_gradient!r}")
         if self.flank_slope_relief_m is not None and self.flank_slope_gradient is not None:

@@ -340,7 +340,8 @@ def build_skeleton(
     floor = None if floor_ratio is None else (
         lambda xy: saddle_floor(xy, p, s, ratio=float(floor_ratio), k=params.saddle_floor_k,
                                 relief_m=params.saddle_floor_relief_m, min_ratio=params.saddle_floor_min_ratio,
-                                spread_ratio=params.saddle_floor_spread, relief=relief_at))
+                                spread_ratio=params.saddle_floor_spread, level_ratio=params.saddle_floor_level,
+                                relief=relief_at))
     rivers = river_network(fine_ridges, ridge_lines.xy, extent, base_elevation=base,
                            margin_m=params.river_margin, slope=params.river_slope, cap=envelope,
                            max_sink_m=params.river_max_sink_m, relief_ratio=params.river_relief_ratio,

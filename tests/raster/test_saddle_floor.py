@@ -186,3 +186,49 @@ def test_render_with_a_spread_bounded_floor_keeps_the_orometry():
     res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
     comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
     assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+
+
+@pytest.mark.parametrize("k", [5, 16])
+def test_saddle_floor_level_against_brute_force(k):
+    """With ``level_ratio`` L0 the floor's depth below the lowest of the k nearest saddles is the plain depth times
+    ``min(1, (L / L0)^2)``, ``L`` = (their median - their lowest) / (highest of the k nearest peaks - that lowest),
+    by a full distance matrix: shallower where the saddles lie at one level, unchanged where L >= L0."""
+    peaks, saddles, q = _random_nodes(9)
+    ds = np.hypot(*(q[:, None, :] - saddles[None, :, :2]).transpose(2, 0, 1))
+    dp = np.hypot(*(q[:, None, :] - peaks[None, :, :2]).transpose(2, 0, 1))
+    near = np.take_along_axis(np.broadcast_to(saddles[:, 2], ds.shape), np.argsort(ds, axis=1)[:, :k], 1)
+    p = np.take_along_axis(np.broadcast_to(peaks[:, 2], dp.shape), np.argsort(dp, axis=1)[:, :k], 1).max(1)
+    s = near.min(1)
+    level = (np.median(near, 1) - s) / (p - s)
+    for ratio, relief_m, lo in ((1.0, None, 0.0), (1.0, 800.0, 0.5)):
+        plain = saddle_floor(q, peaks, saddles, ratio=ratio, k=k, relief_m=relief_m, min_ratio=lo)
+        for l0 in (0.05, 0.2, 1.0):
+            got = saddle_floor(q, peaks, saddles, ratio=ratio, k=k, relief_m=relief_m, min_ratio=lo, level_ratio=l0)
+            np.testing.assert_allclose(got, s - (s - plain) * np.minimum(level / l0, 1.0) ** 2)
+            assert (got >= plain - 1e-9).all() and (got <= s + 1e-9).all()
+        # the test can fail: at L0 = the median L the factor binds at some points and not at others
+        l0 = float(np.median(level))
+        assert ((level < l0) & (level > 0)).any() and (level >= l0).any()
+        got = saddle_floor(q, peaks, saddles, ratio=ratio, k=k, relief_m=relief_m, min_ratio=lo, level_ratio=l0)
+        assert (got > plain + 1.0).any() and np.allclose(got[level >= l0], plain[level >= l0])
+    with pytest.raises(ValueError, match="level_ratio"):
+        saddle_floor(q, peaks, saddles, ratio=1.0, level_ratio=0.0)
+    with pytest.raises(InputError, match="saddle_floor_level"):
+        RenderParams(saddle_floor_level=-0.1)
+
+
+def test_render_with_a_level_bounded_floor_keeps_the_orometry():
+    """The small tree with the floor shrunk by the saddles' levelness: the beds lie on or above that floor
+    (ridge crossings aside), which is never below the plain floor; every peak recovered, none extra."""
+    tree = small_tree()
+    params = RenderParams(lam=200.0, saddle_floor_ratio=1.0, saddle_floor_level=0.5)
+    dem, skel = render_elevation(tree, cell_size_m=50.0, erosion=False, params=params, return_skeleton=True, rng=7)
+    peaks = tree.peaks[["x", "y", "elevation"]].to_numpy(float)
+    saddles = tree.saddles[["x", "y", "elevation"]].to_numpy(float)
+    rv = skel.river_network
+    f = saddle_floor(rv.xy, peaks, saddles, ratio=1.0, level_ratio=0.5)
+    assert (f >= saddle_floor(rv.xy, peaks, saddles, ratio=1.0) - 1e-9).all()
+    assert (rv.elevation >= np.minimum(f, 900.0 - 5.0) - 1e-6).all()
+    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
