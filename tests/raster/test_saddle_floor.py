@@ -220,6 +220,7 @@ def test_saddle_floor_level_against_brute_force(k):
 def test_render_with_a_level_bounded_floor_keeps_the_orometry():
     """The small tree with the floor shrunk by the saddles' levelness: the beds lie on or above that floor
     (ridge crossings aside), which is never below the plain floor; every peak recovered, none extra."""
+    assert RenderParams().saddle_floor_level == 0.3
     tree = small_tree()
     params = RenderParams(lam=200.0, saddle_floor_ratio=1.0, saddle_floor_level=0.5)
     dem, skel = render_elevation(tree, cell_size_m=50.0, erosion=False, params=params, return_skeleton=True, rng=7)
