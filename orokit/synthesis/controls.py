@@ -298,7 +298,7 @@ def random_elevation_field(domain: Domain, elevation_hist: Any, *, correlation_m
 def random_elevation_fields(domain: Domain, elevation_hist: Any, *, correlation_m: float, rng: Any,
                             border_rank: Sequence[float] | None = None, fine_m: float = 1000.0,
                             fine_weights: Sequence[float] = (0.0,),
-                            density: np.ndarray | None = None) -> Iterator[np.ndarray]:
+                            density: np.ndarray | None = None, valley_weight: float = 0.0) -> Iterator[np.ndarray]:
     """:func:`random_elevation_field` for each of ``fine_weights`` in turn, from the same two noises
     (lazily: a caller fitting the weight stops when it has what it needs).
 
@@ -306,6 +306,11 @@ def random_elevation_fields(domain: Domain, elevation_hist: Any, *, correlation_
     ``density`` (the C_P, >= 0, of the domain's shape): ranks are weighted by it, so the field's
     elevations at the places the peaks are drawn from (not per area) follow the histogram, and the
     border trend's band means are those of the peaks; None: every cell weighs the same.
+
+    ``valley_weight`` v in (0, 1]: the smooth noise becomes ``(1 - v) g + v |h|`` (both standardised,
+    h a second noise of the same correlation drawn after g), so the low ground follows the zero lines
+    of h, a network that crosses the domain, instead of the isolated basins a ranked Gaussian field
+    gives (issue 11, session 16). 0 draws nothing more.
     """
     from scipy.ndimage import gaussian_filter
 
@@ -316,6 +321,10 @@ def random_elevation_fields(domain: Domain, elevation_hist: Any, *, correlation_
     ny, nx = domain.shape
     sigma = (min(correlation_m / cy, float(ny)), min(correlation_m / cx, float(nx)))
     base = gaussian_filter(rng.standard_normal(domain.shape), sigma=sigma, mode="wrap")
+    if valley_weight > 0:
+        folded = np.abs(gaussian_filter(rng.standard_normal(domain.shape), sigma=sigma, mode="wrap"))
+        base = ((1.0 - valley_weight) * base / max(float(base.std()), 1e-12)
+                + valley_weight * (folded - folded.mean()) / max(float(folded.std()), 1e-12))
     fine = None
     for w in fine_weights:
         noise = base

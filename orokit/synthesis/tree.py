@@ -123,9 +123,16 @@ class SynthesisParams:
         ``border_density`` (relative peak density by distance to the data border, in its ``disks``
         record; :func:`orokit.synthesis.controls.border_density_map`), and the automatic C_H is ranked
         by it, so the twin of a DEM cropped around its relief holds as many of its peaks inside as the
-        DEM does (off, or a type without the record: a uniform C_P). An option, off (issue 11, session 15:
+        DEM does (off, or a type without the record: a uniform C_P). The profile is first shrunk towards 1
+        by its sampling noise (:func:`orokit.synthesis.disks.shrink_border_density`; session 16, after
+        session 15's runs: andes-chile's 149 peaks gave +-18 % per band). An option, off (issue 11, session 15:
         the trees' band densities come twice as close to the real trees', but reclassification 10 / 9 / 7 of 12
         in seeds 0-2 with karakoram's vote wrong in seed 2; see NOTES).
+    valley_network : weight v in [0, 1] of a folded noise in the automatic C_H: its smooth noise becomes
+        ``(1 - v) g + v |h|`` (:func:`orokit.synthesis.controls.random_elevation_fields`), so the low
+        peaks, and the valleys the renderer cuts between them, follow the zero lines of h, a network
+        crossing the domain, instead of a few isolated basins (0: no network, nothing more drawn). An
+        option, off (issue 11, session 16: see NOTES).
     elevation_tolerance : width of the C_H acceptance of the dart throwing, as a share of the C_H
         range (the paper: 1/20). Default 0.0125 (issue 11): with 0.05 neighbouring twin peaks differed
         twice as much in elevation as real ones (median |dz| / distance to the nearest peak 0.23-0.24
@@ -197,6 +204,7 @@ class SynthesisParams:
     disk_count_weight: float = 0.0
     border_trend: bool = True
     border_density: bool = False
+    valley_network: float = 0.0
     elevation_tolerance: float = 0.0125
     saddle_slope_ratio: float | None = 1.5
     follow_gradient: bool = True
@@ -236,6 +244,9 @@ class SynthesisParams:
                 ok = False
             if not ok:
                 raise InputError(f"{name} must be a number >= 0, got {v!r}")
+        v = self.valley_network
+        if isinstance(v, bool) or not (isinstance(v, (int, float, np.floating)) and 0 <= float(v) <= 1):
+            raise InputError(f"valley_network must be a number in [0, 1], got {v!r}")
         if self.auto_elevation_m is not None and not float(self.auto_elevation_m) > 0:
             raise InputError(f"auto_elevation_m must be > 0 metres or None, got {self.auto_elevation_m!r}")
         g = self.gradient_tail
@@ -365,7 +376,11 @@ def synthesize_divide_tree(
     profile = (types[0].disks or {}).get("border_density") if p.border_density and len(types) == 1 else None
     if profile is not None and control_density is None:
         from orokit.synthesis.controls import border_density_map
+        from orokit.synthesis.disks import shrink_border_density
 
+        prov = types[0].provenance or {}
+        n_real = int(prov.get("n_peaks") or round(types[0].peak_density_per_km2 * float(prov.get("area_km2") or 0.0)))
+        profile = shrink_border_density(profile, n_real)
         controls = replace(controls, density=border_density_map(domain, profile))
     else:
         profile = None
@@ -381,7 +396,8 @@ def synthesize_divide_tree(
             domain, types[0].histograms["elevation"], correlation_m=float(auto_m),
             rng=rng.integers(2**63) if fit_fine else rng,
             border_rank=disks.get("border_rank") if p.border_trend else None, fine_m=float(p.fine_elevation_m),
-            fine_weights=FINE_WEIGHTS if fit_fine else (0.0,), density=None if profile is None else controls.density)
+            fine_weights=FINE_WEIGHTS if fit_fine else (0.0,), density=None if profile is None else controls.density,
+            valley_weight=float(p.valley_network))
         if not fit_fine:
             controls = replace(controls, elevation=next(fields))
     peaks = _peak_elevations(types, free_t, fixed_xyz, fixed_type, fragment, eps, rng)

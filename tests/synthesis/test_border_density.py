@@ -153,3 +153,27 @@ def test_border_distance_bands_agree_with_the_brute_force_helper():
     t = border_distance(x, y, ext)
     band = np.clip(np.searchsorted(BORDER_BANDS, t, side="right") - 1, 0, 4)
     assert np.array_equal(band, _bands(x, y, ext))
+
+
+def test_a_small_trees_profile_is_shrunk_by_its_noise_and_a_large_ones_kept():
+    from orokit.synthesis.disks import shrink_border_density
+
+    ext = (0.0, 0.0, 50_000.0, 50_000.0)
+    g = np.random.default_rng(11)
+    raw, shrunk = [], []
+    for _ in range(200):  # uniform spreads of 150 peaks: every deviation from 1 is noise
+        x, y = g.uniform(0, 50_000, 150), g.uniform(0, 50_000, 150)
+        b = border_density(x, y, ext)
+        raw.append(np.abs(np.subtract(b, 1.0)).mean())
+        shrunk.append(np.abs(np.subtract(shrink_border_density(b, 150), 1.0)).mean())
+    assert np.mean(shrunk) < 0.5 * np.mean(raw)
+    # a real gradient of 2000 peaks (a third in the middle) is far above its noise: nearly kept
+    x, y = g.uniform(0, 50_000, 1400), g.uniform(0, 50_000, 1400)
+    x, y = np.r_[x, g.uniform(17_000, 33_000, 600)], np.r_[y, g.uniform(17_000, 33_000, 600)]
+    b = np.asarray(border_density(x, y, ext))
+    s = np.asarray(shrink_border_density(b, 2000))
+    assert np.allclose(s - 1.0, b - 1.0, rtol=0.05)
+    # the same profile from a handful of peaks is mostly noise
+    assert np.abs(np.asarray(shrink_border_density(b, 20)) - 1.0).max() < 0.5 * np.abs(b - 1.0).max()
+    assert shrink_border_density([1.0] * 5, 100) == [1.0] * 5
+    assert shrink_border_density([1.3, 0.7, 1.0, 1.0, 1.0], 0) == [1.0] * 5
