@@ -159,7 +159,7 @@ def analyze(
     bar = _progress(progress and not tiled, ["peaks, saddles and Divide Tree", "isolation", "tables"])
     if tiled:
         from orokit.tiling.engine import get_compute, tiled_orometry
-        from orokit.tiling.isolation import tiled_isolation
+        from orokit.tiling.isolation import cell_places, tiled_isolation
 
         data = dem.data
         client = None
@@ -195,10 +195,13 @@ def analyze(
                 engine.spill_orometry(core, store)
             iso = None
             if isolation and core.n_kept:
-                iso = tiled_isolation(data, core.peak_row, core.peak_col, core.peak_z, transform=transform,
+                # the places int32 and made here: the call's arguments live until it returns
+                peak_rows, peak_cols = cell_places(core.peak_cell, core.shape[1])
+                iso = tiled_isolation(data, peak_rows, peak_cols, core.peak_z, transform=transform,
                                       crs=crs, compute=get_compute(scheduler),
                                       chunk_stats=tiled_core.chunk_stats, known=tiled_core.chunk_isolation,
                                       release_known=True)
+                del peak_rows, peak_cols
             del tiled_core  # the settled isolation (~90 bytes per candidate peak) is in iso now
             if store is not None and iso is not None:  # to the store, freed before the tables are made
                 for name, dtype in engine.ISOLATION_ARRAYS:
