@@ -184,7 +184,7 @@ def _settled_hook(merge, eps: float, table: dict):
 
 
 def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: str | None = None,
-            workers: int = 0, settled: bool = False) -> dict:
+            workers: int = 0, settled: bool = False, process_settings: bool = True) -> dict:
     """One measurement (in a subprocess): analyse, report time, peak RSS (per phase) and task costs.
 
     With ``workers`` > 0 the chunk tasks, merges and isolation reads run on a
@@ -194,9 +194,17 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
     """
     import threading
 
-    from orokit.tiling.memory import limit_gdal_cache
+    if process_settings:
+        # the process of `orokit analyze` (its entry point's settings: two malloc arenas, blocks of 1 MB or
+        # more mapped on their own, Arrow's system allocator, GDAL's cache bounded). Runs before session 16
+        # set the GDAL cache only (--malloc-defaults): freed arrays of up to 32 MB stayed in the heap
+        from orokit.cli.main import apply_process_settings
 
-    limit_gdal_cache()  # as `orokit analyze` (its entry point's setting since session 14; the library's before)
+        apply_process_settings("analyze")
+    else:
+        from orokit.tiling.memory import limit_gdal_cache
+
+        limit_gdal_cache()
     rss = _PhaseRss(log=rss_log)
     rss.enter("imports")
     import orokit
@@ -301,9 +309,11 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
 
 
 def measure(vrt: Path, chunks: int | None, eps: float, out: Path | None = None, rss_log: Path | None = None,
-            workers: int = 0, settled: bool = False) -> dict:
+            workers: int = 0, settled: bool = False, process_settings: bool = True) -> dict:
     """:func:`run_one` in a fresh subprocess."""
     cmd = [sys.executable, __file__, "--one", str(vrt), "--eps", str(eps), "--workers", str(workers)]
+    if not process_settings:
+        cmd += ["--malloc-defaults"]
     if settled:
         cmd += ["--settled"]
     if rss_log:
@@ -343,13 +353,16 @@ def main() -> None:
     ap.add_argument("--distributed-sizes", type=int, nargs="+", metavar="N",
                     help="with --workers: only these mosaics run on the cluster (default: all)")
     ap.add_argument("--rss-log", help="(with --one) append every resident-memory sample here: seconds phase MB")
+    ap.add_argument("--malloc-defaults", action="store_true",
+                    help="measure without `orokit analyze`'s process settings (glibc's malloc defaults, as every run "
+                         "before session 16): GDAL's cache bounded only")
     ap.add_argument("--settled", action="store_true",
                     help="count the settled peaks of every merge input (what streaming them out would remove; "
                          "adds the count's cost to the run, not to the merge tasks' time)")
     args = ap.parse_args()
     if args.one:
         print(json.dumps(run_one(args.one, args.chunks if "--chunks" in sys.argv else None, args.eps, args.out,
-                                 args.rss_log, args.workers, args.settled)))
+                                 args.rss_log, args.workers, args.settled, not args.malloc_defaults)))
         return
 
     import pandas as pd
@@ -369,7 +382,7 @@ def main() -> None:
             out = args.workdir / f"analysis_{n}_{mode}"
             m = measure(vrt, ch, eps, out, rss_log=args.workdir / f"rss_{n}_{mode}.log",
                         workers=args.workers if mode == "distributed" else 0,
-                        settled=args.settled and mode == "chunked")
+                        settled=args.settled and mode == "chunked", process_settings=not args.malloc_defaults)
             rows[n, mode] = m
             (args.workdir / f"run_{n}_{mode}.json").write_text(json.dumps(m))  # kept if a later size is stopped
             tc = m["task_costs"]
@@ -392,6 +405,7 @@ def main() -> None:
                       f"(the client process: {m['rss_mb']:.0f}); peaks and saddles identical to the threaded run: "
                       f"{same}")
     summary = {"chunks": args.chunks, "eps_ft": args.eps_ft, "dem": args.dem,
+               "process_settings": "malloc defaults" if args.malloc_defaults else "orokit analyze's",
                "runs": [{"mosaic": n, "mode": mode, **m} for (n, mode), m in rows.items()]}
     both = [n for n in args.sizes if (n, "in-memory") in rows]
     if both:
@@ -422,7 +436,7 @@ def main() -> None:
         print(f"{'chunk':>6} {'chunks':>6} {'merges':>6} {'merge s':>8} {'chunk s':>8} {'total s':>8} {'RSS MB':>7}")
         sweep = []
         for ch in args.chunk_sweep[1:]:
-            m = measure(vrt, ch, eps)
+            m = measure(vrt, ch, eps, process_settings=not args.malloc_defaults)
             tc = m["task_costs"]
             print(f"{ch:>6} {tc['chunks']:>6} {tc['merges']:>6} {tc['merge_s']:>8.2f} {tc['chunk_s']:>8.2f} "
                   f"{m['seconds']:>8.1f} {m['rss_mb']:>7.0f}")
