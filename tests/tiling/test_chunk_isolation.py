@@ -161,3 +161,50 @@ def test_tiled_isolation_with_settled_peaks_finished_in_small_blocks_equals_in_m
     assert known == {}
     assert got.equals(want)
     assert all(not p for p in parts)  # merged parts are emptied: the merge owns them
+
+
+@pytest.mark.parametrize("grid", GRIDS)
+def test_tiled_isolation_of_unordered_peaks_with_extra_settled_cells_equals_in_memory(grid):
+    """Peaks not in raster order, float32 elevations, and settled isolation of more cells than the
+    peaks (``known`` rows that are no peak here are left out): the in-memory table, row for row."""
+    import dask.array as da
+
+    from orokit.tiling import isolation as tiso
+    from orokit.tiling.engine import _merge_iso
+
+    transform, crs = GRIDS[grid]
+    rng = np.random.default_rng(11)
+    z = np.round(rng.normal(size=(60, 75)).cumsum(axis=0) + 2 * rng.normal(size=(60, 75)), 1).astype(np.float32)
+    H, W = z.shape
+    cells = np.flatnonzero(np.isfinite(z.ravel()))[::3]
+    peaks = rng.permutation(cells[::2])  # every other settled cell is a peak, in no particular order
+    rows, cols = peaks // W, peaks % W
+    metric = KernelMetric.from_grid(transform, crs)
+    ch, cw = 20, 25
+    parts = []
+    for r0 in range(0, H, ch):
+        for c0 in range(0, W, cw):
+            r, c = cells // W, cells % W
+            mine = cells[(r >= r0) & (r < r0 + ch) & (c >= c0) & (c < c0 + cw)]
+            parts.append(chunk_isolation(np.ascontiguousarray(z[r0:r0 + ch, c0:c0 + cw]), r0, c0, (H, W), mine,
+                                         metric))
+    known = _merge_iso(parts)
+    assert np.isin(known["key"], peaks, invert=True).any() and np.isin(known["key"], peaks).any()
+    got = tiso.tiled_isolation(da.from_array(z, chunks=(ch, cw)), rows, cols, z.ravel()[peaks],
+                               transform=transform, crs=crs, known=known, release_known=True,
+                               compute=lambda objs: [np.asarray(o.compute(scheduler="sync")) for o in objs])
+    assert got.equals(isolation(z, rows, cols, transform=transform, crs=crs))
+
+
+def test_cell_places_are_int32_rows_and_columns_made_by_blocks(monkeypatch):
+    from orokit.tiling import isolation as tiso
+
+    monkeypatch.setattr(tiso, "_FINISH_ROWS", 4)
+    cell = np.array([0, 5, 17, 2**33 + 9, 123456789], np.int64)
+    rows, cols = tiso.cell_places(cell, 2**20)
+    assert rows.dtype == cols.dtype == np.int32
+    assert rows.tolist() == (cell // 2**20).tolist() and cols.tolist() == (cell % 2**20).tolist()
+    big_rows, _ = tiso.cell_places(np.array([2**62], np.int64), 3)
+    assert big_rows.dtype == np.int64 and big_rows[0] == 2**62 // 3
+    empty = tiso.cell_places(np.empty(0, np.int64), 7)
+    assert empty[0].size == 0 and empty[0].dtype == np.int32
