@@ -198,9 +198,12 @@ def run_one(vrt: str, chunks: int | None, eps: float, out: str | None, rss_log: 
         # the process of `orokit analyze` (its entry point's settings: two malloc arenas, blocks of 1 MB or
         # more mapped on their own, Arrow's system allocator, GDAL's cache bounded). Runs before session 16
         # set the GDAL cache only (--malloc-defaults): freed arrays of up to 32 MB stayed in the heap
-        from orokit.cli.main import apply_process_settings
+        from orokit.cli.main import CHUNKED_MMAP_THRESHOLD_BYTES, apply_process_settings
+        from orokit.tiling.memory import fix_mmap_threshold
 
         apply_process_settings("analyze")
+        if chunks is not None:  # what `orokit analyze` sets once it takes the chunked engine
+            fix_mmap_threshold(CHUNKED_MMAP_THRESHOLD_BYTES)
     else:
         from orokit.tiling.memory import limit_gdal_cache
 

@@ -128,6 +128,12 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         if owns_process():
             release_library_pages("")
     else:
+        from orokit.cli.main import CHUNKED_MMAP_THRESHOLD_BYTES, owns_process
+
+        if owns_process():  # a chunked run reuses its per-batch arrays from the heap (CHUNKED_MMAP_THRESHOLD_BYTES)
+            from orokit.tiling.memory import fix_mmap_threshold
+
+            fix_mmap_threshold(CHUNKED_MMAP_THRESHOLD_BYTES)
         _numba_without_blas_probe()
         da = dem.read_dem(z_units=z_units, cell_size_m=cell_size_m, chunks=chunks, band=band)
     from orokit.analysis import analyze as run

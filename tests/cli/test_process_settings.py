@@ -98,6 +98,9 @@ def test_console_script_applies_them_to_analyze(tmp_path):
     # started (LLVM's, the imports') and before the raster is read (together they were the process's peak at
     # 15.1 M cells, session 14), after the read and the kernels' loading, and before writing
     assert _analyze_calls(_console(*args, str(tmp_path / "a"))) == (ANALYZE_CALLS, "system")
+    # chunked: glibc's own 32 MB ceiling once the chunked engine is chosen (per-batch arrays reused from the heap)
+    chunked = _console(*args, str(tmp_path / "c"), "--chunks", "32")
+    assert "'mmap 1048576', 'mmap 33554432'" in chunked and "'read'" not in chunked, chunked
     # a user's choice of Arrow's pool stays
     assert _console(*args, str(tmp_path / "b"), env={"ARROW_DEFAULT_MEMORY_POOL": "jemalloc"}).endswith("jemalloc")
 
