@@ -279,15 +279,10 @@ class DivideTree:
         if a.size >= max(n, 1):
             raise DivideTreeError(f"{a.size} ridges for {n} peaks: a tree has at most n - 1")
         if a.size:
-            from orokit.topology._kernels import forest_components_like, index_like
+            from orokit.topology._kernels import forest_components
 
-            # n nodes and m edges without a cycle make exactly n - m components (the state in the
-            # narrowest index type, its roots counted by blocks: ~4 bytes per peak, not ~17)
-            dom = forest_components_like(n, a, b, np.empty(0, np.bool_), index_like(n))
-            step = 1 << 20
-            roots = sum(np.count_nonzero(dom[i:i + step] == np.arange(i, min(n, i + step), dtype=dom.dtype))
-                        for i in range(0, n, step))
-            del dom
+            # n nodes and m edges without a cycle make exactly n - m components
+            roots = np.count_nonzero(forest_components(n, a, b) == np.arange(n))
             if roots != n - a.size:  # find the first ridge that closes a cycle
                 parent = np.arange(n)
                 for i in range(a.size):
