@@ -18,11 +18,21 @@ pytestmark = pytest.mark.cluster
 
 @pytest.fixture(scope="module")
 def cluster():
+    """A cluster of two worker processes; the test process's environment is put back afterwards (a Nanny
+    leaves its ``distributed.nanny.pre-spawn-environ`` in its own process's environment for good:
+    ``MALLOC_TRIM_THRESHOLD_``, ``OMP_NUM_THREADS``, ``PYTHONHASHSEED``, which every process a later test of
+    the same xdist worker starts inherited)."""
     import distributed  # a hard dependency (dask[distributed]): a missing install must fail, not skip
 
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                  memory_limit="2GiB") as cl, distributed.Client(cl) as client:
-        yield cl, client
+    saved = dict(os.environ)
+    try:
+        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                      memory_limit="2GiB") as cl, distributed.Client(cl) as client:
+            yield cl, client
+    finally:
+        for name in set(os.environ) - set(saved):
+            del os.environ[name]
+        os.environ.update(saved)
 
 
 def _terrain(shape=(400, 500), seed=7):
