@@ -196,9 +196,13 @@ def overwrite_option(what: str = "existing outputs") -> Decorator:
 
 
 def progress_option() -> Decorator:
-    """``--progress/--no-progress``: progress bars on stderr (on by default)."""
-    return click.option("--progress/--no-progress", default=True, show_default=True,
-                        help="Progress bars on stderr.")
+    """``--progress/--no-progress``: progress bars on stderr (on by default; off under ``orokit -q``,
+    which prints only errors)."""
+    def unless_quiet(ctx: click.Context, param: click.Parameter, value: bool) -> bool:
+        return value and not (ctx.find_root().obj or {}).get("quiet")
+
+    return click.option("--progress/--no-progress", default=True, show_default=True, callback=unless_quiet,
+                        help="Progress bars on stderr (none with orokit -q).")
 
 
 def common_input_options(f: Callable[..., Any]) -> Callable[..., Any]:

@@ -39,3 +39,19 @@ def test_compare_progress_on_stderr_and_off_with_no_progress(make_dem, tmp_path)
     off = CliRunner().invoke(cli, ["compare", str(tmp_path / "a"), str(tmp_path / "a"), "--no-progress"])
     assert off.exit_code == 0, off.output
     assert off.stderr == "" and off.stdout == on.stdout
+
+
+def test_quiet_turns_the_progress_bars_off(make_dem, tmp_path):
+    """``orokit -q`` prints only errors: no progress bars (before: compare's stage bar and the chunked
+    analyze's dask bars were printed under -q)."""
+    z = np.random.default_rng(3).normal(size=(40, 50)).cumsum(0).cumsum(1)
+    r = orokit.analyze(make_dem(z, res=0.0005, crs="EPSG:4326"), min_prominence_m=3, isolation=False)
+    write_analysis(r, tmp_path / "a")
+    quiet = CliRunner().invoke(cli, ["-q", "compare", str(tmp_path / "a"), str(tmp_path / "a"), "--progress"])
+    assert quiet.exit_code == 0, quiet.output
+    assert quiet.stderr == "" and "location precision / recall" in quiet.stdout
+    tif = tmp_path / "dem.tif"
+    make_dem(z.astype("float32")).rio.to_raster(tif)
+    run = CliRunner().invoke(cli, ["-q", "analyze", str(tif), "--chunks", "16", "-o", str(tmp_path / "b")])
+    assert run.exit_code == 0, run.output
+    assert run.stderr == "" and run.stdout == ""
