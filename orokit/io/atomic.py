@@ -180,12 +180,14 @@ def hold_run_path(path: PathLike, *, create: bool = False) -> int | None:
     return fd
 
 
-def remove_unless_held(path: PathLike, remove: Callable[[Path], None] | None = None) -> bool:
+def remove_unless_held(path: PathLike, remove: Callable[[Path], None] | None = None, *,
+                       lock_required: bool = False) -> bool:
     """Remove ``path``, a temporary file or folder whose name says its run ended, unless a process holds
     it (:func:`hold_run_path`); True when removed. ``remove`` removes it (default: file or folder tree).
 
     A name can be wrong about its run: the process id of another PID namespace (a container) with the same
-    host name looks ended. Where the filesystem has no such locks (some network filesystems) the name decides.
+    host name looks ended. Where the filesystem has no such locks (some network filesystems) the name decides,
+    unless ``lock_required`` (the name says nothing: then only a lock taken removes it).
     """
     p = Path(path)
     try:
@@ -193,7 +195,8 @@ def remove_unless_held(path: PathLike, remove: Callable[[Path], None] | None = N
     except OSError:  # gone already, or not ours to open
         return False
     try:
-        if _try_lock(fd) is False:
+        taken = _try_lock(fd)
+        if taken is False or (taken is None and lock_required):
             return False
         (_remove if remove is None else remove)(p)
         return True

@@ -4,7 +4,7 @@
 a folder of another run is refused. Chunk files are written atomically, so a file
 that exists is complete and a rerun reuses it; the temporary file of a chunk that a
 killed run was writing holds that run's process (``.chunk_I_J.npz.tmp-PID@HOST-...``), is
-locked by its writer until renamed, and is removed when the folder is opened again.
+locked by its writer until renamed, and is removed when the folder is opened again (no process holding it).
 """
 from __future__ import annotations
 
@@ -18,8 +18,8 @@ import numpy as np
 
 from orokit._typing import PathLike
 from orokit.errors import TilingError
-from orokit.io.atomic import atomic_path, remove_unless_held
-from orokit.io.spill_io import run_ended, run_tag
+from orokit.io.atomic import atomic_path
+from orokit.io.spill_io import may_remove, run_tag
 
 logger = logging.getLogger(__name__)
 
@@ -61,11 +61,11 @@ def open_checkpoint(folder: PathLike, fingerprint: dict[str, Any]) -> Path:
 
 
 def _remove_stale_temps(root: Path) -> None:
-    """Remove the folder's temporary files whose run has ended (:func:`~orokit.io.spill_io.run_ended`) and
-    whose writer does not hold them (:func:`~orokit.io.atomic.remove_unless_held`)."""
+    """Remove the folder's temporary files whose run has ended (:func:`~orokit.io.spill_io.may_remove`: no
+    process holds them)."""
     for path in sorted(root.iterdir()):
         match = _TEMP.fullmatch(path.name)
-        if match and path.is_file() and run_ended(match.group(1).rpartition("-")[0]) and remove_unless_held(path):
+        if match and path.is_file() and may_remove(path, match.group(1).rpartition("-")[0]):
             logger.info("removed %s, left by a run that was killed", path)
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, cast
@@ -24,8 +24,8 @@ from orokit.io.atomic import atomic_path, hold_run_path, is_no_space_error, remo
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["spill_folder", "remove_folder", "remove_stale_folders", "run_tag", "run_ended", "write_spill", "read_spill",
-           "SpilledColumns"]
+__all__ = ["spill_folder", "remove_folder", "remove_stale_folders", "run_tag", "run_ended", "on_this_host", "may_remove",
+           "write_spill", "read_spill", "SpilledColumns"]
 
 #: name prefixes of the temporary folders of a run (spills of the chunk tasks, the peak table's columns)
 SPILL_PREFIX, COLUMNS_PREFIX = "orokit-spill-", "orokit-columns-"
@@ -44,12 +44,35 @@ def run_ended(owner: str) -> bool:
     """True when ``owner`` (``PID@HOST``: :func:`run_tag` without its dash) names a process that is not running
     on this host, or is not of that form (a name made before names held the process); False for a running
     process or another host's."""
+    pid, at, _ = owner.partition("@")
+    if at and pid.isdigit():
+        return on_this_host(owner) and not _alive(int(pid))
+    return True
+
+
+def on_this_host(owner: str) -> bool:
+    """True when ``owner`` (``PID@HOST``) names a process of this host, running or not."""
     import socket
 
     pid, at, where = owner.partition("@")
-    if at and pid.isdigit():
-        return where == socket.gethostname() and not _alive(int(pid))
-    return True
+    return bool(at) and pid.isdigit() and where == socket.gethostname()
+
+
+def may_remove(path: PathLike, owner: str, remove: Callable[[Path], None] | None = None) -> bool:
+    """Remove the temporary ``path`` of the run ``owner`` names (``PID@HOST``) if that run has ended; True
+    when removed.
+
+    A run holds its paths' locks while it lives (:func:`~orokit.io.atomic.hold_run_path`), and the kernel
+    lets them go however it ends. A name of this host is therefore removed when no process holds its lock,
+    even when its process id runs: another process got the id (a container's rerun is often PID 1 again, as
+    the killed run was) or it is of another PID namespace. Where the filesystem refuses such locks, the name
+    decides (:func:`run_ended`); another host's names are left (a filesystem exported to it does not show
+    its locks here).
+    """
+    ended = run_ended(owner)
+    if not (ended or on_this_host(owner)):
+        return False
+    return remove_unless_held(path, remove, lock_required=not ended)
 
 
 def _make_folder(prefix: str, parent: PathLike | None) -> tuple[Path, int | None]:
@@ -94,9 +117,9 @@ def remove_stale_folders(parent: PathLike) -> list[Path]:
     """Remove the spill and column folders in ``parent`` whose run has ended without removing them
     (a killed process: SIGKILL, out of memory, power loss); returns the folders removed.
 
-    A folder is stale when its name's process id is not running on this host, or when its name holds
-    no process id (made before names held one), and no process holds its lock (a run in another PID
-    namespace with the same host name). A folder of another host, or of a process that is running, is
+    A folder is stale when no process holds its lock and its name is of this host (:func:`may_remove`;
+    where the filesystem has no such locks: its name's process id is not running on this host), or its name
+    holds no process id (made before names held one). A folder of another host, or that a process holds, is
     left alone; nothing else in ``parent`` (a checkpoint's chunk files) is touched.
     """
     root = Path(parent)
@@ -105,9 +128,9 @@ def remove_stale_folders(parent: PathLike) -> list[Path]:
     removed = []
     for folder in sorted(root.iterdir()):
         prefix = next((p for p in (SPILL_PREFIX, COLUMNS_PREFIX) if folder.name.startswith(p)), None)
-        if prefix is None or not folder.is_dir() or not run_ended(folder.name[len(prefix):].rpartition("-")[0]):
+        if prefix is None or not folder.is_dir():
             continue
-        if remove_unless_held(folder, remove_folder):
+        if may_remove(folder, folder.name[len(prefix):].rpartition("-")[0], remove_folder):
             removed.append(folder)
     if removed:
         logger.info("removed %d temporary folders left in %s by runs that were killed", len(removed), root)

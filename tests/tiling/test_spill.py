@@ -301,14 +301,18 @@ orokit.analyze(tif, min_prominence_m=1.0, chunks=(13, 16), geometry=False, block
 """
 
 
-@pytest.mark.parametrize("where", ["merge", "write", "isolation"])
-def test_a_rerun_after_a_killed_checkpoint_run_removes_its_folders_and_keeps_its_chunks(where, make_dem, tmp_path):
+@pytest.mark.parametrize("where, same_pid", [("merge", False), ("write", False), ("isolation", False),
+                                             ("write", True)])
+def test_a_rerun_after_a_killed_checkpoint_run_removes_its_folders_and_keeps_its_chunks(where, same_pid, make_dem,
+                                                                                       tmp_path):
     """A run killed (SIGKILL) in the chunk pass (between chunks, or while a chunk file is written) or the
     isolation search leaves its spill and column folders, and the temporary file of the chunk being written, in
     the checkpoint folder; the rerun removes them, reuses the finished chunks (their files untouched) and
-    writes the files of a run without a checkpoint."""
+    writes the files of a run without a checkpoint. ``same_pid``: the rerun has the killed run's process id
+    (a container's PID 1 both times; here its leftovers are renamed to the rerun's id)."""
     import gc
     import os
+    import re
     import subprocess
     import sys
 
@@ -322,6 +326,9 @@ def test_a_rerun_after_a_killed_checkpoint_run_removes_its_folders_and_keeps_its
     # the column store exists from the start of the chunk pass (the finalize fills it)
     assert left == (["columns"] if where == "isolation" else ["columns", "spill"])
     assert len(list(ck.glob(".chunk_*.tmp-*"))) == (1 if where == "write" else 0)
+    if same_pid:
+        for p in [*ck.glob("orokit-*"), *ck.glob(".chunk_*.tmp-*")]:
+            p.rename(p.with_name(re.sub(r"\d+@", f"{os.getpid()}@", p.name, count=1)))
     chunks = {p: p.stat().st_mtime_ns for p in ck.glob("chunk_*.npz")}
     assert len(chunks) >= (7 * 7 if where == "isolation" else 5)
     b = orokit.analyze(str(tif), min_prominence_m=1.0, chunks=(13, 16), geometry=False, blocks=True, checkpoint=ck,
@@ -355,7 +362,10 @@ def test_only_the_folders_of_ended_runs_on_this_host_are_stale(tmp_path):
     host = socket.gethostname()
     names = {f"orokit-spill-{dead}@{host}-abc": False, f"orokit-columns-{dead}@{host}-x_1": False,
              "orokit-spill-k2j4h_9q": False,  # named before names held the process
-             f"orokit-spill-{dead}@other.host-abc": True, f"orokit-columns-{os.getpid()}@{host}-abc": True,
+             f"orokit-spill-{dead}@other.host-abc": True,
+             # a running process's id, but no process holds it: an earlier run with this id (a container's
+             # rerun is often PID 1 again, as the killed run was) or another PID namespace's
+             f"orokit-columns-{os.getpid()}@{host}-abc": False,
              "orokit-mosaic-abc": True, "chunk_00000_00000.npz": True}
     for name in names:
         (tmp_path / name).mkdir()
@@ -387,7 +397,7 @@ def test_opening_a_checkpoint_removes_the_temporary_chunk_files_of_ended_runs_on
     names = {f".chunk_00001_00002.npz.tmp-{dead}@{host}-0123456789ab.npz": False,
              ".chunk_00000_00001.npz.tmp-0123456789ab.npz": False,  # named before names held the process
              f".checkpoint.json.tmp-{dead}@{host}-0123456789ab.json": False,
-             f".chunk_00002_00002.npz.tmp-{os.getpid()}@{host}-0123456789ab.npz": True,
+             f".chunk_00002_00002.npz.tmp-{os.getpid()}@{host}-0123456789ab.npz": False,  # held by none
              f".chunk_00003_00002.npz.tmp-{dead}@other.host-0123456789ab.npz": True,
              f".notes.txt.tmp-{dead}@{host}-0123456789ab.txt": True}  # not the checkpoint's own
     for name in names:
@@ -408,10 +418,14 @@ sys.stdin.read()  # until the test closes the pipe
 """
 
 
-def test_a_live_runs_folder_or_temporary_file_is_kept_whatever_its_name_says(tmp_path):
+@pytest.mark.parametrize("pid", ["ended", "running"])
+def test_a_live_runs_folder_or_temporary_file_is_kept_whatever_its_name_says(pid, tmp_path):
     """A name whose process looks ended on this host (a run in another PID namespace with the same host name,
     e.g. a container on the host's network) is removed only when no process holds the path's lock: before,
-    the name alone decided and a running run's spill folder or chunk file went."""
+    the name alone decided and a running run's spill folder or chunk file went. A name whose process id runs
+    is removed once no process holds it (before: kept for good, e.g. a killed container run's as PID 1, rerun
+    as PID 1)."""
+    import os
     import socket
     import subprocess
     import sys
@@ -420,7 +434,7 @@ def test_a_live_runs_folder_or_temporary_file_is_kept_whatever_its_name_says(tmp
     from orokit.io.spill_io import remove_stale_folders
 
     ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
-    dead, host = int(ended.stdout), socket.gethostname()
+    dead, host = int(ended.stdout) if pid == "ended" else os.getpid(), socket.gethostname()
     fingerprint = {"input": "x", "chunks": [13, 16]}
     open_checkpoint(tmp_path, fingerprint)
     folder = tmp_path / f"orokit-spill-{dead}@{host}-abc"
