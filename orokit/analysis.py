@@ -424,15 +424,20 @@ def _import_in_thread(target):
 
 
 def start_numba_target() -> None:
-    """Start numba's CPU target (its registries and LLVM's code generator) without loading a kernel.
+    """Start numba's CPU target as far as LLVM goes: its code generator and its runtime (NRT, which LLVM
+    compiles at start), without the target's registries of implementations or any kernel.
 
-    This step touches most of LLVM's code (~65 MiB of ``libllvmlite``'s pages at 15 M cells,
-    measured); loading the cached kernels after it touches ~12 MiB more. ``orokit analyze``
-    runs it, drops those pages, and only then reads the raster (issue 13: peak RSS).
+    This step touches most of LLVM's code (~47 MiB of ``libllvmlite``'s pages after the import's
+    were dropped, measured) in ~0.03 CPU s; the registries (numba's implementations, ~0.2 CPU s of
+    Python with the array ones' import) touch none of it and load with the first kernel
+    (:func:`load_kernels`: numba refreshes the target before loading a cached kernel). ``orokit
+    analyze`` runs this, drops those pages, and only then reads the raster (issue 13: peak RSS), the
+    registries loading beside the read instead of before it (its 2-core wall time).
     """
     from numba.core.registry import cpu_target
+    from numba.core.runtime.nrt import rtsys
 
-    cpu_target.target_context.refresh()
+    rtsys.initialize(cpu_target.target_context)  # what the target's refresh does first (once per process)
 
 
 def load_kernels(*, isolation: bool = True) -> None:

@@ -114,8 +114,9 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         # second thread imports numba and loads the kernels while GDAL reads (wall time). The read
         # stays in this thread: its freed buffers are reused later (a reader thread's malloc arena
         # kept ~70 MB more resident at 15 M cells). In orokit's own process the read waits for
-        # numba's target to start, then the pages of files touched so far are dropped (LLVM's, ~65 MB
-        # at 15 M cells, the imports'): resident with the raster they were the process's peak
+        # numba's target to start as far as LLVM goes, then the pages of files touched so far are
+        # dropped (LLVM's, ~47-65 MB at 15 M cells, the imports'): resident with the raster they were
+        # the process's peak. numba's implementations (~0.2 CPU s of Python) load beside the read
         started = threading.Event() if owns_process() else None
         with ThreadPoolExecutor(1) as pool:
             loading = pool.submit(_load_kernels, isolation=not no_isolation, started=started)
@@ -181,20 +182,23 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
 
 def _load_kernels(*, isolation: bool, started: threading.Event | None = None) -> None:
     """Import numba and load the engine's kernels. With ``started`` (orokit's own process): first
-    start numba's target (most of LLVM's pages), then set ``started`` (set on failure too); the pages
-    of files are dropped before the target starts (the imports touched them) and LLVM's after the loading."""
+    start numba's target as far as LLVM goes (most of LLVM's pages), then set ``started`` (set on
+    failure too), then load numba's implementations and the kernels (beside the read); the pages of
+    files are dropped before the target starts (the imports touched them) and LLVM's after the loading."""
     from orokit.analysis import load_kernels, start_numba_target
 
     from orokit.tiling.memory import release_library_pages
 
     try:
-        _numba_without_blas_probe()
         if started is not None:
+            import numba  # noqa: F401 - LLVM's library, before its pages are dropped
+
             release_library_pages("")  # the imports' pages (LLVM's first 36 MB): not all touched again
             start_numba_target()
     finally:
         if started is not None:
             started.set()
+    _numba_without_blas_probe()  # before the target's implementations load (with the first kernel)
     load_kernels(isolation=isolation)
     if started is not None:
         release_library_pages("libllvmlite")  # what the loading touched (12 MB), if the read is not done

@@ -37,7 +37,7 @@ z = (np.random.default_rng(0).random((60, 70)) * 100).astype("float32")
 with rasterio.open(sys.argv[1], "w", driver="GTiff", height=60, width=70, count=1, dtype="float32",
                    crs="EPSG:32633", transform=from_origin(500000, 4000000, 30, 30)) as dst:
     dst.write(z, 1)
-atexit.register(lambda: print(sorted(m for m in ("geopandas", "shapely", "pyogrio") if m in sys.modules)))
+atexit.register(lambda: print(sorted(m for m in ("geopandas", "shapely", "pyogrio", "scipy.linalg") if m in sys.modules)))
 from orokit.cli.main import main
 
 sys.argv = ["orokit", "-q", "analyze", sys.argv[1], "-o", sys.argv[2], "--no-progress"]
@@ -48,13 +48,36 @@ main()
 def test_analyze_writes_its_files_without_geopandas_shapely_or_pyogrio(tmp_path):
     """The whole ``orokit analyze`` process (the console script) writes the CSV, the GeoParquet
     tables and the GeoPackage through pyarrow and rasterio's GDAL: pyogrio's GDAL, shapely and
-    geopandas (~34 MiB resident) are never loaded (issue 13). pandas still is (the tables are frames)."""
+    geopandas (~34 MiB resident) are never loaded (issue 13). pandas still is (the tables are frames).
+    Nor is scipy.linalg: numba's BLAS probe is skipped though its target starts before (the read waits for it)."""
     out = tmp_path / "out"
     res = subprocess.run([sys.executable, "-c", WRITING, str(tmp_path / "dem.tif"), str(out)],
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stderr[-2000:]
     assert res.stdout.strip().splitlines()[-1] == "[]", res.stdout + res.stderr
     assert (out / "analysis.json").is_file() and (out / "dividetree.gpkg").is_file()
+
+
+TARGET = """
+import sys
+from numba.core.runtime.nrt import rtsys
+from orokit.analysis import load_kernels, start_numba_target
+from orokit.cli.analyze import _numba_without_blas_probe
+
+start_numba_target()
+print(rtsys._init, "numba.np.arraymath" in sys.modules, "scipy.linalg" in sys.modules)
+_numba_without_blas_probe()
+load_kernels(isolation=False)  # the first kernel loads the target's implementations
+print(rtsys._init, "numba.np.arraymath" in sys.modules, "scipy.linalg" in sys.modules)
+"""
+
+
+def test_numba_target_starts_without_its_implementations():
+    """What the read waits for (LLVM's code generator and numba's runtime: LLVM's pages) does not load numba's
+    implementations (~0.2 CPU s of Python, no LLVM page): those load with the first kernel, beside the read
+    (issue 13: the 2-core run's serial start), after the BLAS probe is skipped."""
+    out = subprocess.run([sys.executable, "-c", TARGET], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["True", "False", "False", "True", "True", "False"], out.stdout + out.stderr
 
 
 SEARCH = """
