@@ -307,6 +307,12 @@ class RenderParams:
             raise InputError(f"river_base_saddle_k must be >= 1 or None, got {self.river_base_saddle_k!r}")
         if self.ridge_max_slope is not None and not float(self.ridge_max_slope) > 0.0:
             raise InputError(f"ridge_max_slope must be > 0 or None, got {self.ridge_max_slope!r}")
+        if self.ridge_plateau_drop is not None:
+            if not float(self.ridge_plateau_drop) > 0.0:  # NaN too: no piece would qualify
+                raise InputError(f"ridge_plateau_drop must be > 0 or None, got {self.ridge_plateau_drop!r}")
+            if self.ridge_max_slope is None:
+                raise InputError("ridge_plateau_drop selects the pieces ridge_max_slope applies to: set "
+                                 "ridge_max_slope too (or leave ridge_plateau_drop None)")
         if self.flank_depth_saddle_ratio is not None and not float(self.flank_depth_saddle_ratio) >= 0.0:
             raise InputError(f"flank_depth_saddle_ratio must be >= 0 or None, got {self.flank_depth_saddle_ratio!r}")
         if not int(self.flank_depth_saddle_k) >= 1:

@@ -77,3 +77,14 @@ def test_plateau_pieces_tell_a_level_base_from_a_falling_one():
     peaks_t = peaks.copy()
     peaks_t[:, 2] -= 2.0 * pxy[:, 0] / 50.0
     assert plateau_pieces(tilt, peaks_t, tilt, 0.05).mean() < 0.2
+
+
+def test_ridge_plateau_drop_is_checked():
+    """A negative or NaN drop selected no piece, and a drop without ridge_max_slope did nothing (both silently):
+    refused, naming the fix."""
+    for bad in (-0.1, 0.0, float("nan")):
+        with pytest.raises(InputError, match="ridge_plateau_drop must be > 0"):
+            RenderParams(ridge_max_slope=0.8, ridge_plateau_drop=bad)
+    with pytest.raises(InputError, match="set ridge_max_slope too"):
+        RenderParams(ridge_plateau_drop=0.05)
+    assert RenderParams(ridge_max_slope=0.8, ridge_plateau_drop=0.05).ridge_plateau_drop == 0.05
