@@ -29,7 +29,8 @@ from orokit.errors import CRSError
 if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
 
-__all__ = ["CellMetric", "cell_distance", "point_distance", "parse_crs", "metric_crs", "cell_size_key", "cell_size_attrs", "WGS84"]
+__all__ = ["CellMetric", "cell_distance", "point_distance", "parse_crs", "metric_crs", "linear_unit_m", "cell_size_key",
+           "cell_size_attrs", "WGS84"]
 
 #: The ellipsoid used for every geodesic computation in orokit.
 WGS84 = Geod(ellps="WGS84")
@@ -50,7 +51,7 @@ def cell_size_attrs(transform: Affine, crs: Any) -> dict[str, tuple[float, float
     """
     c = parse_crs(crs)
     geographic = c is not None and c.is_geographic
-    unit = 1.0 if geographic else _linear_unit_m(c)
+    unit = 1.0 if geographic else linear_unit_m(c)
     return {cell_size_key(geographic): (float(abs(transform.a)) * unit, float(abs(transform.e)) * unit)}
 
 
@@ -105,7 +106,7 @@ def metric_crs(crs: Any, what: str) -> CRS | None:
     if c.is_geographic:
         raise CRSError(f"{what} is in a geographic CRS ({c.name}); this needs metres: reproject it to a projected "
                        "CRS (e.g. its UTM zone) first")
-    unit_m = _linear_unit_m(c)
+    unit_m = linear_unit_m(c)
     if unit_m != 1.0:
         unit = c.axis_info[0].unit_name
         raise CRSError(f"{what} is in the CRS {c.name!r}, whose unit is the {unit} ({unit_m:.7g} m); this needs "
@@ -114,7 +115,12 @@ def metric_crs(crs: Any, what: str) -> CRS | None:
     return c
 
 
-def _linear_unit_m(crs: CRS | None) -> float:
+def linear_unit_m(crs: CRS | None) -> float:
+    """Metres per unit of a projected CRS's coordinates (1.0 for none or a geographic one).
+
+    >>> round(linear_unit_m(CRS.from_epsg(2227)), 7), linear_unit_m(CRS.from_epsg(32633))
+    (0.3048006, 1.0)
+    """
     if crs is None or crs.is_geographic:
         return 1.0
     factors = {ax.unit_conversion_factor for ax in crs.axis_info[:2] if ax.unit_conversion_factor}
@@ -186,7 +192,7 @@ class CellMetric:
     @property
     def unit_m(self) -> float:
         """Metres per CRS unit (1 for metric and local grids; not used for geographic)."""
-        return _linear_unit_m(self.crs)
+        return linear_unit_m(self.crs)
 
     # -- coordinates --------------------------------------------------------------
     def xy(self, rows: ArrayLike, cols: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

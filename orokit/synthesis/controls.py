@@ -120,6 +120,15 @@ def make_domain(
             f"the output CRS {out.name!r} is not projected: synthesis works in metres. Use a projected CRS "
             "(e.g. UTM) or give only a centre lon/lat for a local projection"
         )
+    from orokit.geodesy import linear_unit_m
+
+    unit_m = linear_unit_m(out)
+    if unit_m != 1.0:  # the tree and the raster would hold metres as that CRS's units
+        raise CRSError(
+            f"the output CRS {out.name!r} is in {out.axis_info[0].unit_name} units ({unit_m:.7g} m): synthesis works "
+            "in metres. Use a projected CRS in metres (e.g. the UTM zone) or give only a centre lon/lat for a local "
+            "projection"
+        )
     if center is None:
         # not the CRS's false origin (often in the ocean): the centre of its area of use
         aou = out.area_of_use

@@ -232,6 +232,13 @@ def test_geographic_output_crs_is_refused(small_type):
         synthesize_divide_tree(small_type, size_m=SIZE, crs="EPSG:4326", rng=0)
 
 
+def test_output_crs_in_feet_is_refused_up_front(small_type):
+    """A projected CRS in US survey feet: refused before the synthesis, naming the unit and the fix (before: a
+    tree synthesized with metres as feet, then the renderer's message about reprojecting the input DEM)."""
+    with pytest.raises(CRSError, match=r"is in US survey foot units \(0.3048006 m\): synthesis works in metres"):
+        synthesize_divide_tree(small_type, size_m=SIZE, crs="EPSG:2227", rng=0)
+
+
 def test_local_projection_centre(small_type):
     t = synthesize_divide_tree(small_type, size_m=SIZE, center=(7.5, 46.2), rng=0)
     pt = peaks_table(t)
