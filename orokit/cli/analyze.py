@@ -139,7 +139,9 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
     else:
         from orokit.cli.main import CHUNKED_MMAP_THRESHOLD_BYTES, owns_process
 
-        if owns_process():  # a chunked run reuses its per-batch arrays from the heap (CHUNKED_MMAP_THRESHOLD_BYTES)
+        # a chunked run reuses its per-batch arrays from the heap (CHUNKED_MMAP_THRESHOLD_BYTES); a manifest
+        # DEM read whole (a dataset name without --chunks) comes here too and keeps the in-memory 1 MB
+        if owns_process() and chunks is not None:
             from orokit.tiling.memory import fix_mmap_threshold
 
             fix_mmap_threshold(CHUNKED_MMAP_THRESHOLD_BYTES)

@@ -105,6 +105,16 @@ def test_console_script_applies_them_to_analyze(tmp_path):
     assert _console(*args, str(tmp_path / "b"), env={"ARROW_DEFAULT_MEMORY_POOL": "jemalloc"}).endswith("jemalloc")
 
 
+@pytest.mark.realdata
+def test_a_dataset_name_read_whole_keeps_the_in_memory_mmap_threshold(real_data, tmp_path):
+    """A manifest DEM analysed without --chunks is read whole (through xarray): the 1 MB threshold of an
+    in-memory run stays (before: 30de9df's chunked 32 MB was set on that path too)."""
+    real_data("gobi")
+    line = _console("-q", "analyze", "gobi", "--no-progress", "--min-prominence", "100", "--no-isolation", "-o",
+                    str(tmp_path / "a"))
+    assert "'mmap 1048576'" in line and "33554432" not in line, line
+
+
 #: the console script's process, printing the size of GDAL's block cache at its end (rasterio asks GDAL)
 GDAL_CACHE = SCRIPT.replace("""print((read_interval or [None])[0], sys.getswitchinterval(), calls,
                               os.environ.get("ARROW_DEFAULT_MEMORY_POOL"))""",
