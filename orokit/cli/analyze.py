@@ -92,6 +92,8 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
             "cells), not a number of chunks, and every chunk costs a fixed ~10 ms (1 x 1 chunks take minutes where "
             "the whole raster in memory takes seconds). Give e.g. --chunks 1024, or leave --chunks out: a DEM too "
             "large for memory is then analysed in chunks of a size chosen for it", param_hint="--chunks")
+    if chunks is not None:
+        chunks = min(chunks, 1 << 31)  # one chunk per side beyond the raster's (dask took 1e20 for no integer)
     if samples and dem_error_m is None:
         raise click.UsageError("--samples needs --dem-error SIGMA")
     if samples and chunks is not None:
