@@ -250,6 +250,9 @@ class RenderParams:
     flank_depth_saddle_ratio: float | None = None
     ridge_max_slope: float | None = None
     ridge_plateau_drop: float | None = None
+    ridge_plateau_spread: float | None = None
+    ridge_plateau_relief_m: float = 600.0
+    ridge_volcano_rise: float | None = None
     flank_depth_saddle_k: int = 16
     keep_hill_ratio: float = 0.0
     cut_slope: float = 0.0

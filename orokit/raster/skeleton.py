@@ -191,6 +191,36 @@ def plateau_pieces(piece_saddle: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: n
     return np.asarray(np.median(ratio[j.reshape(piece_saddle.shape[0], -1)], axis=1) < float(max_drop))
 
 
+def spread_pieces(piece_saddle: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, max_spread: float,
+                  *, min_relief_m: float = 0.0, k: int = 16) -> np.ndarray:
+    """Pieces whose saddle lies in a field of level saddles under high peaks (volcanoes on a plateau). At every
+    saddle the spread of the ``k`` saddles nearest to it, (median - lowest) / local relief (highest of the ``k``
+    nearest peaks - that lowest, :func:`local_relief`); a piece is selected where the median of that spread over
+    the ``k`` saddles nearest to its saddle is at most ``max_spread`` and its saddle's local relief is at least
+    ``min_relief_m`` (a dune field's saddles are level too, under low peaks; a range's spread over its relief)."""
+    m = saddle_xyz.shape[0]
+    kk = min(int(k), m)
+    s_low, p_high, _ = local_relief(saddle_xyz[:, :2], peak_xyz, saddle_xyz, k=k)
+    stree = cKDTree(saddle_xyz[:, :2])
+    _, js = stree.query(saddle_xyz[:, :2], k=kk, workers=-1)
+    med = np.median(saddle_xyz[js.reshape(m, -1), 2], axis=1)
+    spread = (med - s_low) / np.maximum(p_high - s_low, 1.0)
+    _, j = stree.query(piece_saddle[:, :2], k=kk, workers=-1)
+    piece_spread = np.median(spread[j.reshape(piece_saddle.shape[0], -1)], axis=1)
+    ps_low, pp_high, _ = local_relief(piece_saddle[:, :2], peak_xyz, saddle_xyz, k=k)
+    return np.asarray((piece_spread <= float(max_spread)) & (pp_high - ps_low >= float(min_relief_m)))
+
+
+def volcano_pieces(piece_peak: np.ndarray, piece_saddle: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray,
+                   min_rise: float, *, k: int = 16) -> np.ndarray:
+    """Pieces that stand like a volcano over its plain: the peak's rise over the saddle minus the saddle's over
+    the lowest of the ``k`` saddles nearest to it, over the local relief (:func:`local_relief`), is at least
+    ``min_rise`` (the relief lies on the piece itself, its saddle at the local base level)."""
+    s_low, p_high, _ = local_relief(piece_saddle[:, :2], peak_xyz, saddle_xyz, k=k)
+    rise = (piece_peak[:, 2] - piece_saddle[:, 2]) - (piece_saddle[:, 2] - s_low)
+    return np.asarray(rise / np.maximum(p_high - s_low, 1.0) >= float(min_rise))
+
+
 def steep_ridge_profile(peak: np.ndarray, saddle: np.ndarray, max_slope: float, *, only: np.ndarray | None = None
                         ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
     """Weight of the saddle's elevation at ``t`` along each ridge piece (0 at the peak, 1 at the saddle;
@@ -267,8 +297,17 @@ def build_skeleton(
     seg_profile = None
     if params.ridge_max_slope is not None:
         only = None
-        if params.ridge_plateau_drop is not None and n < nodes.shape[0]:
-            only = plateau_pieces(nodes[ridges.node1], p, s, params.ridge_plateau_drop)
+        if n < nodes.shape[0]:
+            cuts = []
+            if params.ridge_plateau_drop is not None:
+                cuts.append(plateau_pieces(nodes[ridges.node1], p, s, params.ridge_plateau_drop))
+            if params.ridge_plateau_spread is not None:
+                cuts.append(spread_pieces(nodes[ridges.node1], p, s, params.ridge_plateau_spread,
+                                           min_relief_m=params.ridge_plateau_relief_m))
+            if params.ridge_volcano_rise is not None:
+                cuts.append(volcano_pieces(nodes[ridges.node0], nodes[ridges.node1], p, s, params.ridge_volcano_rise))
+            if cuts:
+                only = np.logical_and.reduce(cuts)
         seg_profile = steep_ridge_profile(nodes[ridges.node0], nodes[ridges.node1], params.ridge_max_slope,
                                           only=only)
     ridge_lines = refine_segments(nodes[:, :2], nodes[:, 2], np.column_stack([ridges.node0, ridges.node1]),
