@@ -171,6 +171,11 @@ class RenderParams:
     ridge_plateau_drop : ``ridge_max_slope`` applies only to the pieces whose saddle lies where the tree's base level
         stays level (:func:`orokit.raster.skeleton.plateau_pieces`: the median, over the 16 saddles nearest to it, of
         each saddle's (lowest of 16 - lowest of 64 nearest saddles) / local relief is below this); None = all pieces.
+    ridge_plateau_spread, ridge_plateau_relief_m : ``ridge_max_slope`` applies only to the pieces in a field of level
+        saddles under high peaks (volcanoes on a plateau; :func:`orokit.raster.skeleton.spread_pieces`): the median,
+        over the 16 saddles nearest to the piece's saddle, of each saddle's 16 nearest saddles' (median - lowest) /
+        local relief is at most ``ridge_plateau_spread``, and the local relief at the piece's saddle is at least
+        ``ridge_plateau_relief_m`` (a dune field's saddles are level too, under low domes); None = all pieces.
     smooth_m : Gaussian sigma (metres) that rounds the skeleton raster's planar facets and creases
         (the TIN carries no information below its meshing distance ``lam``), faded to 0 within
         ``texture_clearance_m`` of peaks and saddles; 0 = off.
@@ -252,7 +257,6 @@ class RenderParams:
     ridge_plateau_drop: float | None = None
     ridge_plateau_spread: float | None = None
     ridge_plateau_relief_m: float = 600.0
-    ridge_volcano_rise: float | None = None
     flank_depth_saddle_k: int = 16
     keep_hill_ratio: float = 0.0
     cut_slope: float = 0.0
@@ -316,6 +320,14 @@ class RenderParams:
             if self.ridge_max_slope is None:
                 raise InputError("ridge_plateau_drop selects the pieces ridge_max_slope applies to: set "
                                  "ridge_max_slope too (or leave ridge_plateau_drop None)")
+        if self.ridge_plateau_spread is not None:
+            if not float(self.ridge_plateau_spread) >= 0.0:  # NaN too
+                raise InputError(f"ridge_plateau_spread must be >= 0 or None, got {self.ridge_plateau_spread!r}")
+            if self.ridge_max_slope is None:
+                raise InputError("ridge_plateau_spread selects the pieces ridge_max_slope applies to: set "
+                                 "ridge_max_slope too (or leave ridge_plateau_spread None)")
+        if not float(self.ridge_plateau_relief_m) >= 0.0:
+            raise InputError(f"ridge_plateau_relief_m must be >= 0 metres, got {self.ridge_plateau_relief_m!r}")
         if self.flank_depth_saddle_ratio is not None and not float(self.flank_depth_saddle_ratio) >= 0.0:
             raise InputError(f"flank_depth_saddle_ratio must be >= 0 or None, got {self.flank_depth_saddle_ratio!r}")
         if not int(self.flank_depth_saddle_k) >= 1:

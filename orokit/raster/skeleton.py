@@ -211,16 +211,6 @@ def spread_pieces(piece_saddle: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np
     return np.asarray((piece_spread <= float(max_spread)) & (pp_high - ps_low >= float(min_relief_m)))
 
 
-def volcano_pieces(piece_peak: np.ndarray, piece_saddle: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray,
-                   min_rise: float, *, k: int = 16) -> np.ndarray:
-    """Pieces that stand like a volcano over its plain: the peak's rise over the saddle minus the saddle's over
-    the lowest of the ``k`` saddles nearest to it, over the local relief (:func:`local_relief`), is at least
-    ``min_rise`` (the relief lies on the piece itself, its saddle at the local base level)."""
-    s_low, p_high, _ = local_relief(piece_saddle[:, :2], peak_xyz, saddle_xyz, k=k)
-    rise = (piece_peak[:, 2] - piece_saddle[:, 2]) - (piece_saddle[:, 2] - s_low)
-    return np.asarray(rise / np.maximum(p_high - s_low, 1.0) >= float(min_rise))
-
-
 def steep_ridge_profile(peak: np.ndarray, saddle: np.ndarray, max_slope: float, *, only: np.ndarray | None = None
                         ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
     """Weight of the saddle's elevation at ``t`` along each ridge piece (0 at the peak, 1 at the saddle;
@@ -304,8 +294,6 @@ def build_skeleton(
             if params.ridge_plateau_spread is not None:
                 cuts.append(spread_pieces(nodes[ridges.node1], p, s, params.ridge_plateau_spread,
                                            min_relief_m=params.ridge_plateau_relief_m))
-            if params.ridge_volcano_rise is not None:
-                cuts.append(volcano_pieces(nodes[ridges.node0], nodes[ridges.node1], p, s, params.ridge_volcano_rise))
             if cuts:
                 only = np.logical_and.reduce(cuts)
         seg_profile = steep_ridge_profile(nodes[ridges.node0], nodes[ridges.node1], params.ridge_max_slope,

@@ -88,3 +88,75 @@ def test_ridge_plateau_drop_is_checked():
     with pytest.raises(InputError, match="set ridge_max_slope too"):
         RenderParams(ridge_plateau_drop=0.05)
     assert RenderParams(ridge_max_slope=0.8, ridge_plateau_drop=0.05).ridge_plateau_drop == 0.05
+
+
+def _field(rng, n, saddle_span, peak_lo, peak_hi, size=50000.0):
+    sxy = rng.uniform(0.0, size, (n, 2))
+    pxy = rng.uniform(0.0, size, (n, 2))
+    saddles = np.column_stack([sxy, 4000.0 + rng.uniform(0.0, saddle_span, n)])
+    peaks = np.column_stack([pxy, 4000.0 + rng.uniform(peak_lo, peak_hi, n)])
+    return peaks, saddles
+
+
+def test_spread_pieces_select_volcanoes_on_a_plain_not_dunes_nor_ranges():
+    """Level saddles under peaks 0.2-1.5 km higher (volcanoes on a plateau): every piece; the same field 20-150 m
+    high (a dune field, relief under the bound): none; saddles spread over the whole relief (a range): few."""
+    from orokit.raster.skeleton import spread_pieces
+
+    rng = np.random.default_rng(2)
+    peaks, saddles = _field(rng, 300, 20.0, 200.0, 1500.0)
+    assert spread_pieces(saddles, peaks, saddles, 0.25, min_relief_m=300.0).all()
+    dunes_p, dunes_s = _field(rng, 300, 5.0, 20.0, 150.0)
+    assert spread_pieces(dunes_s, dunes_p, dunes_s, 0.25).all()  # level saddles ...
+    assert not spread_pieces(dunes_s, dunes_p, dunes_s, 0.25, min_relief_m=300.0).any()  # ... under low domes
+    range_p, range_s = _field(rng, 300, 2000.0, 1500.0, 2500.0)
+    assert spread_pieces(range_s, range_p, range_s, 0.25, min_relief_m=300.0).mean() < 0.05
+
+
+def test_spread_pieces_follow_the_tree_piece_by_piece():
+    """Volcanoes on a plain in the west half and a range in the east half of one tree: the cut selects the west's
+    pieces, not the east's (a per-piece quantity, not one value per tree); brute force over all pairs."""
+    from orokit.raster.skeleton import spread_pieces
+
+    rng = np.random.default_rng(3)
+    vp, vs = _field(rng, 400, 20.0, 200.0, 1500.0)
+    rp, rs = _field(rng, 400, 2000.0, 1500.0, 2500.0)
+    vp[:, 0] *= 0.5
+    vs[:, 0] *= 0.5
+    rp[:, 0] = 50000.0 + 0.5 * rp[:, 0]
+    rs[:, 0] = 50000.0 + 0.5 * rs[:, 0]
+    peaks, saddles = np.concatenate([vp, rp]), np.concatenate([vs, rs])
+    sel = spread_pieces(saddles, peaks, saddles, 0.25, min_relief_m=300.0)
+    # brute force: nearest 16 by full distance matrices
+    ds = np.hypot(*(saddles[:, None, :2] - saddles[None, :, :2]).transpose(2, 0, 1))
+    dp = np.hypot(*(saddles[:, None, :2] - peaks[None, :, :2]).transpose(2, 0, 1))
+    ns = np.argsort(ds, axis=1)[:, :16]
+    low = saddles[ns, 2].min(axis=1)
+    relief = peaks[np.argsort(dp, axis=1)[:, :16], 2].max(axis=1) - low
+    spread = (np.median(saddles[ns, 2], axis=1) - low) / np.maximum(relief, 1.0)
+    expect = (np.median(spread[ns], axis=1) <= 0.25) & (relief >= 300.0)
+    np.testing.assert_array_equal(sel, expect)
+    west = saddles[:, 0] < 20000.0
+    east = saddles[:, 0] > 60000.0
+    assert sel[west].mean() > 0.95 and sel[east].mean() < 0.1
+
+
+def test_ridge_plateau_spread_bounds_only_the_selected_pieces():
+    """The small tree's saddles lie within 0.21 of its 600-m relief: with the cut at 0.25 every piece is
+    selected (the crests of ``ridge_max_slope`` alone); with a relief bound above 600 m none is (straight crests)."""
+    kw = {"extent": (0.0, 0.0, 8000.0, 8000.0), "rng": 3}
+    plain = build_skeleton(small_tree(), params=RenderParams(lam=200.0), **kw)
+    steep = build_skeleton(small_tree(), params=RenderParams(lam=200.0, ridge_max_slope=0.8), **kw)
+    both = build_skeleton(small_tree(), params=RenderParams(lam=200.0, ridge_max_slope=0.8, ridge_plateau_spread=0.25,
+                                                            ridge_plateau_relief_m=300.0), **kw)
+    none = build_skeleton(small_tree(), params=RenderParams(lam=200.0, ridge_max_slope=0.8, ridge_plateau_spread=0.25,
+                                                            ridge_plateau_relief_m=700.0), **kw)
+    np.testing.assert_array_equal(both.ridges.z, steep.ridges.z)
+    np.testing.assert_array_equal(none.ridges.z, plain.ridges.z)
+    assert (steep.ridges.z < plain.ridges.z - 100.0).any()
+    for bad in ({"ridge_plateau_spread": -0.1}, {"ridge_plateau_spread": float("nan")},
+                {"ridge_plateau_relief_m": -1.0}):
+        with pytest.raises(InputError, match=next(iter(bad))):
+            RenderParams(ridge_max_slope=0.8, **bad)
+    with pytest.raises(InputError, match="set ridge_max_slope too"):
+        RenderParams(ridge_plateau_spread=0.25)
