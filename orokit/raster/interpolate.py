@@ -79,6 +79,7 @@ def sample_elevation(
     tree: cKDTree | None = None,
     border_distance: np.ndarray | None = None,
     beyond_slope: float | None = None,
+    river_blend_k: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elevation of ``points`` from the nearest ridge point q and river point r.
 
@@ -104,6 +105,9 @@ def sample_elevation(
     ridge point lies at ``h(r) - beyond_slope * (d(p, R) - w)``: past the last river toward the border the
     paper's interpolation climbs again (``a`` tends to 1/2) into hills with no tree peak, which the orometry
     enforcement then cuts into flat shelves; the ground now falls away to the border instead.
+    With ``river_blend_k`` (>= 2) a hillslope point (``d(p, R) >= w``) takes ``h(r)`` as the inverse-square-distance
+    mean of its ``river_blend_k`` nearest river points: the nearest river point's elevation jumps where a high
+    tributary's points give way to a deep trunk's (across a hillslope, not on a ridge), which the TIN makes a cliff.
     Returns ``(h, d_ridge, d_river)``.
     """
     tree = tree if tree is not None else cKDTree(ridge_xy)
@@ -119,9 +123,19 @@ def sample_elevation(
                 dT[tie], iq[tie] = tree.query(points[tie], workers=-1)
     else:
         dT, iq = tree.query(points, workers=-1)  # both cores; same answers
-    dR, ir = cKDTree(river_xy).query(points, workers=-1)
+    if river_blend_k is not None and int(river_blend_k) >= 2 and river_xy.shape[0] >= 2:
+        kb = min(int(river_blend_k), river_xy.shape[0])
+        dk, jk = cKDTree(river_xy).query(points, k=kb, workers=-1)
+        dR, ir = dk[:, 0].copy(), jk[:, 0].copy()
+        wk = 1.0 / np.maximum(dk, 1.0) ** 2
+        hr_blend = np.sum(wk * river_z[jk], axis=1) / np.sum(wk, axis=1)
+    else:
+        dR, ir = cKDTree(river_xy).query(points, workers=-1)
+        hr_blend = None
     w = river_w[ir]
     hq, hr = ridge_z[iq], river_z[ir]
+    if hr_blend is not None:
+        hr = np.where(dR < w, hr, hr_blend)
     if valley_floor_slope > 0:
         hr = hr + float(valley_floor_slope) * np.minimum(dR, w)
     denom = np.maximum(dR + dT - w, 1e-9)

@@ -79,6 +79,10 @@ class RenderParams:
         least at this slope (m/m; :func:`orokit.raster.interpolate.sample_elevation`).
     valley_floor_slope : the valley floor rises from the bed at this slope (m/m) across its width
         instead of lying flat at the bed (:func:`orokit.raster.interpolate.sample_elevation`); 0 = flat.
+    river_blend_k : the hillslope's foot is the inverse-square-distance mean of this many nearest river points
+        instead of the nearest one's bed (:func:`orokit.raster.interpolate.sample_elevation`): where a high
+        tributary's points give way to a deep trunk's across a hillslope the nearest bed jumps by hundreds of
+        metres and the TIN makes a cliff (session 17: 83 % of annapurna's > 60-deg cells); None = the nearest.
     min_prominence_m : eps of the orometry to keep; noise amplitude is ``noise_ratio * eps``.
     noise_ratio : amplitude of the paper's multi-fractal value noise as a fraction of eps (< 0.5 so no new
         peak reaches eps); 0 (off) since session 8: it changed no landform statistic (<= 6 % band power,
@@ -229,6 +233,7 @@ class RenderParams:
     floor_relief_ratio: float = 0.0
     floor_slope: float = 0.05
     valley_floor_slope: float = 0.0
+    river_blend_k: int | None = None
     min_prominence_m: float = 30.0
     noise_ratio: float = 0.0
     uplift_radius: float = 1500.0
@@ -326,6 +331,8 @@ class RenderParams:
             if self.ridge_max_slope is None:
                 raise InputError("ridge_plateau_spread selects the pieces ridge_max_slope applies to: set "
                                  "ridge_max_slope too (or leave ridge_plateau_spread None)")
+        if self.river_blend_k is not None and not int(self.river_blend_k) >= 2:
+            raise InputError(f"river_blend_k must be >= 2 or None, got {self.river_blend_k!r}")
         if not float(self.ridge_plateau_relief_m) >= 0.0:
             raise InputError(f"ridge_plateau_relief_m must be >= 0 metres, got {self.ridge_plateau_relief_m!r}")
         if self.flank_depth_saddle_ratio is not None and not float(self.flank_depth_saddle_ratio) >= 0.0:

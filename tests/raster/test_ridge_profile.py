@@ -160,3 +160,34 @@ def test_ridge_plateau_spread_bounds_only_the_selected_pieces():
             RenderParams(ridge_max_slope=0.8, **bad)
     with pytest.raises(InputError, match="set ridge_max_slope too"):
         RenderParams(ridge_plateau_spread=0.25)
+
+
+def test_river_blend_k_removes_the_step_where_the_nearest_river_changes():
+    """Two straight rivers 1 km apart in elevation, a ridge far off: with the nearest bed the hillslope points
+    step by ~alpha x 1 km where the nearer river changes; the blend of the 64 nearest steps by < 10 % of that, equal
+    to the nearest bed's where one river is far, and ``river_blend_k`` None keeps the old elevations exactly."""
+    from orokit.raster.interpolate import sample_elevation
+
+    t = np.arange(0.0, 10000.0, 50.0)
+    low = np.column_stack([t, np.zeros_like(t)])           # trunk along y = 0 at 1000 m
+    high = np.column_stack([t, np.full_like(t, 2000.0)])   # tributary along y = 2000 at 2000 m
+    rxy = np.concatenate([low, high])
+    rz = np.concatenate([np.full(t.size, 1000.0), np.full(t.size, 2000.0)])
+    rw = np.full(rxy.shape[0], 10.0)
+    ridge = np.array([[5000.0, 20000.0]])
+    ridge_z = np.array([4000.0])
+    y = np.arange(800.0, 1200.0, 5.0)
+    pts = np.column_stack([np.full_like(y, 5000.0), y])
+    near, _, _ = sample_elevation(pts, ridge, ridge_z, rxy, rz, rw)
+    blend, _, _ = sample_elevation(pts, ridge, ridge_z, rxy, rz, rw, river_blend_k=64)
+    step_near, step_blend = np.abs(np.diff(near)).max(), np.abs(np.diff(blend)).max()
+    assert step_near > 100.0  # the step at y = 1000
+    assert step_blend < 0.1 * step_near  # what is left: points entering the 64 nearest
+    again, _, _ = sample_elevation(pts, ridge, ridge_z, rxy, rz, rw, river_blend_k=None)
+    np.testing.assert_array_equal(again, near)
+    far = np.array([[5000.0, 30.0]])  # beside the trunk, the tributary 2 km off: weights ~ 1/d^2
+    a, _, _ = sample_elevation(far, ridge, ridge_z, rxy, rz, rw)
+    b, _, _ = sample_elevation(far, ridge, ridge_z, rxy, rz, rw, river_blend_k=64)
+    assert abs(a[0] - b[0]) < 5.0
+    with pytest.raises(InputError, match="river_blend_k"):
+        RenderParams(river_blend_k=1)
