@@ -88,8 +88,10 @@ def _blocked_targets(want: np.ndarray, cost_fn, block_size: int, rng: np.random.
 
 
 def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTargets, rng, block_size, keep_keys=0,
-             floor=None):
+             floor=None, level=None, level_weight=0.0):
     """One OT assignment (dominance or prominence); returns new saddle elevations.
+
+    With ``level`` (per ridge, m) the cost also holds ``level_weight * (new saddle - level)^2 / |AB|``.
 
     Large problems are split into random row blocks, each receiving a stratified
     sub-sample of the sorted targets and solved exactly with ``ot.emd`` (see
@@ -118,6 +120,8 @@ def _ot_step(kind, pz, a, b, sz, hmax, ridge_len, movable, targets: SaddleTarget
             e = e_all[blk]
             new_h = sz[e][:, None] - delta
             cost = delta**2 / ridge_len[e][:, None]
+            if level is not None:
+                cost = cost + level_weight * (new_h - level[e][:, None]) ** 2 / ridge_len[e][:, None]
             bad = (new_h < floor[e][:, None]) | (new_h > hmax[e][:, None])
             if bad.all():
                 return np.zeros_like(cost)
@@ -181,6 +185,8 @@ def assign_saddle_elevations(
     restarts: int = 3,
     block_size: int = 300,
     max_ridge_slope: float | None = None,
+    level_weight: float = 0.0,
+    level_k: int = 16,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, dict]:
     """Alternate dominance and prominence OT assignments until the errors are stable.
@@ -203,6 +209,10 @@ def assign_saddle_elevations(
         (both ends' drops to the saddle over the ridge's length): a saddle is never
         lowered below ``(h_a + h_b - max_ridge_slope |AB|) / 2`` (nor below 0), so a
         deep saddle needs a long ridge (the OT treats targets beyond it as infeasible).
+    level_weight : > 0 adds ``level_weight * (s - m)^2 / |AB|`` to the OT cost, ``m`` the median of the
+        current saddles of the ``level_k`` ridges nearest to the ridge's midpoint (:func:`saddle_level`):
+        the targets go to the peaks that stand as far above their neighbours' saddles, so nearby saddles
+        lie at one level (a dome field on a plain) without changing the histograms (0: the paper's cost).
 
     Returns
     -------
@@ -216,6 +226,16 @@ def assign_saddle_elevations(
     floor = np.zeros(a.size)
     if max_ridge_slope is not None:
         floor = np.clip(0.5 * (pz[a] + pz[b] - float(max_ridge_slope) * ridge_len), 0.0, hmax)
+    near = None
+    if level_weight > 0 and a.size > 1:
+        from scipy.spatial import cKDTree
+
+        mid = np.column_stack([0.5 * (px[a] + px[b]), 0.5 * (py[a] + py[b])])
+        near = cKDTree(mid).query(mid, k=min(int(level_k), a.size))[1].reshape(a.size, -1)
+
+    def lvl(s):
+        return None if near is None else np.median(s[near], axis=1)
+
     best = sz.copy()
     best_err = max(max_bin_errors(pz, a, b, sz, targets))
     history = []
@@ -226,9 +246,9 @@ def assign_saddle_elevations(
         if it <= restarts:
             sz = start  # the first rounds all start from the initial saddles (restarts)
         sz = _ot_step("dominance", pz, a, b, sz, hmax, ridge_len, movable, targets, rng, block_size,
-                      keep_keys if it > restarts else 0, floor)
+                      keep_keys if it > restarts else 0, floor, lvl(sz), level_weight)
         sz = _ot_step("prominence", pz, a, b, sz, hmax, ridge_len, movable, targets, rng, block_size,
-                      keep_keys if it > restarts else 0, floor)
+                      keep_keys if it > restarts else 0, floor, lvl(sz), level_weight)
         errs = max_bin_errors(pz, a, b, sz, targets)
         history.append([round(errs[0], 5), round(errs[1], 5)])
         logger.debug("saddle OT round %d: max bin error dominance %.4f, prominence %.4f", it, *errs)

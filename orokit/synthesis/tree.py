@@ -221,6 +221,7 @@ class SynthesisParams:
     ridge_slope_factor: float = 1.0
     fine_needs_reach: bool = False
     gradient_tail: float | None = 2.0
+    saddle_level_weight: float = 0.0
 
     def __post_init__(self) -> None:
         if self.use_bands not in ("auto", True, False):
@@ -242,7 +243,7 @@ class SynthesisParams:
         f = self.ridge_slope_factor
         if not (isinstance(f, (int, float)) and 0 < float(f) < np.inf):
             raise InputError(f"ridge_slope_factor must be a number > 0, got {f!r}")
-        for name in ("void_weight", "disk_weight", "disk_count_weight"):
+        for name in ("void_weight", "disk_weight", "disk_count_weight", "saddle_level_weight"):
             v = getattr(self, name)
             try:
                 ok = bool(np.isfinite(float(v)) and float(v) >= 0)
@@ -693,7 +694,8 @@ def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray
     for mode in modes:
         cand, info = assign_saddle_elevations(z, px, py, a, b, sz0, _saddle_targets(types, ptype, z, mode),
                                               movable=movable, max_iterations=p.max_ot_iterations,
-                                              max_ridge_slope=max_ridge_slope, rng=rng)
+                                              max_ridge_slope=max_ridge_slope,
+                                              level_weight=float(p.saddle_level_weight), rng=rng)
         cand, below_c = enforce_min_prominence(z, a, b, cand, eps)
         score = max(max_bin_errors(z, a, b, cand, marginal))
         logger.debug("saddle targets %s: worst max-bin error %.4f", "per band" if mode else "marginal", score)
