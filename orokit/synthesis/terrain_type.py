@@ -229,6 +229,12 @@ class TerrainType:
         Synthesis never lowers a saddle below it (issue 11: the twins had short ridges with deep
         saddles, twice the real trees' 99th percentile in steep regions, the renders' curvature
         tails). Edits of any histogram but the directions, or of the density, drop it.
+    saddle_level : :func:`orokit.synthesis.saddles.saddle_level` of the source tree: how far its nearby
+        saddles lie from one level, over the local relief (dimensionless; None: not recorded). With
+        ``follow_saddle_level`` synthesis weights a level term of its saddle OT until the tree's value is
+        no higher (issue 11, session 17: the OT's saddles scattered around the peaks' levels, a dome field's
+        twin 0.21 against the real 0.08, and the renders sank their low ground). An elevation shift keeps it;
+        other edits of a linear histogram, or of the density, drop it.
     """
 
     name: str
@@ -247,6 +253,7 @@ class TerrainType:
     ridge_contrast: float | None = None
     neighbour_gradient: float | None = None
     max_ridge_slope: float | None = None
+    saddle_level: float | None = None
 
     def __post_init__(self) -> None:
         missing = set(FEATURES) - set(self.histograms)
@@ -293,6 +300,14 @@ class TerrainType:
                 if not (np.isfinite(c) and c >= 0):
                     raise SchemaError(f"{name} must be a finite number >= 0 (m/m) or None, got {v!r}")
                 object.__setattr__(self, name, c)
+        if self.saddle_level is not None:
+            try:
+                c = float(self.saddle_level)
+            except (TypeError, ValueError):
+                c = float("nan")
+            if not (np.isfinite(c) and 0 <= c <= 1):
+                raise SchemaError(f"saddle_level must be a number in [0, 1] or None, got {self.saddle_level!r}")
+            object.__setattr__(self, "saddle_level", c)
         if self.disks is not None:
             from orokit.synthesis.disks import check_disk_quantiles
 
@@ -415,6 +430,7 @@ class TerrainType:
             rho = estimate_rho(tree, min_prominence_m) if tree is not None else 1.0
         contrast = tree_ridge_contrast(tree, min_prominence_m) if tree is not None else None
         ridge_slope = tree_max_ridge_slope(tree, min_prominence_m) if tree is not None else None
+        level = tree_saddle_level(tree, min_prominence_m) if tree is not None else None
         prov = {
             "area_km2": float(area_km2),
             "n_peaks": int(len(p)),
@@ -428,7 +444,7 @@ class TerrainType:
                    isolation_basis, prov, bands, source_crs=src_crs, source_center=center,
                    disks=_disk_record(x, y, z, prom, crs, extent, min_prominence_m), gradient=gradient,
                    ridge_contrast=contrast, neighbour_gradient=_neighbour_gradient(*planar_xy(x, y, crs), z),
-                   max_ridge_slope=ridge_slope)
+                   max_ridge_slope=ridge_slope, saddle_level=level)
 
     @classmethod
     def from_divide_tree(cls, tree: Any, *, area_km2: float, min_prominence_m: float = 30.0,
@@ -561,11 +577,12 @@ class TerrainType:
         keep_slope = FEATURES[feature][1] != "linear"  # only the direction histograms leave it as it is
         return {"gradient": None if drop_gradient else self.gradient,
                 "neighbour_gradient": None if drop_gradient else self.neighbour_gradient,
-                "max_ridge_slope": self.max_ridge_slope if keep_slope else None}
+                "max_ridge_slope": self.max_ridge_slope if keep_slope else None,
+                "saddle_level": self.saddle_level if keep_slope else None}
 
     def with_density(self, peak_density_per_km2: float) -> "TerrainType":
         return self._edited(f"density {peak_density_per_km2:g}", peak_density_per_km2=float(peak_density_per_km2),
-                            neighbour_gradient=None, max_ridge_slope=None)
+                            neighbour_gradient=None, max_ridge_slope=None, saddle_level=None)
 
     def with_rho(self, rho: float) -> "TerrainType":
         return self._edited(f"rho {rho:g}", rho=float(rho))
@@ -592,6 +609,7 @@ class TerrainType:
             "ridge_contrast": self.ridge_contrast,
             "neighbour_gradient": self.neighbour_gradient,
             "max_ridge_slope": self.max_ridge_slope,
+            "saddle_level": self.saddle_level,
         }
 
     @classmethod
@@ -618,7 +636,8 @@ class TerrainType:
                            tuple(float(e) for e in data["gradient"]["edges"]), tuple(data["gradient"]["counts"]),
                            bool(data["gradient"].get("open_last", False))),
                        ridge_contrast=data.get("ridge_contrast"),
-                       neighbour_gradient=data.get("neighbour_gradient"), max_ridge_slope=data.get("max_ridge_slope"))
+                       neighbour_gradient=data.get("neighbour_gradient"), max_ridge_slope=data.get("max_ridge_slope"),
+                       saddle_level=data.get("saddle_level"))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, SchemaError):
                 raise
@@ -782,6 +801,22 @@ def tree_max_ridge_slope(tree: Any, min_prominence_m: float = 30.0, quantile: fl
         return None
     v = float(np.quantile((z[a] + z[b] - 2 * s)[ok] / length[ok], quantile))
     return v if np.isfinite(v) and v >= 0 else None
+
+
+def tree_saddle_level(tree: Any, min_prominence_m: float = 30.0, k: int = 16) -> float | None:
+    """:func:`orokit.synthesis.saddles.saddle_level` of a Divide Tree pruned at ``min_prominence_m`` (planar
+    metres; None below 4 peaks or when undefined)."""
+    from orokit.synthesis.orometry import planar_xy
+    from orokit.synthesis.saddles import saddle_level
+
+    tree = tree.prune(min_prominence_m) if min_prominence_m > 0 else tree
+    if tree.n_peaks < 4:
+        return None
+    x, y = planar_xy(tree.peaks["x"].to_numpy(float), tree.peaks["y"].to_numpy(float), tree.crs)
+    s = tree.saddles["elevation"].to_numpy(float)[tree.edges["saddle"].to_numpy(np.int64)]
+    v = saddle_level(tree.peaks["elevation"].to_numpy(float), x, y, tree.edges["peak_a"].to_numpy(np.int64),
+                     tree.edges["peak_b"].to_numpy(np.int64), s, k=k)
+    return v if np.isfinite(v) and 0 <= v <= 1 else None
 
 
 def _neighbour_gradient(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> float | None:

@@ -187,6 +187,13 @@ class SynthesisParams:
         explain: gobi and sahara, where the largest weight only bent the elevation distribution,
         gobi's hypsometry distance 0.022 -> 0.082 at weight 3; session 11). False: the closer of the
         last two weights, as before.
+    saddle_level_weight : weight w of a level term in the saddle OT's cost, ``w (s - m)^2 / |AB|`` with ``m`` the
+        median of the saddles of the 16 nearest ridges (:func:`orokit.synthesis.saddles.assign_saddle_elevations`):
+        the prominence targets go to the peaks standing as far above their neighbours' saddles (0: the paper's cost).
+    follow_saddle_level : the level term's weight is the first of :data:`SADDLE_LEVEL_WEIGHTS` (from
+        ``saddle_level_weight``) whose tree has :func:`~orokit.synthesis.saddles.saddle_level` no higher than the
+        type's ``saddle_level``, or the one before it if that came closer (off for a type without it or with several types). An option, off (issue 11,
+        session 17: see NOTES).
     Measured for ``follow_gradient`` and the 4 km ``auto_elevation_m`` (``benchmarks/realism.py
     --twin-only``, 13 regions, seeds 0-2, session 7, load 6-9): twins' disks classified as their own
     region at least as often as the real disks under the spatial hold-out in 10, 9, 10 of 12 regions
@@ -222,12 +229,13 @@ class SynthesisParams:
     fine_needs_reach: bool = False
     gradient_tail: float | None = 2.0
     saddle_level_weight: float = 0.0
+    follow_saddle_level: bool = False
 
     def __post_init__(self) -> None:
         if self.use_bands not in ("auto", True, False):
             raise InputError(f"use_bands must be 'auto', True or False, got {self.use_bands!r}")
         for name in ("border_trend", "border_density", "follow_gradient", "follow_ridge_contrast", "follow_ridge_slope",
-                     "follow_neighbour_gradient", "fine_needs_reach"):
+                     "follow_neighbour_gradient", "fine_needs_reach", "follow_saddle_level"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise InputError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.saddle_placement not in ("targeted", "paper"):
@@ -444,8 +452,30 @@ def synthesize_divide_tree(
     slope_cap = _ridge_slope_target(types) if p.follow_ridge_slope else None
     if slope_cap is not None:
         slope_cap *= float(p.ridge_slope_factor)
-    sz, ot_info, below, band_mode = _saddle_elevations(types, peaks, px, py, a, b, sz, movable, eps, p, rng,
-                                                       slope_cap)
+    level_target = types[0].saddle_level if p.follow_saddle_level and len(types) == 1 else None
+    weights = [float(p.saddle_level_weight)]
+    if level_target is not None:
+        weights += [w for w in SADDLE_LEVEL_WEIGHTS if w > weights[0]]
+    level_fit: dict[str, Any] | None = None
+    state = rng.bit_generator.state
+    tried: list[tuple[float, float, Any, Any]] = []
+    for w in weights:
+        rng.bit_generator.state = state  # every weight tried from the same draws
+        out = _saddle_elevations(types, peaks, px, py, a, b, sz, movable, eps, p, rng, slope_cap, w)
+        if level_target is None:
+            break
+        from orokit.synthesis.saddles import saddle_level
+
+        got = saddle_level(peaks.z, px, py, a, b, out[0])
+        tried.append((abs(got - float(level_target)), got, out, rng.bit_generator.state))
+        if got <= level_target:
+            break
+    if tried and level_target is not None:  # the closer of the last two weights tried
+        _, got, out, after = min(tried[-2:], key=lambda t: t[0])
+        rng.bit_generator.state = after
+        level_fit = {"target": round(float(level_target), 4), "reached": round(got, 4),
+                     "weight": weights[[t[2] is out for t in tried].index(True)]}
+    sz, ot_info, below, band_mode = out
     timings["saddle_elevations"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
@@ -485,12 +515,16 @@ def synthesize_divide_tree(
             "ridge_contrast": contrast,
             "neighbour_gradient": fine_fit,
             "max_ridge_slope": slope_cap,
+            "saddle_level": level_fit,
         },
     )
     logger.info("synthesized %d peaks, %d ridges in %.2f s (OT rounds %d)", tree.n_peaks, a.size,
                 timings["total"], ot_info["iterations"])
     return tree
 
+
+#: weights of the saddle OT's level term tried, in order, by ``follow_saddle_level``
+SADDLE_LEVEL_WEIGHTS: tuple[float, ...] = (0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 
 #: weights of the ~1 km component of the automatic C_H tried, in order, by ``follow_neighbour_gradient``
 FINE_WEIGHTS: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
@@ -682,7 +716,7 @@ def _ridges(px: np.ndarray, py: np.ndarray, peaks: _PeakSet, fragment: DivideTre
 
 def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray, py: np.ndarray, a: np.ndarray,
                        b: np.ndarray, sz0: np.ndarray, movable: np.ndarray, eps: float, p: SynthesisParams,
-                       rng: np.random.Generator, max_ridge_slope: float | None = None):
+                       rng: np.random.Generator, max_ridge_slope: float | None = None, level_weight: float = 0.0):
     """OT saddle elevations; with use_bands="auto", the target set that matches the type's marginals better."""
     from orokit.synthesis.saddles import assign_saddle_elevations, enforce_min_prominence, max_bin_errors
 
@@ -695,7 +729,7 @@ def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray
         cand, info = assign_saddle_elevations(z, px, py, a, b, sz0, _saddle_targets(types, ptype, z, mode),
                                               movable=movable, max_iterations=p.max_ot_iterations,
                                               max_ridge_slope=max_ridge_slope,
-                                              level_weight=float(p.saddle_level_weight), rng=rng)
+                                              level_weight=level_weight, rng=rng)
         cand, below_c = enforce_min_prominence(z, a, b, cand, eps)
         score = max(max_bin_errors(z, a, b, cand, marginal))
         logger.debug("saddle targets %s: worst max-bin error %.4f", "per band" if mode else "marginal", score)
