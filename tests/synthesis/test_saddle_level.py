@@ -3,12 +3,15 @@ dominance targets go to the peaks that stand as far above their neighbours' sadd
 lie nearer one level; the histograms are the same draws. Spreads are re-measured here by brute force."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from orokit.errors import InputError
+from orokit.errors import InputError, SchemaError
 from orokit.synthesis.ridges import delaunay_mst
 from orokit.synthesis.saddles import SaddleTargets, assign_saddle_elevations, max_bin_errors
+from orokit.synthesis.terrain_type import TerrainType
 from orokit.synthesis.tree import SynthesisParams, synthesize_divide_tree
 
 
@@ -63,3 +66,57 @@ def test_synthesis_option(small_type):
     assert not np.array_equal(off.saddles["elevation"].to_numpy(), on.saddles["elevation"].to_numpy())
     with pytest.raises(InputError, match="saddle_level_weight"):
         SynthesisParams(saddle_level_weight=-1.0)
+
+
+def _level_by_hand(tree, k: int = 16) -> float:
+    """saddle_level by brute force: median over ridges of (median - lowest) / (highest end - lowest), k nearest."""
+    x, y, z = (tree.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
+    a, b = tree.edges["peak_a"].to_numpy(), tree.edges["peak_b"].to_numpy()
+    s = tree.saddles["elevation"].to_numpy(float)[tree.edges["saddle"].to_numpy()]
+    mx, my = 0.5 * (x[a] + x[b]), 0.5 * (y[a] + y[b])
+    d = np.hypot(mx[:, None] - mx[None, :], my[:, None] - my[None, :])
+    near = np.argsort(d, axis=1, kind="stable")[:, :k]
+    top = np.maximum(z[a], z[b])[near].max(axis=1)
+    lo = s[near].min(axis=1)
+    return float(np.median((np.median(s[near], axis=1) - lo) / (top - lo)))
+
+
+@pytest.fixture(scope="module")
+def level_type(small_type):
+    tree = synthesize_divide_tree(small_type, size_m=30_000.0, rng=2)
+    return tree, TerrainType.from_divide_tree(tree, area_km2=900.0, min_prominence_m=30.0)
+
+
+def test_type_records_saddle_level(level_type):
+    tree, t = level_type
+    assert t.saddle_level == pytest.approx(_level_by_hand(tree.prune(30.0)))
+    back = TerrainType.from_dict(t.to_dict())
+    assert back.saddle_level == t.saddle_level
+    old = t.to_dict()
+    del old["saddle_level"]  # a type written before session 17
+    assert TerrainType.from_dict(old).saddle_level is None
+    with pytest.raises(SchemaError, match="saddle_level"):
+        dataclasses.replace(t, saddle_level=1.5)
+    assert t.shifted("elevation", 300.0).saddle_level == t.saddle_level
+    assert t.scaled("prominence", 1.5).saddle_level is None and t.with_density(0.5).saddle_level is None
+
+
+def test_synthesis_follows_the_saddle_level(level_type):
+    _, t = level_type
+    free = synthesize_divide_tree(t, size_m=30_000.0, rng=3)
+    got = _level_by_hand(free)
+    # a type asking for saddles nearer one level than the free tree has
+    target = 0.6 * got
+    on = SynthesisParams(follow_saddle_level=True)
+    fitted = synthesize_divide_tree(dataclasses.replace(t, saddle_level=target), size_m=30_000.0, rng=3, params=on)
+    fit = fitted.attrs["saddle_level"]
+    assert fit["weight"] > 0 and fit["reached"] == pytest.approx(_level_by_hand(fitted), abs=1e-4)
+    assert abs(_level_by_hand(fitted) - target) < abs(got - target)
+    assert fitted.peaks.equals(free.peaks)
+    # a type already as level as the free tree: weight 0, the same tree as without the option
+    easy = synthesize_divide_tree(dataclasses.replace(t, saddle_level=min(1.0, 1.5 * got)), size_m=30_000.0, rng=3,
+                                  params=on)
+    assert easy.attrs["saddle_level"]["weight"] == 0 and easy.saddles.equals(free.saddles)
+    # without the record: off
+    none = synthesize_divide_tree(dataclasses.replace(t, saddle_level=None), size_m=30_000.0, rng=3, params=on)
+    assert none.attrs["saddle_level"] is None and none.saddles.equals(free.saddles)
