@@ -464,6 +464,8 @@ def load_kernels(*, isolation: bool = True) -> None:
     _kernels.first_ancestor_above(line_parent, np.zeros(3), rank)
     ea.flags.writeable = eb.flags.writeable = False
     _kernels.forest_components(3, ea, eb)
+    # the finalize's sort on two threads (its merge: a tiny raster's edges are sorted whole)
+    _kernels.merge_sorted_halves(np.array([2, 1], np.uint64), np.zeros(1, np.int64), np.zeros(1, np.int64), 1)
     if not isolation:
         return
     metric = KernelMetric.from_grid(Affine(1.0, 0.0, 0.0, 0.0, -1.0, 0.0), None)

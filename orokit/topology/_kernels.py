@@ -595,6 +595,39 @@ def radix_argsort(key):
 
 
 @njit(cache=True, nogil=True)
+def merge_sorted_halves(key, first, second, h):
+    """The stable argsort of ``key`` from its two halves ``key[:h]`` and ``key[h:]``, each sorted in place with
+    ``first`` and ``second`` its stable argsort (:func:`radix_argsort`; ``second`` counts from ``h``); ``key``
+    merged in place (a copy of its first half held meanwhile). Equal keys: the first half's first."""
+    n = key.size
+    a = key[:h].copy()
+    order = np.empty(n, np.int64)
+    i = 0
+    j = h
+    k = 0
+    while i < h and j < n:  # k = i + j - h < j: no key of the second half is written over before it is read
+        if key[j] < a[i]:
+            key[k] = key[j]
+            order[k] = second[j - h] + h
+            j += 1
+        else:
+            key[k] = a[i]
+            order[k] = first[i]
+            i += 1
+        k += 1
+    while i < h:
+        key[k] = a[i]
+        order[k] = first[i]
+        i += 1
+        k += 1
+    while j < n:  # the second half's rest is in place already
+        order[k] = second[j - h] + h
+        j += 1
+        k += 1
+    return order
+
+
+@njit(cache=True, nogil=True)
 def sort_saddle_ties(order, key, ea, eb, in_order=False):
     """Within each run of equal ``key[order]`` (edges of one saddle cell), ``order`` rearranged in place
     by ``(ea, eb)``, then by index (a stable lexsort's order); ``ea``, ``eb`` in ``[0, 2**31)``.

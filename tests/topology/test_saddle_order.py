@@ -88,3 +88,40 @@ def test_radix_argsort_is_a_stable_argsort_and_sorts_the_keys():
         got = radix_argsort(sorted_key)
         np.testing.assert_array_equal(got, want, err_msg=f"case {t}")
         np.testing.assert_array_equal(sorted_key, key[want])
+
+
+def test_merge_sorted_halves_is_the_stable_argsort():
+    """Two halves, each radix-sorted, merged: the whole key's stable argsort, the key sorted in place
+    (repeats within and across the halves, halves of sizes 0 and 1)."""
+    from orokit.topology._kernels import merge_sorted_halves, radix_argsort
+
+    rng = np.random.default_rng(3)
+    for t in range(80):
+        m = [0, 1, 2, 3][t] if t < 4 else int(rng.integers(4, 3000))
+        key = rng.integers(0, [5, 2**40, 2**63][t % 3], m, dtype=np.uint64)
+        h = m // 2 if t % 4 else int(rng.integers(0, m + 1))
+        work = key.copy()
+        first, second = radix_argsort(work[:h]), radix_argsort(work[h:])
+        got = merge_sorted_halves(work, first, second, h)
+        np.testing.assert_array_equal(got, np.argsort(key, kind="stable"), err_msg=f"case {t}")
+        np.testing.assert_array_equal(work, np.sort(key))
+
+
+def test_saddle_order_on_two_threads_is_the_lexsort(monkeypatch):
+    """The finalize's sort as two halves on two threads (every size here) gives the lexsort's order."""
+    from orokit.topology import engine
+
+    monkeypatch.setattr(engine, "PARALLEL_SORT_KEYS", 2)
+    monkeypatch.setattr(engine, "_threads", lambda: 2)
+    rng = np.random.default_rng(4)
+    for t in range(100):
+        m = int(rng.integers(0, 3000))
+        cells = rng.integers(0, 200, m).astype(np.int64)  # monkey saddles across the halves
+        z = rng.integers(-3, 4, 300).astype(np.float32) * np.float32(0.5)
+        ez = z[cells].astype(np.float64)
+        ea = rng.integers(0, 50, m)
+        eb = ea + rng.integers(1, 5, m)
+        want = np.lexsort((eb, ea, cells, -ez))
+        got = saddle_order(ea, eb, ez, cells, radix=True)
+        edges = np.stack([ea, eb, cells])
+        np.testing.assert_array_equal(edges[:, got], edges[:, want], err_msg=f"case {t}")
