@@ -12,6 +12,7 @@ import math
 import os
 import threading
 import warnings
+import weakref
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -185,6 +186,19 @@ class _WindowHandles(threading.local):
 
 
 _WINDOW_HANDLES = _WindowHandles()
+
+
+def window_source(data: Any) -> Any:
+    """The reader behind ``data``, a dask array :func:`read_dem` made and nothing changed since (same name),
+    or None: ``source[r0:r1, c0:c1]`` reads that window of the file straight away, converted as the
+    array's chunks are (one GDAL read, no dask graph: computing a slice of the array optimises the whole
+    raster's graph, O(chunks) per window)."""
+    return _READERS.get(getattr(data, "name", None) or "")
+
+
+#: the reader of each dask array :func:`read_dem` made, by the array's name (:func:`window_source`); the array's
+#: graph holds the reader, so an entry lives as long as an array of that name
+_READERS: weakref.WeakValueDictionary[str, Any] = weakref.WeakValueDictionary()
 
 
 @dataclass(frozen=True)
@@ -778,6 +792,7 @@ def _read_dem(
         stamp = None if _is_virtual(path) else (os.stat(path).st_mtime_ns, os.stat(path).st_size)
         name = "read_dem-" + tokenize(path, stamp, band, nd, reader.factor, reader.offset_m, norm)
         data = dsa.from_array(reader, chunks=norm, name=name, lock=False, asarray=False, meta=np.empty((0, 0), np.float32))
+        _READERS[name] = reader  # the same name means the same file, band and conversion
         sample = reader.read(out_shape=(min(height, 256), min(width, 256)))
         if not np.isfinite(sample).any() and not bool(dsa.isfinite(data).any().compute()):
             raise InputError(_all_nodata_message(path, nd))
