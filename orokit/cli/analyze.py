@@ -100,7 +100,7 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         raise click.UsageError("--samples (the Monte Carlo) runs in memory: drop --chunks")
     if (scheduler or checkpoint) and chunks is None:
         raise click.UsageError("--scheduler and --checkpoint need --chunks N")
-    if chunks is None and dem.dataset is None and not dem.path.is_dir():
+    if chunks is None and not dem.path.is_dir():  # a manifest DEM's file too (it was read whole whatever its size)
         from orokit.analysis import plan_chunks
 
         chunks = plan_chunks(str(dem.path))

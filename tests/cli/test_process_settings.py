@@ -115,6 +115,20 @@ def test_a_dataset_name_read_whole_keeps_the_in_memory_mmap_threshold(real_data,
     assert "'mmap 1048576'" in line and "33554432" not in line, line
 
 
+@pytest.mark.realdata
+def test_a_dataset_name_too_large_for_memory_is_analysed_in_chunks(real_data, tmp_path, monkeypatch):
+    """The automatic chunk plan holds for a manifest DEM given by name, as for its file (before: read whole
+    whatever the free memory)."""
+    import orokit.analysis
+
+    real_data("gobi")
+    monkeypatch.setattr(orokit.analysis, "available_memory", lambda: 1 << 20)
+    res = CliRunner().invoke(cli, ["analyze", "gobi", "--no-progress", "--min-prominence", "100", "--no-isolation",
+                                   "-o", str(tmp_path / "a")])
+    assert res.exit_code == 0, res.output
+    assert "is too large for memory: analysing in 2048 x 2048 chunks" in res.stderr, res.stderr
+
+
 #: the console script's process, printing the size of GDAL's block cache at its end (rasterio asks GDAL)
 GDAL_CACHE = SCRIPT.replace("""print((read_interval or [None])[0], sys.getswitchinterval(), calls,
                               os.environ.get("ARROW_DEFAULT_MEMORY_POOL"))""",
