@@ -4,6 +4,7 @@ from __future__ import annotations
 import itertools
 import json
 import logging
+from collections.abc import Callable
 from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
@@ -15,7 +16,7 @@ from orokit._typing import PathLike
 from orokit.errors import InputError
 from orokit.io.atomic import atomic_path, temp_path_for
 from orokit.topology.divide_tree import DivideTree
-from orokit.topology.tables import table_rows, upgrade_attrs
+from orokit.topology.tables import TableBlocks, table_rows, upgrade_attrs
 from orokit.topology.tree_checks import check_read_tree
 
 logger = logging.getLogger(__name__)
@@ -77,6 +78,15 @@ def _sqlite_without_sync() -> AbstractContextManager[bool]:
 def _ids(start: int, stop: int) -> np.ndarray:
     """Row ids ``start..stop - 1`` of a layer's batch."""
     return np.arange(start, stop, dtype=np.int64)
+
+
+def _column_at(frame: Any, name: str) -> Callable[[np.ndarray], np.ndarray]:
+    """``at(positions)``: the float column ``name`` of a DataFrame (held whole) or of a
+    :class:`~orokit.topology.tables.TableBlocks` (made at those rows only) at some rows."""
+    if isinstance(frame, TableBlocks):
+        return lambda at: frame.take(name, at).astype(np.float64, copy=False)
+    values = frame[name].to_numpy(np.float64)
+    return lambda at: values[at]
 
 
 def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFrame | None = None,
@@ -168,19 +178,38 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
         pyogrio.write_arrow(reader, dst, layer=layer, geometry_name="geometry", geometry_type=geometry_type, crs=crs,
                             **_GPKG)
 
-    def points(dst: Path, frame: pd.DataFrame, id_name: str, layer: str, extra: Any = None) -> None:
-        """A point layer of ``frame``'s columns, then the ``added`` columns of ``extra`` (a table
-        with the same rows: a DataFrame or TableBlocks, whose rows are taken batch by batch)."""
+    def points(dst: Path, frame: Any, id_name: str, layer: str, extra: Any = None) -> None:
+        """A point layer of ``frame``'s columns (a DataFrame, or a TableBlocks whose rows are made batch
+        by batch), then the ``added`` columns of ``extra`` (a table with the same rows: a DataFrame or
+        TableBlocks, whose rows are taken batch by batch)."""
         # the ids made per batch: no column of the whole layer (8 bytes per row)
         columns: dict[str, Any] = {id_name: _ids}
-        columns.update((c, frame[c]) for c in frame.columns)
-        more = None
-        if extra is not None:
-            def more(i: int, j: int) -> dict[str, Any]:
+        lazy = isinstance(frame, TableBlocks)
+        names = list(frame.columns)
+        if not lazy:
+            columns.update((c, frame[c]) for c in names)
+        batch: dict[str, Any] = {}  # the TableBlocks' rows of the batch being written (for its points)
+
+        def more(i: int, j: int) -> dict[str, Any]:
+            out: dict[str, Any] = {}
+            if lazy:
+                block = batch["rows"] = frame.block(i, j)
+                out.update((c, block[c]) for c in names)
+            if extra is not None:
                 block = table_rows(extra, i, j)
-                return {c: block[c] for c in added}
-        x, y = frame["x"].to_numpy(np.float64), frame["y"].to_numpy(np.float64)
-        write(dst, columns, lambda i, j: point_wkb(x[i:j], y[i:j]), len(frame), layer, "Point", more)
+                out.update((c, block[c]) for c in added)
+            return out
+
+        if lazy:
+            def wkb(i: int, j: int):
+                rows = batch.pop("rows")
+                return point_wkb(rows["x"].to_numpy(np.float64), rows["y"].to_numpy(np.float64))
+        else:
+            x, y = frame["x"].to_numpy(np.float64), frame["y"].to_numpy(np.float64)
+
+            def wkb(i: int, j: int):
+                return point_wkb(x[i:j], y[i:j])
+        write(dst, columns, wkb, len(frame), layer, "Point", more if lazy or extra is not None else None)
 
     def saddles_and_ridges(dst: Path) -> None:
         with _sqlite_without_sync():  # this thread's setting (the parallel writer's is its own)
@@ -189,15 +218,15 @@ def write_divide_tree_gpkg(tree: DivideTree, path: PathLike, *, peaks: pd.DataFr
     def _saddles_and_ridges(dst: Path) -> None:
         points(dst, tree.saddles, "saddle_id", "saddles")
         a, b, s = tree._edge_arrays()
-        px, py = tree.peaks["x"].to_numpy(np.float64), tree.peaks["y"].to_numpy(np.float64)
-        sx, sy = tree.saddles["x"].to_numpy(np.float64), tree.saddles["y"].to_numpy(np.float64)
+        px, py, sx, sy, sz = (_column_at(frame, c) for frame, c in ((tree.peaks, "x"), (tree.peaks, "y"),
+                                                                    (tree.saddles, "x"), (tree.saddles, "y"),
+                                                                    (tree.saddles, "elevation")))
         ridges: dict[str, Any] = {c: tree.edges[c] for c in tree.edges.columns}
-        sz = tree.saddles["elevation"].to_numpy(np.float64)
-        ridges["saddle_elevation"] = lambda i, j: sz[s[i:j]]  # per batch: no gathered column of every ridge
+        ridges["saddle_elevation"] = lambda i, j: sz(s[i:j])  # per batch: no gathered column of every ridge
 
         def lines(i: int, j: int):
             ai, bi, si = a[i:j], b[i:j], s[i:j]
-            return polyline_wkb(np.stack([px[ai], sx[si], px[bi]], axis=1), np.stack([py[ai], sy[si], py[bi]], axis=1))
+            return polyline_wkb(np.stack([px(ai), sx(si), px(bi)], axis=1), np.stack([py(ai), sy(si), py(bi)], axis=1))
 
         write(dst, ridges, lines, len(a), "ridges", "LineString")
 

@@ -29,6 +29,7 @@ from orokit.topology import _kernels, _strip_kernels
 from orokit.topology.divide_tree import DivideTree
 from orokit.topology.tables import (
     PEAK_COLUMNS,
+    CellPlaces,
     SADDLE_COLUMNS,
     AnalysisResult,
     TableBlocks,
@@ -494,15 +495,6 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
 
     H, W = core.shape
 
-    def xy(rows, cols):
-        """Places of cells, made by blocks (the whole arrays' temporaries were ~16 bytes per cell)."""
-        x, y = np.empty(rows.size), np.empty(rows.size)
-        for s0 in range(0, rows.size, 1 << 18):
-            r, c = rows[s0:s0 + (1 << 18)], cols[s0:s0 + (1 << 18)]
-            x[s0:s0 + r.size] = transform.c + (c + 0.5) * transform.a + (r + 0.5) * transform.b
-            y[s0:s0 + r.size] = transform.f + (c + 0.5) * transform.d + (r + 0.5) * transform.e
-        return x, y
-
     n = core.n_kept
     elev = core.peak_z.astype(np.float64, copy=False)
     moved = store is not None and blocks and n > 0
@@ -549,46 +541,48 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
             line = prom_parent = None
     else:
         del key_saddle
-    rows, cols = core.peak_row, core.peak_col
-    x, y = xy(rows, cols)
-    s_r, s_c = sc_sorted // W, sc_sorted % W
-    s_x, s_y = xy(s_r, s_c)
-    del sc_sorted
-    # copy=False: the tree's frames and the tables share these columns (pandas copies on write)
-    tree = DivideTree(
-        pd.DataFrame({"row": rows, "col": cols, "x": x, "y": y, "elevation": elev}, copy=False),
-        pd.DataFrame({"row": s_r, "col": s_c, "x": s_x, "y": s_y, "elevation": sad_z}, copy=False),
-        edges,
-        crs,
-        {"units": "m"},
-    )
-    make = _peak_rows(core, rows, cols, x, y, elev, line, prom_parent, isolation, transform, crs,
-                      store if moved else None)
+    # the places (row, col, x, y, elevation) of peaks and saddles from their cells and elevations: with
+    # ``blocks`` made when read (the tree's frames and both tables are TableBlocks: 16 bytes per peak and
+    # per saddle held instead of 40; the files are written by blocks), otherwise made whole once
+    places = CellPlaces(core.peak_cell, core.peak_z, W, transform)
+    s_places = CellPlaces(sc_sorted, sad_z, W, transform)
+    del sc_sorted, sad_z, elev
     if blocks:
-        shared = {"row": rows, "col": cols, "x": x, "y": y, "elevation": elev}
-        peaks: Any = TableBlocks(n, make, index_name="peak_id", shared=shared)
+        make = _peak_rows(core, places, line, prom_parent, isolation, transform, crs, store if moved else None)
+        tree = DivideTree(
+            TableBlocks(n, places.frame, index_name="peak_id", places=places),
+            TableBlocks(len(s_places), s_places.frame, index_name="saddle_id", places=s_places),
+            edges, crs, {"units": "m"},
+        )
+        peaks: Any = TableBlocks(n, make, index_name="peak_id", places=places)
+        saddles: Any = TableBlocks(len(s_places), lambda i, j: s_places.frame(i, j, "saddle_id", {"key_of": key_of}),
+                                   index_name="saddle_id", places=s_places)
     else:
+        pf, sf = places.frame(0, n), s_places.frame(0, len(s_places))
+        # copy=False: the tree's frames and the tables share these columns (pandas copies on write)
+        tree = DivideTree(pf, sf, edges, crs, {"units": "m"})
+        make = _peak_rows(core, places, line, prom_parent, isolation, transform, crs, store if moved else None,
+                          whole=pf)
         peaks = make(0, n)
-    saddles = pd.DataFrame({"row": s_r, "col": s_c, "x": s_x, "y": s_y, "elevation": sad_z, "key_of": key_of},
-                           copy=False)
-    saddles.index.name = "saddle_id"
+        saddles = pd.DataFrame({**{c: sf[c].to_numpy() for c in sf.columns}, "key_of": key_of}, copy=False)
+        saddles.index.name = "saddle_id"
     assert list(saddles.columns) == SADDLE_COLUMNS
     if geometry and not blocks:
         import geopandas as gpd
 
-        peaks = gpd.GeoDataFrame(peaks, geometry=gpd.points_from_xy(x, y), crs=crs)
-        saddles = gpd.GeoDataFrame(saddles, geometry=gpd.points_from_xy(s_x, s_y), crs=crs)
+        peaks = gpd.GeoDataFrame(peaks, geometry=gpd.points_from_xy(pf["x"], pf["y"]), crs=crs)
+        saddles = gpd.GeoDataFrame(saddles, geometry=gpd.points_from_xy(sf["x"], sf["y"]), crs=crs)
     validate_peak_table(peaks)
     validate_saddle_table(saddles)
     return AnalysisResult(peaks, saddles, tree, crs, {})
 
 
-def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray, y: np.ndarray, elev: np.ndarray,
-               line: np.ndarray | None, prom_parent: np.ndarray | None, isolation: pd.DataFrame | None,
-               transform, crs, store: Any = None):
+def _peak_rows(core: Orometry, places: CellPlaces, line: np.ndarray | None, prom_parent: np.ndarray | None,
+               isolation: pd.DataFrame | None, transform, crs, store: Any = None, whole: Any = None):
     """``make(start, stop)``: rows ``start:stop`` of the peaks table (:data:`PEAK_COLUMNS`, index
-    ``peak_id``) from whole arrays held once (the engine's, the isolation's, the places and the
-    parents); every other column is made for the rows asked. Thread-safe (writers run in two threads).
+    ``peak_id``) from whole arrays held once (the engine's, the isolation's, the places' cells and
+    elevations and the parents); every other column is made for the rows asked. Thread-safe (writers
+    run in two threads). ``whole``: a frame of the places' columns already made (shared, not made again).
     ``store``: the engine's row-only columns, the parents and the isolation (when there) are read
     from it by rows (see :func:`build_result`).
     """
@@ -618,6 +612,9 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
         iso = store
     local = threading.local()  # one pyproj Transformer per thread (they are not shared between threads)
 
+    def place(name: str, at: Any) -> np.ndarray:
+        return places.values(name, at) if whole is None else whole[name].to_numpy()[at]
+
     def xy(r, c):
         return (transform.c + (c + 0.5) * transform.a + (r + 0.5) * transform.b,
                 transform.f + (c + 0.5) * transform.d + (r + 0.5) * transform.e)
@@ -636,9 +633,9 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
             """row and col of peak ids (-1 for none)."""
             has = ids >= 0
             idx = np.maximum(ids, 0)
-            return np.where(has, rows[idx] if n else 0, -1), np.where(has, cols[idx] if n else 0, -1)
+            return np.where(has, place("row", idx) if n else 0, -1), np.where(has, place("col", idx) if n else 0, -1)
 
-        e = elev[sl]
+        e = place("elevation", sl)
         prom = col("prominence", sl)
         ksc = col("key_saddle_cell", sl)
         has_saddle = ksc >= 0
@@ -662,7 +659,7 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
             del ix, iy, found
         parent = col("parent", sl).astype(np.int64, copy=False)
         island_rc, line_rc, prom_rc = cell_of(parent), cell_of(ln), cell_of(pp)
-        px, py = x[sl], y[sl]
+        px, py = place("x", sl), place("y", sl)
         lon, lat = nan(), nan()
         if crs is not None and m:
             if getattr(local, "transformer", None) is None:
@@ -671,8 +668,8 @@ def _peak_rows(core: Orometry, rows: np.ndarray, cols: np.ndarray, x: np.ndarray
                 local.transformer = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
             lon, lat = local.transformer.transform(px, py)
         columns = {
-            "row": rows[sl],
-            "col": cols[sl],
+            "row": place("row", sl),
+            "col": place("col", sl),
             "x": px,
             "y": py,
             "lon": lon,
