@@ -282,7 +282,11 @@ class DivideTree:
             from orokit.topology._kernels import forest_components
 
             # n nodes and m edges without a cycle make exactly n - m components
-            roots = np.count_nonzero(forest_components(n, a, b) == np.arange(n))
+            comp = forest_components(n, a, b)
+            # counted by blocks: no arange(n) of the whole tree beside the components (8 bytes per peak)
+            roots = sum(int(np.count_nonzero(comp[s0:s0 + (1 << 18)] == np.arange(s0, min(n, s0 + (1 << 18)))))
+                        for s0 in range(0, n, 1 << 18))
+            del comp
             if roots != n - a.size:  # find the first ridge that closes a cycle
                 parent = np.arange(n)
                 for i in range(a.size):
