@@ -193,6 +193,29 @@ def test_tables_made_by_blocks_write_the_same_files(result, tmp_path, monkeypatc
     assert_same_analysis_files(tmp_path / "blocks", tmp_path / "frames")
 
 
+def test_blocks_make_the_places_from_the_cells(result):
+    """``analyze(blocks=True)``: the saddles table and the tree's frames are TableBlocks whose places
+    (row, col, x, y, elevation) are made from the cells when read: equal, bit for bit, to the frames'
+    whole columns, whole, by blocks and gathered at any rows (the ridges' ends)."""
+    from orokit.topology.tables import CellPlaces, TableBlocks
+
+    lean = orokit.analyze(_dem(), min_prominence_m=5.0, geometry=False, blocks=True)
+    want_s = result.saddles.drop(columns="geometry")
+    assert isinstance(lean.saddles, TableBlocks) and lean.saddles.to_frame().equals(want_s)
+    assert lean.saddles.block(3, 8).equals(want_s.iloc[3:8])
+    rng = np.random.default_rng(0)
+    for got, want in ((lean.tree.peaks, result.tree.peaks), (lean.tree.saddles, result.tree.saddles)):
+        assert isinstance(got, TableBlocks) and list(got.columns) == list(want.columns) == list(CellPlaces.NAMES)
+        assert len(got) == len(want) > 7
+        at = rng.integers(0, len(want), 50)
+        for c in CellPlaces.NAMES:
+            w = want[c].to_numpy()
+            assert got[c].to_numpy().tobytes() == w.tobytes(), c
+            assert got.take(c, at).tobytes() == w[at].tobytes(), c
+    assert lean.tree.edges.equals(result.tree.edges)
+    lean.tree.validate()  # the tree's checks read the TableBlocks' elevations
+
+
 def test_csv_written_by_blocks_is_one_csv_of_the_whole_table(result, tmp_path):
     """peaks.csv by blocks of rows: the bytes of Arrow's one ``write_csv`` of the whole table."""
     import pyarrow as pa
