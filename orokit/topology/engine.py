@@ -481,7 +481,9 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     places; the files written are the same), ~45 % less memory per peak.
     ``blocks=True``: the peaks table is a :class:`~orokit.topology.tables.TableBlocks`
     whose rows are made from the engine's arrays by blocks when written (no geometry;
-    the same rows and files; ~130 bytes per peak less held at once).
+    the same rows and files; ~130 bytes per peak less held at once); the saddles table and
+    the tree's frames are TableBlocks whose places are made from the cells
+    (:class:`~orokit.topology.tables.CellPlaces`: 16 bytes per peak and per saddle held).
     ``store`` (with ``blocks``): a column store (``put(name, values)``, ``rows(name, start, stop)``,
     ``column(name)``, ``name in store``; :class:`orokit.io.spill_io.SpilledColumns`) where the peak
     table's own columns wait while the files are written, each block reading its rows back: ``core``'s

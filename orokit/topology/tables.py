@@ -322,8 +322,10 @@ class AnalysisResult:
     peaks : GeoDataFrame indexed by ``peak_id`` with :data:`PEAK_COLUMNS` (:data:`PEAK_SCHEMA`);
         a plain DataFrame (no point geometry) from ``analyze(geometry=False)``; a
         :class:`TableBlocks` (rows made by blocks when written) from ``analyze(blocks=True)``.
-    saddles : GeoDataFrame (or DataFrame) indexed by ``saddle_id`` with :data:`SADDLE_COLUMNS`.
-    tree : the Divide Tree pruned at the threshold (same ids).
+    saddles : GeoDataFrame (or DataFrame) indexed by ``saddle_id`` with :data:`SADDLE_COLUMNS`;
+        a :class:`TableBlocks` from ``analyze(blocks=True)``.
+    tree : the Divide Tree pruned at the threshold (same ids); from ``analyze(blocks=True)`` its
+        ``peaks`` and ``saddles`` are TableBlocks of their places (:class:`CellPlaces`).
     crs : CRS of x/y (None for a local metric grid without CRS).
     attrs : metadata (threshold, outside convention, units, source, dataset, shape,
         ``transform`` (affine a, b, c, d, e, f of the grid), ``crs_geographic``, timings).
