@@ -514,13 +514,12 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     sad_z = take("ridge_saddle_z")[first].astype(np.float64)
     del first
     key_saddle = take("key_saddle_cell")
-    key_of = np.full(sc_sorted.size, -1, np.int64)
-    kp = np.flatnonzero(key_saddle >= 0)
-    key_of[np.searchsorted(sc_sorted, key_saddle[kp])] = kp
-    del kp
     edges = pd.DataFrame({"peak_a": take("ridge_a"), "peak_b": take("ridge_b"), "saddle": ridge_sid}, copy=False)
     del ridge_sid
     line = prom_parent = None
+    if moved:  # the saddles' cells wait in the store while the parents are found (8 bytes per saddle)
+        store.put("saddle_cell", sc_sorted)
+        del sc_sorted
     if n:
         # the parents read only the elevations and the ridges: found on a tree of those alone, before
         # the places of peaks and saddles exist (~64 bytes per peak less under the sweeps' transient)
@@ -530,7 +529,6 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
         # prominence; a root is the highest peak of its domain): no second Kruskal sweep over the tree
         # for them (~100 bytes per peak of sorted edge copies and sweep state at the tables' peak)
         known = pd.DataFrame({"prominence": take("prominence"), "key_saddle": key_saddle}, copy=False)
-        del key_saddle
         parents = bare.parents(known)
         del known
         del bare
@@ -541,8 +539,12 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
             store.put("line_parent", line)
             store.put("prominence_parent", prom_parent)
             line = prom_parent = None
-    else:
-        del key_saddle
+    if moved:
+        sc_sorted = store.column("saddle_cell")
+    key_of = np.full(sc_sorted.size, -1, np.int64)  # the peak whose key saddle each saddle is (-1 for none)
+    kp = np.flatnonzero(key_saddle >= 0)
+    key_of[np.searchsorted(sc_sorted, key_saddle[kp])] = kp
+    del kp, key_saddle
     # the places (row, col, x, y, elevation) of peaks and saddles from their cells and elevations: with
     # ``blocks`` made when read (the tree's frames and both tables are TableBlocks: 16 bytes per peak and
     # per saddle held instead of 40; the files are written by blocks), otherwise made whole once

@@ -313,7 +313,7 @@ def test_tables_whose_own_columns_wait_in_a_store_write_the_same_files(result, t
     for f in engine.SPILLED_OROMETRY:
         assert getattr(core, f).size == 0, f  # moved to the store
         assert moved[f]() is None, f  # freed (an empty view [:0] would keep the whole column alive)
-    assert len(store) == 4 + len(engine.SPILLED_OROMETRY) + 2 and "line_parent" in store
+    assert len(store) == 4 + len(engine.SPILLED_OROMETRY) + 3 and "line_parent" in store and "saddle_cell" in store
     whole = result.peaks.drop(columns="geometry")
     n = len(whole)
     assert lean.peaks.to_frame().equals(whole)
