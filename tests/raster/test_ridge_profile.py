@@ -1,4 +1,5 @@
-"""Crests that fall from their peak at a bounded slope (``RenderParams.ridge_max_slope``, an option, off)."""
+"""Crests that fall from their peak at a bounded slope (``RenderParams.ridge_max_slope``; by default 1.0 on the
+pieces ``ridge_plateau_spread`` selects)."""
 from __future__ import annotations
 
 import numpy as np
@@ -47,7 +48,7 @@ def test_steep_ridges_lie_at_or_below_the_straight_crests_and_keep_the_tree_orom
     """The same jitter draws: every refined ridge point lies where the straight crest put it in the plane and no
     higher, lower on the small tree's long gentle pieces; a render keeps the tree's peaks and prominences."""
     kw = {"extent": (0.0, 0.0, 8000.0, 8000.0), "rng": 3}
-    plain = build_skeleton(small_tree(), params=RenderParams(lam=200.0), **kw)
+    plain = build_skeleton(small_tree(), params=RenderParams(lam=200.0, ridge_max_slope=None), **kw)
     steep = build_skeleton(small_tree(), params=RenderParams(lam=200.0, ridge_max_slope=0.8), **kw)
     np.testing.assert_array_equal(plain.ridges.xy, steep.ridges.xy)
     assert (steep.ridges.z <= plain.ridges.z + 1e-9).all()
@@ -86,7 +87,7 @@ def test_ridge_plateau_drop_is_checked():
         with pytest.raises(InputError, match="ridge_plateau_drop must be > 0"):
             RenderParams(ridge_max_slope=0.8, ridge_plateau_drop=bad)
     with pytest.raises(InputError, match="set ridge_max_slope too"):
-        RenderParams(ridge_plateau_drop=0.05)
+        RenderParams(ridge_max_slope=None, ridge_plateau_drop=0.05)
     assert RenderParams(ridge_max_slope=0.8, ridge_plateau_drop=0.05).ridge_plateau_drop == 0.05
 
 
@@ -145,8 +146,9 @@ def test_ridge_plateau_spread_bounds_only_the_selected_pieces():
     """The small tree's saddles lie within 0.21 of its 600-m relief: with the cut at 0.25 every piece is
     selected (the crests of ``ridge_max_slope`` alone); with a relief bound above 600 m none is (straight crests)."""
     kw = {"extent": (0.0, 0.0, 8000.0, 8000.0), "rng": 3}
-    plain = build_skeleton(small_tree(), params=RenderParams(lam=200.0), **kw)
-    steep = build_skeleton(small_tree(), params=RenderParams(lam=200.0, ridge_max_slope=0.8), **kw)
+    plain = build_skeleton(small_tree(), params=RenderParams(lam=200.0, ridge_max_slope=None), **kw)
+    steep = build_skeleton(small_tree(), params=RenderParams(lam=200.0, ridge_max_slope=0.8,
+                                                             ridge_plateau_spread=None), **kw)
     both = build_skeleton(small_tree(), params=RenderParams(lam=200.0, ridge_max_slope=0.8, ridge_plateau_spread=0.25,
                                                             ridge_plateau_relief_m=300.0), **kw)
     none = build_skeleton(small_tree(), params=RenderParams(lam=200.0, ridge_max_slope=0.8, ridge_plateau_spread=0.25,
@@ -158,8 +160,12 @@ def test_ridge_plateau_spread_bounds_only_the_selected_pieces():
                 {"ridge_plateau_relief_m": -1.0}):
         with pytest.raises(InputError, match=next(iter(bad))):
             RenderParams(ridge_max_slope=0.8, **bad)
-    with pytest.raises(InputError, match="set ridge_max_slope too"):
-        RenderParams(ridge_plateau_spread=0.25)
+    # the defaults: 1.0 on the pieces the cut at 0.25 / 300 m selects; None turns the bound off whatever the cut
+    assert (RenderParams().ridge_max_slope, RenderParams().ridge_plateau_spread,
+            RenderParams().ridge_plateau_relief_m) == (1.0, 0.25, 300.0)
+    off = build_skeleton(small_tree(), params=RenderParams(lam=200.0, ridge_max_slope=None, ridge_plateau_spread=0.25),
+                         **kw)
+    np.testing.assert_array_equal(off.ridges.z, plain.ridges.z)
 
 
 def test_river_blend_k_removes_the_step_where_the_nearest_river_changes():
