@@ -241,6 +241,9 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
             cutting = _cut_mask(sp, keep, lab)
             if cutting.any():
                 cut = _kernels.reconstruct_masked(z, cutting, 1e-3, cut_slope * grid.cell_size_m, cut_depth_m)
+                # a cut's bowl never takes a ridge cell below its own saddle (its floor): a bowl on a crest that
+                # falls gently to its saddle would open a pass below the tree's saddle
+                np.maximum(z, floor, out=z, where=cutting & np.isfinite(floor))
                 stats["cut"] += cut
                 # only the cut basins' cells can change basin (and elevation)
                 relabelled = basins.relabel(np.flatnonzero(cutting))

@@ -197,3 +197,18 @@ def test_river_blend_k_removes_the_step_where_the_nearest_river_changes():
     assert abs(a[0] - b[0]) < 5.0
     with pytest.raises(InputError, match="river_blend_k"):
         RenderParams(river_blend_k=1)
+
+
+def test_cut_bowls_never_take_a_crest_below_its_saddle():
+    """Strong detail on crests that fall gently to their saddles (``ridge_max_slope`` 1.0 on every piece of the
+    small tree) makes hills on the crest near the saddle; with ``cut_slope`` > 0 their cut bowls went below the
+    crest's own saddle and opened passes 4-19 m under the tree's saddles (prominences off by that much): the
+    ridge cells now stop at their floor, and the prominences are the tree's."""
+    p = RenderParams(detail_gain=30.0, detail_flat_deg=2.0, keep_hill_ratio=0.5, cut_slope=0.05,
+                     ridge_max_slope=1.0, ridge_plateau_spread=None)
+    z = render_elevation(small_tree(), cell_size_m=50.0, erosion=False, params=p, rng=11)
+    res = orokit.analyze(z, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(small_tree(), res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+    np.testing.assert_allclose(comp.peaks["raster_prominence"].to_numpy(), [1500.0, 200.0, 200.0, 150.0, 100.0],
+                               atol=1.0)
