@@ -38,3 +38,13 @@ def peak_table() -> pd.DataFrame:
 @pytest.fixture(scope="session")
 def small_type(peak_table) -> TerrainType:
     return TerrainType.from_peaks(peak_table, area_km2=1600.0, name="test")
+
+
+@pytest.fixture(scope="module")
+def synthesized_type(small_type):
+    """A 30 km tree synthesized from ``small_type`` and the type measured on it (a type that has a tree to record
+    ridge slopes, neighbour gradients and its saddle level from)."""
+    from orokit.synthesis import synthesize_divide_tree
+
+    tree = synthesize_divide_tree(small_type, size_m=30_000.0, rng=2)
+    return tree, TerrainType.from_divide_tree(tree, area_km2=900.0, min_prominence_m=30.0)

@@ -31,15 +31,8 @@ def _ridge_slopes(tree) -> np.ndarray:
     return (z[a] + z[b] - 2 * s) / np.hypot(x[a] - x[b], y[a] - y[b])
 
 
-@pytest.fixture(scope="module")
-def tree_type(small_type):
-    """A type measured on a synthesized tree (so it has a tree to record ridge slopes from)."""
-    tree = synthesize_divide_tree(small_type, size_m=30_000.0, rng=2)
-    return tree, TerrainType.from_divide_tree(tree, area_km2=900.0, min_prominence_m=30.0)
-
-
-def test_type_records_neighbour_gradient_and_ridge_slope(tree_type):
-    tree, t = tree_type
+def test_type_records_neighbour_gradient_and_ridge_slope(synthesized_type):
+    tree, t = synthesized_type
     pruned = tree.prune(30.0)
     x, y, z = (pruned.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
     assert t.neighbour_gradient == pytest.approx(float(np.median(_nn_gradient_by_hand(x, y, z))))
@@ -58,8 +51,8 @@ def test_type_records_neighbour_gradient_and_ridge_slope(tree_type):
         dataclasses.replace(t, neighbour_gradient=float("nan"))
 
 
-def test_edits_drop_the_records_that_no_longer_hold(tree_type):
-    _, t = tree_type
+def test_edits_drop_the_records_that_no_longer_hold(synthesized_type):
+    _, t = synthesized_type
     shifted = t.shifted("elevation", 500.0)  # a shift changes no gradient
     assert (shifted.neighbour_gradient, shifted.max_ridge_slope) == (t.neighbour_gradient, t.max_ridge_slope)
     scaled = t.scaled("elevation", 2.0)
@@ -92,8 +85,8 @@ def test_saddles_never_fall_below_the_ridge_slope_bound(small_type, peak_table):
     assert np.all(capped <= np.minimum(z[a], z[b]) + 1e-9)
 
 
-def test_synthesis_follows_the_ridge_slope_bound(tree_type):
-    _, t = tree_type
+def test_synthesis_follows_the_ridge_slope_bound(synthesized_type):
+    _, t = synthesized_type
     on = SynthesisParams(follow_ridge_slope=True)
     free = synthesize_divide_tree(dataclasses.replace(t, max_ridge_slope=None), size_m=30_000.0, rng=3, params=on)
     cap = float(np.quantile(_ridge_slopes(free), 0.9))
@@ -131,8 +124,8 @@ def test_fine_elevation_fields():
         SynthesisParams(fine_elevation_m=0.0)
 
 
-def test_synthesis_fits_the_neighbour_gradient(tree_type):
-    _, t = tree_type
+def test_synthesis_fits_the_neighbour_gradient(synthesized_type):
+    _, t = synthesized_type
     plain = synthesize_divide_tree(t, size_m=30_000.0, rng=6, params=SynthesisParams(follow_neighbour_gradient=False))
     x, y, z = (plain.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
     g0 = float(np.median(_nn_gradient_by_hand(x, y, z)))
@@ -152,9 +145,9 @@ def test_synthesis_fits_the_neighbour_gradient(tree_type):
     fitted.validate()
 
 
-def test_fine_component_needs_reach(tree_type):
+def test_fine_component_needs_reach(synthesized_type):
     """Session 11: with ``fine_needs_reach`` a median no weight reaches gets no fine component."""
-    _, t = tree_type
+    _, t = synthesized_type
     far = dataclasses.replace(t, neighbour_gradient=100.0 * t.neighbour_gradient)
     closest = synthesize_divide_tree(far, size_m=30_000.0, rng=6,
                                      params=SynthesisParams(follow_neighbour_gradient=True))

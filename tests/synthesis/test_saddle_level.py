@@ -81,14 +81,8 @@ def _level_by_hand(tree, k: int = 16) -> float:
     return float(np.median((np.median(s[near], axis=1) - lo) / (top - lo)))
 
 
-@pytest.fixture(scope="module")
-def level_type(small_type):
-    tree = synthesize_divide_tree(small_type, size_m=30_000.0, rng=2)
-    return tree, TerrainType.from_divide_tree(tree, area_km2=900.0, min_prominence_m=30.0)
-
-
-def test_type_records_saddle_level(level_type):
-    tree, t = level_type
+def test_type_records_saddle_level(synthesized_type):
+    tree, t = synthesized_type
     assert t.saddle_level == pytest.approx(_level_by_hand(tree.prune(30.0)))
     back = TerrainType.from_dict(t.to_dict())
     assert back.saddle_level == t.saddle_level
@@ -101,8 +95,8 @@ def test_type_records_saddle_level(level_type):
     assert t.scaled("prominence", 1.5).saddle_level is None and t.with_density(0.5).saddle_level is None
 
 
-def test_synthesis_follows_the_saddle_level(level_type):
-    _, t = level_type
+def test_synthesis_follows_the_saddle_level(synthesized_type):
+    _, t = synthesized_type
     free = synthesize_divide_tree(t, size_m=30_000.0, rng=3)
     got = _level_by_hand(free)
     # a type asking for saddles nearer one level than the free tree has
