@@ -23,7 +23,8 @@ import click
 
 __all__ = ["Length", "parse_length", "common_input_options", "min_prominence_option", "cell_size_option",
            "z_units_option", "seed_option", "overwrite_option", "progress_option", "LENGTH", "RADIUS", "SIZE",
-           "PROMINENCE", "InputSource", "resolve_input", "INPUT", "refuse_existing"]
+           "PROMINENCE", "InputSource", "resolve_input", "INPUT", "refuse_existing", "LonLat", "LONLAT",
+           "center_option", "output_frame"]
 
 #: a non-negative decimal number: digits with an optional fraction, or a bare fraction,
 #: optionally followed by an exponent; no sign, no second dot
@@ -143,6 +144,52 @@ RADIUS = Length(allow_bare=True, bare_min_m=100.0)
 PROMINENCE = Length(allow_bare=True, allow_zero=True)
 
 Decorator = Callable[[Callable[..., Any]], Callable[..., Any]]
+
+
+class LonLat(click.ParamType):
+    """Click type of a point ``LON,LAT`` in degrees, one word (``86.9,27.98``, ``-70.1,-33.4``);
+    the value is ``(lon, lat)``, lon in [-180, 180] and lat in [-90, 90]."""
+
+    name = "LON,LAT"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:  # noqa: D102
+        if isinstance(value, tuple):
+            return value
+        parts = str(value).split(",")
+        try:
+            numbers = [float(v) for v in parts]
+        except ValueError:
+            numbers = []
+        if len(numbers) == 1:  # `--center 86.9 27.98`: the two-word form of synthesize-tree before session 18
+            self.fail(f"{value!r} is one number: give LON,LAT as one word with a comma, e.g. 86.9,27.98 "
+                      "(the two-word form LON LAT is no longer accepted)", param, ctx)
+        if len(numbers) != 2:
+            self.fail(f"{value!r} is not LON,LAT (e.g. 86.9,27.98)", param, ctx)
+        lon, lat = numbers
+        if not (math.isfinite(lon) and math.isfinite(lat) and -180 <= lon <= 180 and -90 <= lat <= 90):
+            self.fail(f"{value!r} is not a point on Earth: LON in [-180, 180], LAT in [-90, 90] degrees", param, ctx)
+        return (lon, lat)
+
+
+#: a point LON,LAT in degrees, one word
+LONLAT = LonLat()
+
+
+def center_option() -> Decorator:
+    """``--center LON,LAT``: the centre of a synthesized domain (``synthesize``, ``synthesize-tree``)."""
+    return click.option("--center", type=LONLAT, default=None,
+                        help="Domain centre LON,LAT in degrees, one word (e.g. 86.9,27.98): with --crs the domain is "
+                             "centred there in that CRS, without it in a local azimuthal-equidistant CRS (written as "
+                             "WKT) centred there.")
+
+
+def output_frame(crs: str | None, center: tuple[float, float] | None) -> tuple[str | None, bool]:
+    """The output CRS of ``--crs`` (None for none or ``local``) and whether ``--crs local`` asked for a
+    local frame; ``--crs local`` with ``--center`` is refused (a local frame has no place on Earth)."""
+    local = crs is not None and str(crs).strip().lower() == "local"
+    if local and center is not None:
+        raise click.UsageError("--crs local is a frame with no place on Earth: give --center or --crs local, not both")
+    return (None if local else crs), local
 
 
 def min_prominence_option(*, default: str | None = "30m", help: str | None = None,  # noqa: A002

@@ -12,6 +12,7 @@ from orokit.cli.options import (
     SIZE,
     InputSource,
     cell_size_option,
+    center_option,
     overwrite_option,
     progress_option,
     seed_option,
@@ -79,8 +80,7 @@ def _like_dem(like: str | InputSource, *, cell_size_m: float | None = None):
               help="Output CRS (projected EPSG/WKT), or 'local' for a local metric frame with the south-west corner at "
                    "(0, 0) [default: the --like DEM's grid and CRS, else a local azimuthal-equidistant CRS centred "
                    "where the type was measured, else a local frame].")
-@click.option("--center", default=None,
-              help="LON,LAT of the domain centre: a local azimuthal-equidistant CRS (written as WKT) centred there.")
+@center_option()
 @click.option("--tin", "write_tin", is_flag=True, help="Also write the TIN as tin.ply.")
 @click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output folder: dividetree.gpkg/.txt, peaks.csv, synthesis.json, dem.tif, hillshade.png.")
@@ -119,22 +119,10 @@ def synthesize(type_file, size, resolution, like, cell_size_m, n_peaks, control_
     existing = [f for f in outputs if (outdir / f).exists()]
     if existing and not overwrite:
         raise click.UsageError(f"{outdir} already holds {', '.join(existing)}; pass --overwrite to replace them")
-    center_ll: tuple[float, float] | None = None
-    if center is not None:
-        try:
-            lon_lat = [float(v) for v in str(center).split(",")]
-            if len(lon_lat) != 2:
-                raise ValueError
-            center_ll = (lon_lat[0], lon_lat[1])
-        except ValueError:
-            raise click.BadParameter(f"{center!r} is not LON,LAT (e.g. 86.9,27.98)", param_hint="--center") from None
-        if crs is not None:
-            raise click.UsageError("give --center or --crs, not both")
-    if crs is not None and str(crs).lower() == "local":
-        crs = None
-        local = True
-    else:
-        local = False
+    from orokit.cli.options import output_frame
+
+    center_ll: tuple[float, float] | None = center
+    crs, local = output_frame(crs, center_ll)
     like_origin = None
     if like is not None:
         x0, y0, w, h, like_res, like_crs = like_box(like, cell_size_m=cell_size_m)

@@ -5,7 +5,16 @@ from pathlib import Path
 
 import click
 
-from orokit.cli.options import LENGTH, SIZE, overwrite_option, parse_length, progress_option, seed_option
+from orokit.cli.options import (
+    LENGTH,
+    SIZE,
+    center_option,
+    output_frame,
+    overwrite_option,
+    parse_length,
+    progress_option,
+    seed_option,
+)
 
 
 def parse_size(text: str) -> tuple[float, float]:
@@ -37,8 +46,7 @@ def parse_size(text: str) -> tuple[float, float]:
 @click.option("--crs", default=None,
               help="Output CRS (EPSG:xxxx or WKT; projected), or 'local' for a local metric frame. Default: a local "
                    "azimuthal-equidistant CRS centred where the (first) type was measured, else a local frame.")
-@click.option("--center", type=(float, float), default=None,
-              help="Domain centre LON LAT; without --crs a local azimuthal equidistant projection is used.")
+@center_option()
 @seed_option(what="the tree", default=None, recorded_in="synthesis.json")
 @click.option("--txt-cell-size", type=LENGTH, default="30m", show_default=True,
               help="Virtual cell size of the pixel coordinates in dividetree.txt (a plain number is metres).")
@@ -70,9 +78,8 @@ def synthesize_tree(type_files, size, n_peaks, control_elevation, control_densit
 
         seed = resolve_seed(None)  # fresh entropy, recorded in synthesis.json, so the run can be replayed
     types = [load_terrain_type(p) for p in type_files]
-    if crs is not None and str(crs).lower() == "local":
-        crs = None
-    elif center is None:
+    crs, local = output_frame(crs, center)
+    if not local and center is None:
         center = types[0].source_center  # where the type was measured (None: a local frame)
     fixed = _read_points(fixed_peaks) if fixed_peaks is not None else None
     frag = _read_tree(fragment) if fragment is not None else None

@@ -1,7 +1,7 @@
 """Parameters of the terrain renderer (:func:`orokit.raster.render.render_elevation`)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 __all__ = ["RenderParams"]
@@ -293,6 +293,7 @@ class RenderParams:
     def __post_init__(self) -> None:
         from orokit.errors import InputError
 
+        self._check_counts()
         if self.profiles not in ("learned", "linear"):
             raise InputError(f"profiles must be 'learned' or 'linear', got {self.profiles!r}")
         if not 0.0 <= float(self.hillslope_convexity) <= 1.0:
@@ -331,7 +332,7 @@ class RenderParams:
         if self.ridge_plateau_spread is not None:
             if not float(self.ridge_plateau_spread) >= 0.0:  # NaN too
                 raise InputError(f"ridge_plateau_spread must be >= 0 or None, got {self.ridge_plateau_spread!r}")
-        if self.river_blend_k is not None and not int(self.river_blend_k) >= 2:
+        if self.river_blend_k is not None and not self.river_blend_k >= 2:
             raise InputError(f"river_blend_k must be >= 2 or None, got {self.river_blend_k!r}")
         if not float(self.ridge_plateau_relief_m) >= 0.0:
             raise InputError(f"ridge_plateau_relief_m must be >= 0 metres, got {self.ridge_plateau_relief_m!r}")
@@ -342,5 +343,37 @@ class RenderParams:
         if self.surface not in ("tin", "field"):
             raise InputError(f"surface must be 'tin' or 'field', got {self.surface!r}")
 
+    def _check_counts(self) -> None:
+        """The count fields (``int`` annotations: neighbours, steps, nodes) hold whole numbers; a whole float
+        (``2.0``, as JSON may give it) becomes its int, anything else (``2.5``, ``True``, ``"2"``) is refused
+        naming the parameter (``int(2.5)`` would quietly make it 2)."""
+        from orokit.errors import InputError
+
+        for f in fields(self):
+            if not str(f.type).startswith("int"):
+                continue
+            value = getattr(self, f.name)
+            if value is None and str(f.type).endswith("None"):
+                continue
+            items = value if isinstance(value, tuple) and "tuple" in str(f.type) else (value,)
+            whole = [_whole(v) for v in items]
+            if any(w is None for w in whole) or not items:
+                what = "a whole number or a tuple of them" if "tuple" in str(f.type) else "a whole number"
+                none = " or None" if str(f.type).endswith("None") else ""
+                raise InputError(f"{f.name} must be {what}{none}, got {value!r}")
+            object.__setattr__(self, f.name, tuple(whole) if isinstance(value, tuple) else whole[0])
+
     def to_dict(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+
+
+def _whole(value: Any) -> int | None:
+    """``value`` as an int if it is a whole number (not a bool), else None."""
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return None
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    v = float(value)
+    return int(v) if v.is_integer() else None

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Literal
@@ -18,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from orokit._typing import SeedLike
-from orokit.errors import InputError, OrokitError
+from orokit.errors import InputError, OrokitError, OrokitWarning
 from orokit.synthesis.controls import Domain, build_controls, make_domain
 from orokit.synthesis.terrain_type import TerrainType
 from orokit.topology.divide_tree import DivideTree
@@ -192,8 +193,9 @@ class SynthesisParams:
         the prominence targets go to the peaks standing as far above their neighbours' saddles (0: the paper's cost).
     follow_saddle_level : the level term's weight is the first of :data:`SADDLE_LEVEL_WEIGHTS` (from
         ``saddle_level_weight``) whose tree has :func:`~orokit.synthesis.saddles.saddle_level` no higher than the
-        type's ``saddle_level``, or the one before it if that came closer (off for a type without it or with several types). An option, off (issue 11,
-        session 17: see NOTES).
+        type's ``saddle_level``, or the one before it if that came closer (off, with an
+        :class:`~orokit.errors.OrokitWarning`, for a type without it or with several types). An option, off
+        (issue 11, session 17: see NOTES).
     Measured for ``follow_gradient`` and the 4 km ``auto_elevation_m`` (``benchmarks/realism.py
     --twin-only``, 13 regions, seeds 0-2, session 7, load 6-9): twins' disks classified as their own
     region at least as often as the real disks under the spatial hold-out in 10, 9, 10 of 12 regions
@@ -452,7 +454,7 @@ def synthesize_divide_tree(
     slope_cap = _ridge_slope_target(types) if p.follow_ridge_slope else None
     if slope_cap is not None:
         slope_cap *= float(p.ridge_slope_factor)
-    level_target = types[0].saddle_level if p.follow_saddle_level and len(types) == 1 else None
+    level_target = _saddle_level_target(types) if p.follow_saddle_level else None
     weights = [float(p.saddle_level_weight)]
     if level_target is not None:
         weights += [w for w in SADDLE_LEVEL_WEIGHTS if w > weights[0]]
@@ -559,6 +561,22 @@ def _fit_fine_elevation(fields: Any, controls: Any, throw: Any, z: np.ndarray, t
               "trials": len(tried)}
     logger.debug("neighbour gradient fit: %s", record)
     return best[2], best[3], record
+
+
+def _saddle_level_target(types: list[TerrainType]) -> float | None:
+    """The one type's ``saddle_level`` that ``follow_saddle_level`` follows; None, with a warning saying why,
+    for a mixture of types or a type that records none (the option then does nothing)."""
+    if len(types) > 1:
+        warnings.warn(f"follow_saddle_level does nothing here: the synthesis mixes {len(types)} types and follows "
+                      "one type's saddle level only; synthesize each type alone to follow its level",
+                      OrokitWarning, stacklevel=3)
+        return None
+    if types[0].saddle_level is None:
+        warnings.warn(f"follow_saddle_level does nothing here: terrain type {types[0].name!r} records no "
+                      "saddle_level (a type made before session 17); remake it with `orokit type` to follow it",
+                      OrokitWarning, stacklevel=3)
+        return None
+    return float(types[0].saddle_level)
 
 
 def _ridge_slope_target(types: list[TerrainType]) -> float | None:

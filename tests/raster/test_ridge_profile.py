@@ -199,6 +199,20 @@ def test_river_blend_k_removes_the_step_where_the_nearest_river_changes():
         RenderParams(river_blend_k=1)
 
 
+@pytest.mark.parametrize("name", ["river_blend_k", "saddle_floor_k", "flank_neighbours", "erosion_steps",
+                                  "river_base_saddle_k", "erosion_max_nodes"])
+def test_counts_are_whole_numbers(name):
+    """A count given as 2.5 was cut to 2 by ``int()`` (``river_blend_k=2.5`` blended 2 rivers), silently: refused
+    naming the parameter; a whole float (JSON's 3.0) is its int, a bool or a string is refused."""
+    for bad in (2.5, True, "3", float("nan")):
+        with pytest.raises(InputError, match=f"{name} must be a whole number"):
+            RenderParams(**{name: bad})
+    assert getattr(RenderParams(**{name: 3.0}), name) == 3 and isinstance(getattr(RenderParams(**{name: 3.0}), name), int)
+    assert RenderParams(erosion_steps=(4.0, 2)).erosion_steps == (4, 2)
+    with pytest.raises(InputError, match="erosion_steps"):
+        RenderParams(erosion_steps=(4, 2.5))
+
+
 def test_cut_bowls_never_take_a_crest_below_its_saddle():
     """Strong detail on crests that fall gently to their saddles (``ridge_max_slope`` 1.0 on every piece of the
     small tree) makes hills on the crest near the saddle; with ``cut_slope`` > 0 their cut bowls went below the

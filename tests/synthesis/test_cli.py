@@ -30,7 +30,7 @@ def test_parse_size():
 def test_synthesize_tree_writes_outputs_and_refuses_overwrite(tmp_path, type_file):
     out = tmp_path / "out"
     args = ["synthesize-tree", "--type", str(type_file), "--size", "20km", "--seed", "3", "--crs", "EPSG:32633",
-            "--center", "15", "45", "--no-progress", "-o", str(out)]
+            "--center", "15,45", "--no-progress", "-o", str(out)]
     res = CliRunner().invoke(cli, args)
     assert res.exit_code == 0, res.output
     for f in ("dividetree.gpkg", "dividetree.txt", "peaks.csv", "synthesis.json"):

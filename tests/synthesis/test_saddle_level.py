@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from orokit.errors import InputError, SchemaError
+from orokit.errors import InputError, OrokitWarning, SchemaError
 from orokit.synthesis.ridges import delaunay_mst
 from orokit.synthesis.saddles import SaddleTargets, assign_saddle_elevations, max_bin_errors
 from orokit.synthesis.terrain_type import TerrainType
@@ -111,6 +111,25 @@ def test_synthesis_follows_the_saddle_level(synthesized_type):
     easy = synthesize_divide_tree(dataclasses.replace(t, saddle_level=min(1.0, 1.5 * got)), size_m=30_000.0, rng=3,
                                   params=on)
     assert easy.attrs["saddle_level"]["weight"] == 0 and easy.saddles.equals(free.saddles)
-    # without the record: off
-    none = synthesize_divide_tree(dataclasses.replace(t, saddle_level=None), size_m=30_000.0, rng=3, params=on)
+    # without the record: off, and said (a type made before session 17)
+    with pytest.warns(OrokitWarning, match="follow_saddle_level does nothing.*records no saddle_level.*orokit type"):
+        none = synthesize_divide_tree(dataclasses.replace(t, saddle_level=None), size_m=30_000.0, rng=3, params=on)
     assert none.attrs["saddle_level"] is None and none.saddles.equals(free.saddles)
+
+
+def test_follow_saddle_level_says_when_it_does_nothing(synthesized_type, small_type):
+    """A mixture of types (one of them without ``saddle_level``) is synthesized without the fit, with a warning;
+    the option off, or one type that records it, warns nothing."""
+    import warnings
+
+    _, t = synthesized_type
+    on = SynthesisParams(follow_saddle_level=True)
+    type_map = np.zeros((8, 8), dtype=np.int64)
+    type_map[:, 4:] = 1
+    with pytest.warns(OrokitWarning, match="follow_saddle_level does nothing.*mixes 2 types"):
+        mixed = synthesize_divide_tree([t, small_type], size_m=20_000.0, type_map=type_map, rng=4, params=on)
+    assert mixed.attrs["saddle_level"] is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", OrokitWarning)
+        synthesize_divide_tree([t, small_type], size_m=20_000.0, type_map=type_map, rng=4)
+        assert synthesize_divide_tree(t, size_m=20_000.0, rng=4, params=on).attrs["saddle_level"] is not None

@@ -150,3 +150,31 @@ def test_render_like_a_manifest_dataset_takes_its_grid(real_data, tmp_path):
     back = read_dem(str(out))
     assert back.shape == like.shape
     assert tuple(back.rio.transform())[:6] == tuple(pytest.approx(v) for v in tuple(t)[:6])
+
+
+def test_center_is_one_word_lon_lat_on_both_commands(small_type_file, tmp_path):
+    """`--center LON,LAT` on `synthesize` and `synthesize-tree`; the old two-word form of synthesize-tree,
+    a point off Earth and `--crs local` with a centre are refused naming --center and the fix."""
+    lon, lat = 15.0, 45.0
+    base = ["--type", str(small_type_file), "--size", "10km", "--seed", "1", "--no-progress"]
+    r = CliRunner().invoke(cli, ["synthesize-tree", *base, "--center", f"{lon},{lat}", "-o", str(tmp_path / "t")])
+    assert r.exit_code == 0, r.output
+    import pandas as pd
+
+    peaks = pd.read_csv(tmp_path / "t" / "peaks.csv")
+    assert peaks["lon"].between(lon - 0.2, lon + 0.2).all() and peaks["lat"].between(lat - 0.2, lat + 0.2).all()
+    # a centre in a given CRS: the same on both commands (synthesize refused the pair before)
+    for cmd, extra in (("synthesize-tree", []), ("synthesize", ["--resolution", "200m", "--no-erosion"])):
+        out = tmp_path / f"utm-{cmd}"
+        r = CliRunner().invoke(cli, [cmd, *base, *extra, "--crs", "EPSG:32633", "--center", f"{lon},{lat}",
+                                     "-o", str(out)])
+        assert r.exit_code == 0, (cmd, r.output)
+        p = pd.read_csv(out / "peaks.csv")
+        assert p["lon"].between(lon - 0.2, lon + 0.2).all(), cmd
+    for cmd in ("synthesize-tree", "synthesize"):
+        for bad, says in ((["--center", "15", "45"], "one word"), (["--center", "200,45"], "LON in [-180, 180]"),
+                          (["--center", "15;45"], "not LON,LAT"),
+                          (["--crs", "local", "--center", "15,45"], "not both")):
+            r = CliRunner().invoke(cli, [cmd, *base, *bad, "-o", str(tmp_path / "bad")])
+            assert r.exit_code == 2 and says in r.output and "--center" in r.output, (cmd, bad, r.output)
+            assert "Traceback" not in r.output
