@@ -327,9 +327,23 @@ def read_peaks(source: PathLike):
         p = p / "peaks.parquet"
     if not p.exists():
         raise InputError(f"no peaks table at {p}")
-    if p.suffix == ".parquet":
-        return gpd.read_parquet(p)
     import pandas as pd
 
-    frame = pd.read_csv(p, index_col="peak_id")
+    fix = "pass an `orokit analyze` output folder, its peaks.parquet or its peaks.csv"
+    parquet = p.suffix.lower() == ".parquet"
+    try:
+        frame = gpd.read_parquet(p) if parquet else pd.read_csv(p)
+    except (ValueError, OSError, UnicodeDecodeError) as exc:  # pyarrow's and pandas' parse errors are ValueErrors
+        why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"{p} is not a readable peaks table ({why}); {fix}") from None
+    if not parquet:
+        if "peak_id" not in frame.columns:
+            columns = ", ".join(map(str, frame.columns)) or "none"
+            raise InputError(f"{p} has no peak_id column (columns: {columns}); {fix}")
+        frame = frame.set_index("peak_id")
+    missing = [c for c in ("x", "y") if c not in frame.columns]
+    if missing:
+        raise InputError(f"{p} has no {' and '.join(missing)} column; {fix}")
+    if parquet:
+        return frame
     return gpd.GeoDataFrame(frame, geometry=gpd.points_from_xy(frame["x"], frame["y"]))

@@ -80,10 +80,18 @@ def read_peak_list(path: PathLike, *, cell_size_m: float | None = None, z_units:
 
             return _from_tree(read_divide_tree(p))
         t = read_peaks(p)
+        missing = [c for c in ("elevation", "prominence") if c not in t.columns]
+        if missing:
+            raise InputError(f"{p} has no {' or '.join(missing)} column: a peak list needs both; pass an `orokit "
+                             "analyze` output folder or its peaks table")
         get = lambda c: t[c].to_numpy() if c in t.columns else None  # noqa: E731
-        return _frame(lat=get("lat"), lon=get("lon"), row=get("row"), col=get("col"), x=get("x"), y=get("y"),
-                      elevation=get("elevation"), prominence=get("prominence"), line_parent=get("line_parent"),
-                      prominence_parent=get("prominence_parent"))
+        try:
+            return _frame(lat=get("lat"), lon=get("lon"), row=get("row"), col=get("col"), x=get("x"), y=get("y"),
+                          elevation=get("elevation"), prominence=get("prominence"), line_parent=get("line_parent"),
+                          prominence_parent=get("prominence_parent"))
+        except (ValueError, TypeError) as exc:
+            raise InputError(f"{p}: a column of the peak list is not numeric ({exc}); pass an `orokit analyze` "
+                             "output folder or its peaks table") from None
     if suffix == ".dvt":
         from orokit.io.kirmse_io import read_kirmse_tree
 

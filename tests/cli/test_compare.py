@@ -72,6 +72,25 @@ def test_cli_compare_bad_input(tmp_path):
     assert res.exit_code != 0 and "unknown peak list format" in res.output
 
 
+
+@pytest.mark.parametrize("name, text, says", [
+    ("a.csv", "a,b\n", "no peak_id column"),                               # was pandas' "unsupported operand"
+    ("b.csv", "peak_id,x\n0,1\n", "no y column"),
+    ("c.csv", "peak_id,x,y\n0,1,2\n", "no elevation or prominence column"),  # was "NoneType has no len()"
+    ("d.csv", "peak_id,x,y,elevation,prominence\n0,1,2,high,3\n", "not numeric"),
+    ("e.parquet", "junk", "not a readable peaks table"),
+    ("f.csv", b"\xff\xfe\x00bin", "not a readable peaks table"),
+])
+def test_cli_compare_a_table_that_is_no_peak_list(tmp_path, name, text, says):
+    """A CSV or Parquet file that is not a peaks table: one line naming the file and what it lacks, exit 1
+    (a traceback before)."""
+    p = tmp_path / name
+    p.write_bytes(text if isinstance(text, bytes) else text.encode())
+    res = CliRunner().invoke(cli, ["compare", str(p), str(p), "--no-progress"])
+    assert res.exit_code == 1 and res.exception is not None and isinstance(res.exception, SystemExit), res.output
+    assert says in res.output and str(p) in res.output and "orokit analyze" in res.output
+
+
 @pytest.mark.realdata
 def test_reference_tree_against_orokit(real_data, tmp_path):
     """The paper's reference tree of gobi against orokit at eps 0 (benchmark: >= 97.6 % next to ours)."""
