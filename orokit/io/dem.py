@@ -49,6 +49,9 @@ PLAUSIBLE_MIN_M = -12_000.0
 PLAUSIBLE_MAX_M = 9_000.0
 #: raw values that tools write for voids without always declaring them as nodata
 VOID_SENTINELS = (-9999.0, -32768.0, -32767.0, -99999.0)
+#: more distinct values above any elevation on Earth than this, in a file without elevation units, are a range of
+#: elevations in another unit (feet), not void markers (a file has one or two: 9999, 32767, 65535)
+MAX_VOID_MARKERS = 16
 #: SRTM .hgt tiles: (rows, cols) for 2-byte samples
 _HGT_SHAPES = ((1201, 1201), (3601, 3601), (1801, 3601))
 #: threads reading a whole raster (row stripes, one GDAL handle each) and rows a stripe has at least
@@ -216,6 +219,7 @@ class _BandReader:
     nodata: float | None
     factor: float  # metres per input unit, times the band scale
     offset_m: float  # band offset, in metres
+    units_assumed: bool = False  # the file declares no elevation units: metres assumed
     dtype: np.dtype = np.dtype(np.float32)
     ndim: int = 2
 
@@ -285,8 +289,21 @@ class _BandReader:
         return n_bad, bad_values
 
     def _warn_implausible(self, n_bad: int, bad_values: list[NDArray[Any]], where: str) -> None:
+        """Warn about cells read as nodata for their values; refuse a file without elevation units whose
+        values run on past any elevation on Earth (a range of values, not a few void markers: not metres)."""
         if n_bad:
             values = np.unique(np.concatenate(bad_values))
+            if self.units_assumed:
+                metres = values.astype(np.float64) * self.factor + self.offset_m
+                high = metres[metres > PLAUSIBLE_MAX_M]
+                if high.size > MAX_VOID_MARKERS:
+                    raise UnitsError(
+                        f"{self.path}{where} declares no elevation units, so they were read as metres, but it holds "
+                        f"{high.size} different values above {PLAUSIBLE_MAX_M:g} m (up to {high.max():g}): a range of "
+                        "elevations, not void markers, so its unit is not the metre (in feet the highest would be "
+                        f"{high.max() * TO_METRES['ft']:.0f} m). Pass --z-units ft (z_units='ft') if it is in feet, or "
+                        "--z-units m to read it as metres with those cells as nodata."
+                    )
             shown = ", ".join(f"{v:g}" for v in values[:3]) + (", ..." if len(values) > 3 else "")
             warnings.warn(
                 f"{self.path}{where}: {n_bad} cells hold void markers or values beyond any elevation on Earth "
@@ -777,6 +794,7 @@ def _read_dem(
         nodata=nd,
         factor=to_m * scale,
         offset_m=to_m * offset,
+        units_assumed=z_assumed,
     )
 
     # -- pixels -------------------------------------------------------------------

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from rasterio.transform import Affine
 
 from orokit.cli.main import cli
-from orokit.errors import CRSError, InputError, OrokitWarning
+from orokit.errors import CRSError, InputError, OrokitWarning, UnitsError
 from orokit.io.dem import read_dem
 
 FLT_MAX = float(np.finfo(np.float32).max)
@@ -107,3 +107,26 @@ def test_hgt_of_the_wrong_size_says_expected_and_actual(tmp_path):
     p.write_bytes(b"\0" * (2 * 1201 * 1201 - 100))
     with pytest.raises(InputError, match=r"2,884,702 bytes, expected 2,884,802 bytes \(1201 x 1201 samples\)"):
         read_dem(p)
+
+
+def test_a_dem_in_feet_without_units_is_refused_naming_the_fix(tmp_path):
+    """A georeferenced DEM in feet that declares no units was read as metres with every cell above 9000 "m"
+    made nodata (a warning, then an analysis of what was left: 50 of 720 peaks on himalaya-everest's feet): a range
+    of such values is no void marker, so it is refused, in memory and chunked; --z-units ft reads it, --z-units m
+    keeps the old reading (a warning), a few void markers above 9000 still only warn."""
+    rng = np.random.default_rng(0)
+    z = (rng.uniform(7000.0, 29000.0, (40, 50))).astype("float32")  # feet, as the PNG datasets
+    p = _tif(tmp_path / "ft.tif", z)
+    for chunks in (None, 16):
+        with pytest.raises(UnitsError, match=r"ft.tif declares no elevation units.*not the metre.*--z-units ft"):
+            read_dem(p, chunks=chunks)
+    res = CliRunner().invoke(cli, ["analyze", str(p), "-o", str(tmp_path / "o"), "--no-progress"])
+    assert res.exit_code == 1 and "--z-units ft" in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "o").exists()
+    assert float(np.nanmax(read_dem(p, z_units="ft").values)) == pytest.approx(float(z.max()) * 0.3048, rel=1e-6)
+    with pytest.warns(OrokitWarning, match="void markers"):
+        assert np.isnan(read_dem(p, z_units="m").values).any()
+    few = np.full((10, 10), 1500.0, dtype="float32")
+    few[0, :3] = (9999.0, 32767.0, 65535.0)
+    with pytest.warns(OrokitWarning, match="3 cells hold void markers"):
+        read_dem(_tif(tmp_path / "few.tif", few))
