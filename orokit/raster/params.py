@@ -4,7 +4,11 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Any
 
-__all__ = ["RenderParams"]
+__all__ = ["RIDGE_TAIL_SLOPE", "RenderParams"]
+
+#: slope (m/m) at which a steep ridge's crest still falls to its saddle past its steep part
+#: (:func:`orokit.raster.skeleton.steep_ridge_profile`)
+RIDGE_TAIL_SLOPE = 0.02
 
 
 @dataclass(frozen=True)
@@ -265,6 +269,7 @@ class RenderParams:
     ridge_plateau_drop: float | None = None
     ridge_plateau_spread: float | None = 0.25
     ridge_plateau_relief_m: float = 300.0
+    ridge_tail_flank_slope: float | None = None
     flank_depth_saddle_k: int = 16
     keep_hill_ratio: float = 0.0
     cut_slope: float = 0.0
@@ -332,6 +337,11 @@ class RenderParams:
         if self.ridge_plateau_spread is not None:
             if not float(self.ridge_plateau_spread) >= 0.0:  # NaN too
                 raise InputError(f"ridge_plateau_spread must be >= 0 or None, got {self.ridge_plateau_spread!r}")
+        if self.ridge_tail_flank_slope is not None:
+            if not float(self.ridge_tail_flank_slope) >= RIDGE_TAIL_SLOPE:  # NaN too
+                raise InputError(f"ridge_tail_flank_slope must be >= the crest's tail slope {RIDGE_TAIL_SLOPE} "
+                                 f"(m/m; gentler cones would rise above the saddle) or None, got "
+                                 f"{self.ridge_tail_flank_slope!r}")
         if self.river_blend_k is not None and not self.river_blend_k >= 2:
             raise InputError(f"river_blend_k must be >= 2 or None, got {self.river_blend_k!r}")
         if not float(self.ridge_plateau_relief_m) >= 0.0:

@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 from orokit._typing import SeedLike
 from orokit.errors import DivideTreeError
 from orokit.raster.interpolate import dart_seed, flank_envelope, poisson_darts, sample_elevation, valley_width
-from orokit.raster.params import RenderParams
+from orokit.raster.params import RIDGE_TAIL_SLOPE, RenderParams
 from orokit.raster.profiles import hillslope_profile, ridge_profile, threshold_profile
 from orokit.raster.refine import Polylines, densify, refine_segments
 from orokit.raster.rivers import (RidgeSegments, RiverNetwork, local_relief, ridge_segments, river_network,
@@ -173,9 +173,6 @@ def _cone_floor(lines: Polylines, point_origin: np.ndarray, pieces: RidgeSegment
     return out
 
 
-#: slope (m/m) at which a steep ridge's crest still falls to its saddle past its steep part
-RIDGE_TAIL_SLOPE = 0.02
-
 
 def plateau_pieces(piece_saddle: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, max_drop: float,
                    *, k: int = 16, k_far: int = 64) -> np.ndarray:
@@ -239,6 +236,44 @@ def steep_ridge_profile(peak: np.ndarray, saddle: np.ndarray, max_slope: float, 
     return weight
 
 
+def tail_points(lines: Polylines, xy: np.ndarray, z: np.ndarray, origin: np.ndarray, piece_saddle: np.ndarray,
+                *, only: np.ndarray | None = None, tol_m: float = 0.5) -> np.ndarray:
+    """Which densified ridge points ``(xy, z)`` lie on a ridge piece's tail: the part of the crest that runs at
+    most :data:`RIDGE_TAIL_SLOPE` above its saddle (``z - saddle <= RIDGE_TAIL_SLOPE x distance + tol_m``;
+    :func:`steep_ridge_profile`'s crest past its steep part, or a straight piece that gentle). ``origin``:
+    :func:`orokit.raster.refine.densify`'s piece of each point (-1 for the refined vertices, whose piece is read
+    from ``lines``' segments); ``piece_saddle`` (m, 3) the saddle of every piece; with ``only`` (one bool per
+    piece) the other pieces have no tail.
+
+    A 10 km piece from a 1000-m peak cut at 0.5 m/m: its crest reaches the tail 1.67 km from the peak
+    (the refined vertices every 200 m, linear between them).
+
+    >>> from orokit.raster.refine import refine_segments, densify
+    >>> ends = np.array([[0.0, 0.0, 1000.0], [10000.0, 0.0, 0.0]])
+    >>> lines = refine_segments(ends[:, :2], ends[:, 2], np.array([[0, 1]]), lam=200.0, jitter=0.0,
+    ...                         segment_profile=steep_ridge_profile(ends[:1], ends[1:], 0.5))
+    >>> xy, z, _, org = densify(lines, 50.0, origin=True)
+    >>> tail = tail_points(lines, xy, z, org, ends[1:])
+    >>> float(xy[tail, 0].min()), float(xy[~tail, 0].max())
+    (1800.0, 1750.0)
+    """
+    piece = np.asarray(origin, np.int64).copy()
+    free = np.flatnonzero(piece < 0)
+    if free.size:
+        seg_origin = lines.origin if lines.origin is not None else np.arange(lines.segments.shape[0])
+        vert = np.full(lines.xy.shape[0], -1, np.int64)
+        vert[lines.segments[:, 0]] = seg_origin
+        vert[lines.segments[:, 1]] = seg_origin  # a vertex shared by pieces (a tree node) takes one of them
+        piece[free] = vert[free - (piece.size - lines.xy.shape[0])]
+    ok = piece >= 0
+    sxy, sz = piece_saddle[np.maximum(piece, 0), :2], piece_saddle[np.maximum(piece, 0), 2]
+    d = np.hypot(*(np.asarray(xy, float) - sxy).T)
+    out = ok & (np.asarray(z, float) - sz <= RIDGE_TAIL_SLOPE * d + float(tol_m))
+    if only is not None:
+        out &= np.asarray(only, bool)[np.maximum(piece, 0)]
+    return np.asarray(out)
+
+
 def _hillslope(params: RenderParams):
     """The ridge-to-river profile of the samples (None: linear)."""
     if params.profiles == "learned":
@@ -285,8 +320,8 @@ def build_skeleton(
         base = 0.5 * zmin
     learned = params.profiles == "learned"
     seg_profile = None
+    only = None
     if params.ridge_max_slope is not None:
-        only = None
         if n < nodes.shape[0]:
             cuts = []
             if params.ridge_plateau_drop is not None:
@@ -338,6 +373,11 @@ def build_skeleton(
         # (within 2 lambda) they stay steep so the saddle stays the highest pass
         near, _ = cKDTree(nodes[n:, :2]).query(rxy, workers=-1)
         rs = np.where(near > 2.0 * lam, np.minimum(rs, params.flank_max_slope), rs)
+    if params.ridge_tail_flank_slope is not None and params.ridge_max_slope is not None and n < nodes.shape[0]:
+        tail = tail_points(ridge_lines, rxy, rz, rorig, nodes[ridges.node1], only=only)
+        near, _ = cKDTree(nodes[n:, :2]).query(rxy, workers=-1)
+        tail &= near > 2.0 * lam  # beside a saddle the cones stay steep: the saddle stays the highest pass
+        rs = np.where(tail, np.minimum(rs, params.ridge_tail_flank_slope), rs)
     drop = None
     if params.flank_depth_saddle_ratio is not None and n < nodes.shape[0]:
         # how far each piece's saddle stands above the lowest of the saddles around it
