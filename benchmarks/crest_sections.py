@@ -2,7 +2,8 @@
 
 For each region, the median drop of the ground beside every straight tree piece (peak -> saddle) at perpendicular
 offsets (:func:`orokit.validate.crest.crest_sections`; points every 200 m from 1 km past the peak to 400 m before
-the saddle) and the median crest width (first offset where the ground lies 25 m below the line,
+the saddle; each centred on the highest ground within ``--search`` 300 m of the line, where a real crest
+meanders) and the median crest width (first offset where the ground lies 25 m below the line,
 :func:`orokit.validate.crest.crest_width`), on the real DEM and on renders of its tree saved by
 ``benchmarks/render_realism.py --save DIR`` (one ``DIR/<region>.npy`` per region, same grid as the DEM). Pieces
 are split into those ``ridge_plateau_spread`` 0.25 / ``ridge_plateau_relief_m`` 300 selects
@@ -27,7 +28,7 @@ from render_realism import _cached  # noqa: E402
 DROP_M = 25.0
 
 
-def region_sections(name: str, grids: dict[str, Path], cache: Path) -> list[str]:
+def region_sections(name: str, grids: dict[str, Path], cache: Path, search_m: float) -> list[str]:
     from orokit.data import open_dataset_dem
     from orokit.raster.rivers import ridge_segments
     from orokit.raster.skeleton import _tree_arrays, spread_pieces
@@ -44,7 +45,7 @@ def region_sections(name: str, grids: dict[str, Path], cache: Path) -> list[str]
                     if (v / f"{name}.npy").is_file()})
     lines = []
     for label, z in rasters.items():
-        cs = crest_sections(z, (xmin, ymax, d["res"]), nodes[rs.node0, :2], nodes[rs.node1, :2])
+        cs = crest_sections(z, (xmin, ymax, d["res"]), nodes[rs.node0, :2], nodes[rs.node1, :2], search_m=search_m)
         w = crest_width(cs, DROP_M)
         for grp, m in (("selected", sel), ("others", ~sel)):
             pts = m[cs.piece]
@@ -63,6 +64,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="renders saved by render_realism.py --save DIR")
     ap.add_argument("--group", choices=("tune", "hold", "all"), default="all")
     ap.add_argument("--regions", default=None, help="comma-separated dataset names (default: the group)")
+    ap.add_argument("--search", type=float, default=300.0,
+                    help="centre each section on the highest ground within this many metres of the line (0: on it)")
     ap.add_argument("--cache", type=Path, default=Path.home() / ".cache" / "orokit" / "render_realism")
     a = ap.parse_args(argv)
     grids = {}
@@ -73,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
         grids[label] = Path(path)
     names = a.regions.split(",") if a.regions else {"tune": TUNE, "hold": HOLD, "all": TUNE + HOLD}[a.group]
     for name in names:
-        print("\n".join(region_sections(name, grids, a.cache)), flush=True)
+        print("\n".join(region_sections(name, grids, a.cache, a.search)), flush=True)
     print(f"load {os.getloadavg()[0]:.1f}")
     return 0
 

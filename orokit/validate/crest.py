@@ -42,13 +42,15 @@ class CrestSections:
 def crest_sections(z: NDArray[np.floating], transform: tuple[float, float, float], peak_xy: NDArray[np.floating],
                    saddle_xy: NDArray[np.floating], *, offsets_m: tuple[float, ...] = OFFSETS_M,
                    step_m: float = 200.0, skip_peak_m: float = 1000.0, skip_saddle_m: float = 400.0,
-                   border_m: float | None = None) -> CrestSections:
+                   border_m: float | None = None, search_m: float = 0.0) -> CrestSections:
     """Cross-sections of the grid ``z`` across the straight pieces ``peak_xy[i] -> saddle_xy[i]`` ((m, 2) each).
 
     ``transform``: ``(x_west, y_north, cell_size_m)`` of ``z``'s north-up grid (cell centres half a cell in).
     Points lie every ``step_m`` from ``skip_peak_m`` past the peak to ``skip_saddle_m`` before the saddle; those
     whose widest section would leave the grid (within ``border_m``, default the largest offset plus one cell, of
-    its edge) are dropped.
+    its edge) are dropped. With ``search_m`` > 0 each section is centred on the highest ground within ``search_m``
+    of the line along its normal (sampled every ``search_m / 10``): a real crest meanders about the straight line
+    from peak to saddle, and the drops are then measured from the crest itself.
 
     >>> y = (np.arange(101) - 50.0) * 20.0  # a cell centre on y = 0
     >>> z = np.tile(1000.0 - 0.1 * np.abs(y)[:, None], (1, 200))  # a tent ridge along y = 0, 0.1 m/m flanks
@@ -64,7 +66,7 @@ def crest_sections(z: NDArray[np.floating], transform: tuple[float, float, float
     off = np.asarray(offsets_m, float)
     if off.size == 0 or not (off > 0).all():
         raise ValueError(f"offsets_m must be > 0 metres, got {offsets_m!r}")
-    border = float(off.max() + res) if border_m is None else float(border_m)
+    border = float(off.max() + search_m + res) if border_m is None else float(border_m)
     p, s = np.asarray(peak_xy, float).reshape(-1, 2), np.asarray(saddle_xy, float).reshape(-1, 2)
     length = np.hypot(*(s - p).T)
     pieces, along = [], []
@@ -87,6 +89,10 @@ def crest_sections(z: NDArray[np.floating], transform: tuple[float, float, float
         rows, cols = (y0 - q[:, 1]) / res - 0.5, (q[:, 0] - x0) / res - 0.5
         return np.asarray(ndimage.map_coordinates(z, [rows, cols], order=1, mode="nearest"), float)
 
+    if search_m > 0 and xy.shape[0]:
+        shifts = np.linspace(-float(search_m), float(search_m), 21)
+        zs = np.column_stack([sample(xy + t * nrm) for t in shifts])
+        xy = xy + shifts[np.argmax(zs, axis=1)][:, None] * nrm
     z0 = sample(xy)
     drop = np.empty((xy.shape[0], off.size))
     for j, o in enumerate(off):

@@ -67,3 +67,19 @@ def test_points_near_the_border_and_short_pieces_are_dropped():
     assert short.drop.shape == (0, 7)
     with pytest.raises(ValueError, match="offsets_m"):
         crest_sections(z, tr, np.zeros((1, 2)), np.ones((1, 2)), offsets_m=(0.0,))
+
+
+def test_search_centres_the_section_on_a_crest_beside_the_line():
+    # the tent's crest runs 120 m north of the straight line (on a cell centre): without the search the section is
+    # lopsided (drops 0.3 (|o - 120| + |o + 120|) / 2 - 0.3 x 120 below the off-crest point); with a 300-m search
+    # (every 30 m) it is the tent's
+    x, y, tr = _grid()
+    s = 0.3
+    z = 2000.0 - s * np.abs(y - 120.0)
+    peak, saddle = np.array([[-3000.0, 0.0]]), np.array([[3000.0, 0.0]])
+    kw = dict(offsets_m=(100.0, 400.0), step_m=200.0, skip_peak_m=0.0, skip_saddle_m=0.0)
+    off = crest_sections(z, tr, peak, saddle, **kw)
+    on = crest_sections(z, tr, peak, saddle, search_m=300.0, **kw)
+    assert on.drop.shape[0] > 5
+    np.testing.assert_allclose(off.median(), [0.0, 84.0], atol=1e-6)
+    np.testing.assert_allclose(on.median(), [30.0, 120.0], atol=1e-6)
