@@ -187,6 +187,13 @@ class RenderParams:
         unused when ``ridge_max_slope`` is None.
         Defaults 0.25 and 300 m (session 17: renders of the 13 real trees within all six 5/6 -> 6/6 tune in seeds
         0 and 1, held out unchanged; andes-chile's slope 5.15 -> 3.28 of 4.00).
+    ridge_tail_flank_slope : the flank cones of the ridge points on a cut piece's tail (the crest past its steep part,
+        running at most ``RIDGE_TAIL_SLOPE`` above its saddle, :func:`orokit.raster.skeleton.tail_points`; only the
+        pieces ``ridge_max_slope`` applies to, and not within ``2 lam`` of a saddle) fall at most this steeply (m/m,
+        at least ``RIDGE_TAIL_SLOPE``, so the ground beside a saddle stays below it): the tail is no ridge but the
+        plain the crest crosses, and the ground beside it stays near its level instead of falling at the flank slope
+        (a thin spoke across the plateau; session 18: andes-chile's render's ground 400 m beside its selected pieces
+        lay 172 m below the line, the real DEM's 19 m); None = the flank slope.
     smooth_m : Gaussian sigma (metres) that rounds the skeleton raster's planar facets and creases
         (the TIN carries no information below its meshing distance ``lam``), faded to 0 within
         ``texture_clearance_m`` of peaks and saddles; 0 = off.
