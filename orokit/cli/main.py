@@ -10,6 +10,7 @@ on stderr; ``-v`` adds the logger name, ``-q`` hides them.
 """
 from __future__ import annotations
 
+import errno
 import importlib
 import logging
 import sys
@@ -144,6 +145,12 @@ class LazyGroup(click.Group):
         except Exception as exc:
             from orokit.io.atomic import is_no_space_error, no_space_error
 
+            if not verbose and isinstance(exc, OSError) and _is_access_error(exc):
+                name = exc.filename or _where(ctx, exc)
+                verb = "write" if exc.errno == errno.EROFS else "access"
+                click.echo(f"Error: cannot {verb} {name}: {str(exc.strerror).lower()}; the previous outputs were kept. "
+                           "Check its permissions, or write to a folder you can write to", err=True)
+                sys.exit(1)
             if verbose or not is_no_space_error(exc):
                 raise
             click.echo(f"Error: {no_space_error(_where(ctx, exc), exc)}", err=True)
@@ -356,6 +363,11 @@ def _caused_by(exc: BaseException, kind: type[BaseException]) -> bool:
             return True
         e = e.__cause__ or e.__context__
     return False
+
+
+def _is_access_error(exc: BaseException) -> bool:
+    """An OSError of a file refused by the file system: read-only (EROFS) or not permitted (EACCES, EPERM)."""
+    return isinstance(exc, OSError) and exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM)
 
 
 def _where(ctx: click.Context, exc: BaseException) -> str:

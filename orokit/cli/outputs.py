@@ -25,12 +25,36 @@ __all__ = ["claim_outputs", "claimed_outputs"]
 def _claimed(paths: list[Path], names: tuple[str, ...] | None, stage: Staging) -> Iterator[Staging]:
     with output_lock(*paths):
         for p in paths:
+            _check_writable(p)
             remove_stale_temps(p, names=names)
         try:
             yield stage
         finally:
             if not stage.committed:
                 stage.abort()
+
+
+def _check_writable(path: Path) -> None:
+    """Refuse an output folder that exists but cannot be written into (a read-only mount, no permission): its
+    lock lies beside it, so without this the command ran to its end and failed there."""
+    import errno
+    import os
+
+    if path.is_dir() and not os.access(path, os.W_OK | os.X_OK):
+        from orokit.errors import OutputError
+
+        why = os.strerror(errno.EROFS if _read_only(path) else errno.EACCES).lower()
+        raise OutputError(f"cannot write into {path}: {why}; write to a folder you can write to (-o/--output)")
+
+
+def _read_only(path: Path) -> bool:
+    """True when ``path`` lies on a file system mounted read-only."""
+    import os
+
+    try:
+        return bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
 
 
 def claim_outputs(*paths: Path | str | None, names: tuple[str, ...] | None = None) -> Staging:

@@ -422,6 +422,44 @@ def test_an_output_in_a_folder_that_cannot_be_written_is_named_with_the_fix(tmp_
     assert not out.exists()
 
 
+def test_an_output_folder_that_cannot_be_written_into_is_refused_before_the_work(tmp_path, dem_tif, monkeypatch):
+    """`-o DIR` where DIR exists but refuses writes (a read-only mount point: its lock lies beside it, in a
+    writable folder): refused at the start, naming DIR (before: the whole analysis ran, then a traceback from
+    the commit's unlink)."""
+    out = tmp_path / "out"
+    assert _analyze(dem_tif, out).exit_code == 0
+    before = {f.name: f.read_bytes() for f in out.iterdir()}
+    real = os.access
+
+    def access(path, mode, *args, **kwargs):
+        return False if Path(path) == out and mode & os.W_OK else real(path, mode, *args, **kwargs)
+
+    monkeypatch.setattr(os, "access", access)
+    res = _analyze(dem_tif, out, "--overwrite")
+    assert isinstance(res.exception, SystemExit) and res.exit_code == 1, res.output
+    assert f"cannot write into {out}: permission denied" in res.output and "--output" in res.output
+    assert "peaks with prominence" not in res.output  # refused before the analysis
+    assert {f.name: f.read_bytes() for f in out.iterdir()} == before
+
+
+def test_a_checkpoint_on_a_read_only_file_system_is_one_line(tmp_path, dem_tif, monkeypatch):
+    """Any write a read-only file system refuses (here the checkpoint folder's) ends in one line naming the
+    path, exit 1 (before: a traceback)."""
+    ckpt = tmp_path / "ck"
+    real = os.mkdir
+
+    def mkdir(path, *args, **kwargs):
+        if Path(path) == ckpt:
+            raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(path))
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "mkdir", mkdir)
+    res = _analyze(dem_tif, tmp_path / "out", "--chunks", "16", "--checkpoint", str(ckpt))
+    assert isinstance(res.exception, SystemExit) and res.exit_code == 1, res.output
+    assert f"cannot write {ckpt}: read-only file system" in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_full_disk_leaves_no_lock_file_behind(tmp_path, dem_tif, monkeypatch):
     """The lock's holder text cannot be written on a full disk: the lock still holds and its file goes at the
     end (before: ENOSPC there, the descriptor leaked and the empty lock file stayed)."""
