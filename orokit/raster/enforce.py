@@ -177,7 +177,8 @@ def cap_basins(z: np.ndarray, grid: Grid, skel: TerrainSkeleton, *, floor: np.nd
     whose top is less than ``keep_hills_m`` above their pass and below that tree peak are
     kept and join its basin (their prominence is below ``keep_hills_m``); the others are
     cut down (flooded from their outside with a 1 mm per cell ascent, or ``cut_slope`` per metre
-    down to ``cut_depth_m`` below their pass: :func:`_kernels.reconstruct_masked`). Then every pair of
+    down to ``cut_depth_m`` below their pass: :func:`_kernels.reconstruct_masked`; a cut never takes a cell
+    below its ``floor``, so a bowl on a crest never opens a pass below the crest's saddle). Then every pair of
     8-adjacent cells in the basins of two tree peaks whose pass (the lower of the two) is
     above the tree's bottleneck between the peaks (lowest saddle on the tree path) is
     lowered ``drop_m`` below it: the lower cell, or the higher one when the target is below

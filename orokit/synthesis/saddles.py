@@ -256,7 +256,7 @@ def assign_saddle_elevations(
         mid = np.column_stack([0.5 * (px[a] + px[b]), 0.5 * (py[a] + py[b])])
         near = cKDTree(mid).query(mid, k=min(int(level_k), a.size))[1].reshape(a.size, -1)
 
-    def lvl(s):
+    def lvl(s: np.ndarray) -> np.ndarray | None:
         return None if near is None else np.median(s[near], axis=1)
 
     best = sz.copy()
