@@ -25,6 +25,24 @@ def small_tree(crs=None) -> DivideTree:
     return DivideTree.from_arrays(peaks, saddles, edges, crs=crs, attrs={"extent": [0.0, 0.0, 8000.0, 8000.0]})
 
 
+#: :func:`small_tree`'s prominences, written by hand: A 1500 (its root), B 200, C 200, D 150, E 100
+SMALL_TREE_PROMINENCES = (1500.0, 200.0, 200.0, 150.0, 100.0)
+
+
+def assert_keeps_small_tree(dem, *, atol: float = 6.0):
+    """A render of :func:`small_tree` analysed at 30 m: every peak found within 100 m, no other one, and the
+    prominences the hand-written ones within ``atol`` (a 50 m cell beside a saddle may pass up to about
+    slope x cell / 2 above it). Returns the comparison."""
+    import orokit
+    from orokit.validate.roundtrip import compare_peaks
+
+    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(small_tree(), res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+    np.testing.assert_allclose(comp.peaks["raster_prominence"].to_numpy(), SMALL_TREE_PROMINENCES, atol=atol)
+    return comp
+
+
 def one_peak() -> DivideTree:
     return DivideTree.from_arrays([[4000.0, 4000.0, 900.0]], np.empty((0, 3)), np.empty((0, 3)),
                                   attrs={"extent": [0.0, 0.0, 8000.0, 8000.0]})

@@ -14,7 +14,7 @@ from orokit.raster.skeleton import build_skeleton
 from orokit.topology.divide_tree import DivideTree
 from orokit.validate.roundtrip import compare_peaks
 
-from helpers.trees import small_tree
+from helpers.trees import assert_keeps_small_tree, small_tree
 
 FAST = RenderParams(lam=200.0, erosion_steps=2)
 
@@ -69,15 +69,7 @@ def test_raster_honours_peaks_and_saddles(rendered):
 
 
 def test_round_trip_recovers_every_peak(rendered):
-    tree, dem, _ = rendered
-    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
-    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
-    assert comp.recovered_share == 1.0
-    assert len(comp.extra) == 0
-    got = comp.peaks["raster_prominence"].to_numpy()
-    # expected prominences written by hand: A 1500 (root), B 200, C 200, D 150, E 100
-    # tolerance: a 50 m cell beside a saddle may pass up to ~slope * cell / 2 above it
-    np.testing.assert_allclose(got, [1500.0, 200.0, 200.0, 150.0, 100.0], atol=6.0)
+    assert_keeps_small_tree(rendered[1])
 
 
 def test_resolution_independence():
@@ -204,11 +196,7 @@ def test_texture_adds_short_wavelength_relief_and_keeps_the_orometry():
     r1, _ = texture_spectrum(rough.values, 50.0)
     assert r1 > r0 + 5.0
     assert json.loads(rough.attrs["parameters"])["texture_rms_m"] == 40.0
-    res = orokit.analyze(rough, min_prominence_m=30.0, isolation=False)
-    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
-    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
-    np.testing.assert_allclose(comp.peaks["raster_prominence"].to_numpy(), [1500.0, 200.0, 200.0, 150.0, 100.0],
-                               atol=6.0)
+    assert_keeps_small_tree(rough)
 
 
 def test_spectral_noise_follows_its_spectral_slope():
@@ -241,11 +229,7 @@ def test_texture_from_relief_and_kept_hills_keep_the_orometry():
     assert json.loads(plain.attrs["parameters"])["texture_rms_used_m"] == 0.0
     assert used > 5.0
     assert texture_spectrum(rough.values, 50.0)[0] > texture_spectrum(plain.values, 50.0)[0] + 0.3 * used
-    res = orokit.analyze(rough, min_prominence_m=30.0, isolation=False)
-    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
-    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
-    np.testing.assert_allclose(comp.peaks["raster_prominence"].to_numpy(), [1500.0, 200.0, 200.0, 150.0, 100.0],
-                               atol=6.0)
+    assert_keeps_small_tree(rough)
     z = np.arange(60.0).reshape(6, 10)  # 2 x 2-cell blocks at 1 m: ptp of each block is 11
     assert _median_relief(z, 1.0, 2.0) == 11.0
 
