@@ -49,9 +49,11 @@ def open_checkpoint(folder: PathLike, fingerprint: dict[str, Any]) -> Path:
         except (OSError, ValueError) as exc:
             raise TilingError(f"{meta} is unreadable ({exc}); delete the checkpoint folder {root} and rerun") from None
         if old != fingerprint:
+            differ = sorted(k for k in set(old) | set(fingerprint) if old.get(k) != fingerprint.get(k)) \
+                if isinstance(old, dict) else ["format"]
             raise TilingError(
-                f"checkpoint folder {root} belongs to another run (different input, chunks or threshold); "
-                "use a new folder or delete it"
+                f"checkpoint folder {root} belongs to another run (different input, chunks or threshold: "
+                f"{', '.join(differ)} differ); use a new folder or delete it"
             )
     else:
         with atomic_path(meta, tag=run_tag(), lock=True) as tmp:

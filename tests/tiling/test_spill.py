@@ -408,6 +408,18 @@ def test_opening_a_checkpoint_removes_the_temporary_chunk_files_of_ended_runs_on
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([*kept, "checkpoint.json", "chunk_00000_00000.npz"])
 
 
+
+def test_a_checkpoint_of_another_run_says_what_differs(tmp_path):
+    """The refusal names the fingerprint's keys that differ (before: only "different input, chunks or
+    threshold", which left a user guessing; session 18 saw it once after an interrupted run)."""
+    from orokit.errors import TilingError
+    from orokit.io.checkpoint_io import open_checkpoint
+
+    open_checkpoint(tmp_path, {"graph": "read_dem-a", "chunks": [[16]], "min_prominence_m": 30.0})
+    with pytest.raises(TilingError, match=r"another run .*graph, min_prominence_m differ\); use a new folder"):
+        open_checkpoint(tmp_path, {"graph": "read_dem-b", "chunks": [[16]], "min_prominence_m": 10.0})
+
+
 _HOLD = """
 import fcntl, os, sys
 path = sys.argv[1]
