@@ -13,6 +13,7 @@ from orokit.cli.options import (
     InputSource,
     cell_size_option,
     center_option,
+    output_frame,
     overwrite_option,
     progress_option,
     seed_option,
@@ -119,8 +120,6 @@ def synthesize(type_file, size, resolution, like, cell_size_m, n_peaks, control_
     existing = [f for f in outputs if (outdir / f).exists()]
     if existing and not overwrite:
         raise click.UsageError(f"{outdir} already holds {', '.join(existing)}; pass --overwrite to replace them")
-    from orokit.cli.options import output_frame
-
     center_ll: tuple[float, float] | None = center
     crs, local = output_frame(crs, center_ll)
     like_origin = None
