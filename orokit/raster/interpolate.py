@@ -9,8 +9,8 @@ from scipy.spatial import cKDTree
 from orokit._typing import SeedLike
 from orokit.raster import _kernels
 
-__all__ = ["dart_seed", "poisson_darts", "poisson_samples", "valley_width", "sample_elevation", "flank_envelope",
-           "field_elevation"]
+__all__ = ["dart_seed", "poisson_darts", "poisson_samples", "valley_width", "sample_elevation", "foot_across_jumps",
+           "flank_envelope", "field_elevation"]
 
 
 def poisson_samples(extent: tuple[float, float, float, float], radius: float, *, rng: SeedLike = None) -> np.ndarray:
@@ -80,6 +80,9 @@ def sample_elevation(
     border_distance: np.ndarray | None = None,
     beyond_slope: float | None = None,
     river_blend_k: int | None = None,
+    river_foot_band: float | None = None,
+    river_foot_slope: float = 0.25,
+    river_foot_k: int = 32,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elevation of ``points`` from the nearest ridge point q and river point r.
 
@@ -108,6 +111,11 @@ def sample_elevation(
     With ``river_blend_k`` (>= 2) a hillslope point (``d(p, R) >= w``) takes ``h(r)`` as the inverse-square-distance
     mean of its ``river_blend_k`` nearest river points: the nearest river point's elevation jumps where a high
     tributary's points give way to a deep trunk's (across a hillslope, not on a ridge), which the TIN makes a cliff.
+    With ``river_foot_band`` (> 0) the foot is blended only across such a jump (:func:`foot_across_jumps`, the
+    ``river_foot_k`` nearest of every 4th river point as the others): points whose bed differs from the nearest
+    one's by more than ``river_foot_slope`` x their distance apart (another river, not the same bed upstream)
+    join within a band of ``river_foot_band`` x that excess beyond the nearest distance; elsewhere the foot
+    stays the nearest bed.
     Returns ``(h, d_ridge, d_river)``.
     """
     tree = tree if tree is not None else cKDTree(ridge_xy)
@@ -123,7 +131,16 @@ def sample_elevation(
                 dT[tie], iq[tie] = tree.query(points[tie], workers=-1)
     else:
         dT, iq = tree.query(points, workers=-1)  # both cores; same answers
-    if river_blend_k is not None and int(river_blend_k) >= 2 and river_xy.shape[0] >= 2:
+    if river_foot_band is not None and river_xy.shape[0] >= 2:
+        dR, ir = cKDTree(river_xy).query(points, workers=-1)
+        # the other beds from every 4th river point (lambda apart as the skeleton densifies): k of them reach
+        # 4x farther along a river than k of all, so a trunk's many points do not hide the tributary beside it
+        cxy, cz = river_xy[::4], river_z[::4]
+        dk, jk = cKDTree(cxy).query(points, k=min(int(river_foot_k), cxy.shape[0]), workers=-1)
+        dk, jk = dk.reshape(points.shape[0], -1), jk.reshape(points.shape[0], -1)
+        hr_blend = foot_across_jumps(dR, river_xy[ir], river_z[ir], dk, cxy[jk], cz[jk],
+                                     band=float(river_foot_band), slope=float(river_foot_slope))
+    elif river_blend_k is not None and int(river_blend_k) >= 2 and river_xy.shape[0] >= 2:
         kb = min(int(river_blend_k), river_xy.shape[0])
         dk, jk = cKDTree(river_xy).query(points, k=kb, workers=-1)
         dR, ir = dk[:, 0].copy(), jk[:, 0].copy()
@@ -162,6 +179,38 @@ def sample_elevation(
         floor = np.minimum(hr + g * np.maximum(dR - w, 0.0), h)
         h = np.maximum(np.minimum(h, env), floor)
     return h, dT, dR
+
+
+def foot_across_jumps(d0: np.ndarray, xy0: np.ndarray, z0: np.ndarray, dk: np.ndarray, xyk: np.ndarray,
+                      zk: np.ndarray, *, band: float, slope: float) -> np.ndarray:
+    """The hillslope's foot from the nearest river point (distance ``d0``, place ``xy0``, bed ``z0``; ``(n,)``) and
+    other river points (``dk``, ``xyk``, ``zk``; ``(n, k)``).
+
+    An other point j whose bed differs from ``z0`` by more than ``slope`` x its distance from ``xy0`` (another
+    river: along one bed gentler than ``slope`` none qualifies) weighs ``w_j = max(1 - (d_j - d0) / B_j, 0)^2`` with
+    ``B_j = band`` x that excess; the foot is ``(z0 + W z*) / (1 + W)`` with ``W = max w_j`` and ``z*`` the
+    ``w``-weighted mean bed of those points. Where the nearest river changes from a high tributary to a deep
+    trunk the foot then moves from one bed to the other over a band that widens with the jump (the mean of both
+    on the line where they are equally far), instead of stepping there (a cliff band in the TIN); elsewhere it is
+    the nearest bed.
+
+    >>> xy = np.array([[0.0, 0.0]]); other = np.array([[[0.0, 1000.0]]])
+    >>> foot_across_jumps(np.array([500.0]), xy, np.array([0.0]), np.array([[500.0]]), other, np.array([[600.0]]),
+    ...                   band=2.0, slope=0.25).tolist()
+    [300.0]
+    >>> foot_across_jumps(np.array([100.0]), xy, np.array([0.0]), np.array([[900.0]]), other, np.array([[600.0]]),
+    ...                   band=2.0, slope=0.25).tolist()
+    [0.0]
+    """
+    z0c = np.asarray(z0, float)[:, None]
+    sep = np.hypot(*np.moveaxis(xyk - np.asarray(xy0, float)[:, None, :], -1, 0))
+    width = float(band) * np.maximum(np.abs(zk - z0c) - float(slope) * sep, 0.0)
+    w = np.where(width > 0.0, np.clip(1.0 - (dk - np.asarray(d0, float)[:, None]) / np.maximum(width, 1e-9),
+                                      0.0, 1.0) ** 2, 0.0)
+    wsum = np.sum(w, axis=1)
+    zs = np.sum(w * zk, axis=1) / np.maximum(wsum, 1e-12)
+    wmax = np.max(w, axis=1)
+    return (z0c[:, 0] + wmax * zs) / (1.0 + wmax)
 
 
 def flank_envelope(points: np.ndarray, ridge_xy: np.ndarray, ridge_z: np.ndarray, ridge_slope: np.ndarray,

@@ -87,6 +87,13 @@ class RenderParams:
         instead of the nearest one's bed (:func:`orokit.raster.interpolate.sample_elevation`): where a high
         tributary's points give way to a deep trunk's across a hillslope the nearest bed jumps by hundreds of
         metres and the TIN makes a cliff (session 17: 83 % of annapurna's > 60-deg cells); None = the nearest.
+    river_foot_band : blend the foot only across such a jump (:func:`orokit.raster.interpolate.foot_across_jumps`):
+        of the ``river_foot_k`` nearest river points, those whose bed differs from the nearest one's by more than
+        ``river_foot_slope`` x their distance apart join the mean within ``river_foot_band`` x that excess (m per m)
+        beyond the nearest distance; the foot stays the nearest bed elsewhere; None = off (takes precedence over
+        ``river_blend_k``).
+    river_foot_slope : the bed slope (m/m) under which two river points count as one bed (no jump).
+    river_foot_k : how many nearest river points :func:`orokit.raster.interpolate.foot_across_jumps` looks at.
     min_prominence_m : eps of the orometry to keep; noise amplitude is ``noise_ratio * eps``.
     noise_ratio : amplitude of the paper's multi-fractal value noise as a fraction of eps (< 0.5 so no new
         peak reaches eps); 0 (off) since session 8: it changed no landform statistic (<= 6 % band power,
@@ -248,6 +255,9 @@ class RenderParams:
     floor_slope: float = 0.05
     valley_floor_slope: float = 0.0
     river_blend_k: int | None = None
+    river_foot_band: float | None = None
+    river_foot_slope: float = 0.25
+    river_foot_k: int = 32
     min_prominence_m: float = 30.0
     noise_ratio: float = 0.0
     uplift_radius: float = 1500.0
@@ -351,6 +361,12 @@ class RenderParams:
                                  f"{self.ridge_tail_flank_slope!r}")
         if self.river_blend_k is not None and not self.river_blend_k >= 2:
             raise InputError(f"river_blend_k must be >= 2 or None, got {self.river_blend_k!r}")
+        if self.river_foot_band is not None and not float(self.river_foot_band) > 0.0:
+            raise InputError(f"river_foot_band must be > 0 or None, got {self.river_foot_band!r}")
+        if not float(self.river_foot_slope) >= 0.0:
+            raise InputError(f"river_foot_slope must be >= 0 (m/m), got {self.river_foot_slope!r}")
+        if not int(self.river_foot_k) >= 2:
+            raise InputError(f"river_foot_k must be >= 2, got {self.river_foot_k!r}")
         if not float(self.ridge_plateau_relief_m) >= 0.0:
             raise InputError(f"ridge_plateau_relief_m must be >= 0 metres, got {self.ridge_plateau_relief_m!r}")
         if self.flank_depth_saddle_ratio is not None and not float(self.flank_depth_saddle_ratio) >= 0.0:

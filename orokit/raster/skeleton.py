@@ -457,7 +457,8 @@ def build_skeleton(
                                  floor_relief_ratio=params.floor_relief_ratio, floor_slope=params.floor_slope,
                                  valley_floor_slope=params.valley_floor_slope, tree=rtree,
                                  border_distance=border, beyond_slope=params.border_beyond_slope,
-                                 river_blend_k=params.river_blend_k)
+                                 river_blend_k=params.river_blend_k, river_foot_band=params.river_foot_band,
+                                 river_foot_slope=params.river_foot_slope, river_foot_k=params.river_foot_k)
     if floor is not None:
         h = np.maximum(h, floor(pts))  # no ground below the tree's own floor (below every nearby saddle)
     far = (np.minimum(dT, dR) >= 0.5 * lam)

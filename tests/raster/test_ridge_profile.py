@@ -196,7 +196,7 @@ def test_river_blend_k_removes_the_step_where_the_nearest_river_changes():
 
 
 @pytest.mark.parametrize("name", ["river_blend_k", "saddle_floor_k", "flank_neighbours", "erosion_steps",
-                                  "river_base_saddle_k", "erosion_max_nodes"])
+                                  "river_base_saddle_k", "erosion_max_nodes", "river_foot_k"])
 def test_counts_are_whole_numbers(name):
     """A count given as 2.5 was cut to 2 by ``int()`` (``river_blend_k=2.5`` blended 2 rivers), silently: refused
     naming the parameter; a whole float (JSON's 3.0) is its int, a bool or a string is refused."""
@@ -207,6 +207,43 @@ def test_counts_are_whole_numbers(name):
     assert RenderParams(erosion_steps=(4.0, 2)).erosion_steps == (4, 2)
     with pytest.raises(InputError, match="erosion_steps"):
         RenderParams(erosion_steps=(4, 2.5))
+
+
+def test_river_foot_band_blends_the_foot_only_across_the_jump():
+    """Two straight rivers 2 km apart, the trunk at 1000 m and a tributary at 2000 m: with the nearest bed the
+    hillslope steps by ~1 km x (1 - profile) on the line where both are equally far (a cliff band in the TIN);
+    ``river_foot_band`` moves the foot from one bed to the other over a band as wide as ``band`` x the jump's excess
+    over ``slope`` x the rivers' distance, so no 5-m step climbs more than 1 m per m. Along one steep bed (slope
+    0.2 < ``river_foot_slope``) and beside one river the foot stays the nearest bed exactly, where
+    ``river_blend_k`` moves it; None keeps the old elevations exactly."""
+    from orokit.raster.interpolate import sample_elevation
+
+    t = np.arange(0.0, 10000.0, 50.0)
+    rxy = np.concatenate([np.column_stack([t, np.zeros_like(t)]), np.column_stack([t, np.full_like(t, 2000.0)])])
+    rz = np.concatenate([np.full(t.size, 1000.0), np.full(t.size, 2000.0)])
+    rw = np.full(rxy.shape[0], 10.0)
+    ridge, ridge_z = np.array([[5000.0, 20000.0]]), np.array([4000.0])
+    y = np.arange(300.0, 1700.0, 5.0)
+    pts = np.column_stack([np.full_like(y, 5000.0), y])
+    near, _, _ = sample_elevation(pts, ridge, ridge_z, rxy, rz, rw)
+    foot, _, _ = sample_elevation(pts, ridge, ridge_z, rxy, rz, rw, river_foot_band=2.0)
+    assert np.abs(np.diff(near)).max() > 100.0  # the step at y = 1000
+    assert np.abs(np.diff(foot)).max() < 10.0  # < 2 m per m over 5-m steps (the hillslope itself included)
+    assert np.abs(np.diff(foot)).max() < 0.01 * np.abs(np.diff(near)).max()
+    np.testing.assert_array_equal(foot[[0, -1]], near[[0, -1]])  # 700 m from the line: the nearest bed
+    again, _, _ = sample_elevation(pts, ridge, ridge_z, rxy, rz, rw, river_foot_band=None)
+    np.testing.assert_array_equal(again, near)
+    # one river whose bed climbs 0.2 m/m: the foot is its nearest point's bed, as without the option
+    steep_z = 1000.0 + 0.2 * t
+    side = np.column_stack([np.arange(500.0, 9500.0, 37.0), np.full(244, 600.0)])
+    a, _, _ = sample_elevation(side, ridge, ridge_z, rxy[: t.size], steep_z, rw[: t.size])
+    b, _, _ = sample_elevation(side, ridge, ridge_z, rxy[: t.size], steep_z, rw[: t.size], river_foot_band=2.0)
+    c, _, _ = sample_elevation(side, ridge, ridge_z, rxy[: t.size], steep_z, rw[: t.size], river_blend_k=64)
+    np.testing.assert_array_equal(b, a)
+    assert np.abs(c - a).max() > 1.0  # the k-nearest mean moves it
+    for bad in ({"river_foot_band": 0.0}, {"river_foot_slope": -0.1}, {"river_foot_k": 1}):
+        with pytest.raises(InputError, match=next(iter(bad))):
+            RenderParams(**bad)
 
 
 def test_cut_bowls_never_take_a_crest_below_its_saddle():
