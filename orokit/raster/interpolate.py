@@ -139,7 +139,7 @@ def sample_elevation(
         dk, jk = cKDTree(cxy).query(points, k=min(int(river_foot_k), cxy.shape[0]), workers=-1)
         dk, jk = dk.reshape(points.shape[0], -1), jk.reshape(points.shape[0], -1)
         hr_blend = foot_across_jumps(dR, river_xy[ir], river_z[ir], dk, cxy[jk], cz[jk],
-                                     band=float(river_foot_band), slope=float(river_foot_slope))
+                                     band=float(river_foot_band), slope=float(river_foot_slope), w0=river_w[ir])
     elif river_blend_k is not None and int(river_blend_k) >= 2 and river_xy.shape[0] >= 2:
         kb = min(int(river_blend_k), river_xy.shape[0])
         dk, jk = cKDTree(river_xy).query(points, k=kb, workers=-1)
@@ -182,13 +182,15 @@ def sample_elevation(
 
 
 def foot_across_jumps(d0: np.ndarray, xy0: np.ndarray, z0: np.ndarray, dk: np.ndarray, xyk: np.ndarray,
-                      zk: np.ndarray, *, band: float, slope: float) -> np.ndarray:
+                      zk: np.ndarray, *, band: float, slope: float, w0: np.ndarray | float = 0.0) -> np.ndarray:
     """The hillslope's foot from the nearest river point (distance ``d0``, place ``xy0``, bed ``z0``; ``(n,)``) and
     other river points (``dk``, ``xyk``, ``zk``; ``(n, k)``).
 
     An other point j whose bed differs from ``z0`` by more than ``slope`` x its distance from ``xy0`` (another
-    river: along one bed gentler than ``slope`` none qualifies) weighs ``w_j = max(1 - (d_j - d0) / B_j, 0)^2`` with
-    ``B_j = band`` x that excess; the foot is ``(z0 + W z*) / (1 + W)`` with ``W = max w_j`` and ``z*`` the
+    river: along one bed gentler than ``slope`` none qualifies) weighs ``w_j = max(1 - (d_j - d0) / B_j, 0)^2``
+    ``x (d0 - w0) / (d_j - w0)`` with ``B_j = band`` x that excess and ``w0`` the nearest river's valley floor
+    width (the foot is ``z0`` at the floor's edge, where the hillslope starts); the foot is
+    ``(z0 + W z*) / (1 + W)`` with ``W = max w_j`` and ``z*`` the
     ``w``-weighted mean bed of those points. Where the nearest river changes from a high tributary to a deep
     trunk the foot then moves from one bed to the other over a band that widens with the jump (the mean of both
     on the line where they are equally far), instead of stepping there (a cliff band in the TIN); elsewhere it is
@@ -205,8 +207,9 @@ def foot_across_jumps(d0: np.ndarray, xy0: np.ndarray, z0: np.ndarray, dk: np.nd
     z0c = np.asarray(z0, float)[:, None]
     sep = np.hypot(*np.moveaxis(xyk - np.asarray(xy0, float)[:, None, :], -1, 0))
     width = float(band) * np.maximum(np.abs(zk - z0c) - float(slope) * sep, 0.0)
-    w = np.where(width > 0.0, np.clip(1.0 - (dk - np.asarray(d0, float)[:, None]) / np.maximum(width, 1e-9),
-                                      0.0, 1.0) ** 2, 0.0)
+    d0c, w0c = np.asarray(d0, float)[:, None], np.broadcast_to(np.asarray(w0, float), np.shape(d0))[:, None]
+    edge = np.clip((d0c - w0c) / np.maximum(dk - w0c, 1e-9), 0.0, 1.0)
+    w = np.where(width > 0.0, np.clip(1.0 - (dk - d0c) / np.maximum(width, 1e-9), 0.0, 1.0) ** 2 * edge, 0.0)
     wsum = np.sum(w, axis=1)
     zs = np.sum(w * zk, axis=1) / np.maximum(wsum, 1e-12)
     wmax = np.max(w, axis=1)
