@@ -241,6 +241,16 @@ def test_river_foot_band_blends_the_foot_only_across_the_jump():
     c, _, _ = sample_elevation(side, ridge, ridge_z, rxy[: t.size], steep_z, rw[: t.size], river_blend_k=64)
     np.testing.assert_array_equal(b, a)
     assert np.abs(c - a).max() > 1.0  # the k-nearest mean moves it
+    # at the valley floor's edge (d0 = w0) the foot is the nearest bed whatever the other river: no step where the
+    # hillslope starts; halfway to the line where both are equally far it is between the beds
+    from orokit.raster.interpolate import foot_across_jumps
+
+    d0 = np.array([300.0, 650.0, 1000.0])
+    xy0 = np.array([[5000.0, 0.0]] * 3)
+    other = np.array([[[5000.0, 2000.0]]] * 3)
+    got = foot_across_jumps(d0, xy0, np.full(3, 1000.0), 2000.0 - d0[:, None], other, np.full((3, 1), 2000.0),
+                            band=2.0, slope=0.25, w0=300.0)
+    assert got[0] == 1000.0 and 1000.0 < got[1] < 1500.0 and got[2] == 1500.0
     for bad in ({"river_foot_band": 0.0}, {"river_foot_slope": -0.1}, {"river_foot_k": 1}):
         with pytest.raises(InputError, match=next(iter(bad))):
             RenderParams(**bad)
