@@ -95,7 +95,7 @@ class SynthesisParams:
         saddles whose dominance and prominence histograms match the type better.
     void_weight : between dart-throwing passes, lower peaks are drawn to the holes left by
         the earlier ones with this weight (:func:`orokit.synthesis.darts.void_density`;
-        0 = the paper's ridge density only). Default 1.0 (issue 11): the 90th percentile of
+        0 = the paper's ridge density only). 1.0 from issue 11 until session 17: the 90th percentile of
         the distance to the nearest peak went from 1.54 to 1.18 x the real trees', and the twins'
         10 km disks were classified right more often (``benchmarks/realism.py``, 6 tuning regions:
         alaska 61 -> 82 %, himalaya-everest 55 -> 65 %, norway 61 -> 72 %, the others equal) with
