@@ -26,6 +26,13 @@ _ERROR_LENGTH = Length(allow_bare=True, allow_zero=True)
 #: graph and reads, its task, summary and merge; session 17, load 11-15: 100 x 100 cells took 3.6 s CPU with
 #: 16-cell chunks, 8.3 s with 4, 30 s with 2), and a window's read grows with the number of chunks
 MIN_CHUNK_SIDE = 16
+#: rasters of more cells are read beside numba's start (its import and target, ~0.25 CPU s of Python that
+#: otherwise leaves a core idle: 2-core start + read modelled 1.19 -> 0.99 s at 60.5 M cells, load 12-15);
+#: smaller ones after it, once LLVM's pages (~47 MiB) are dropped: beside a small raster they were the
+#: process's peak (15.1 M cells, session 15). Beside a large one they are below the saddle graph's peak
+#: that follows on real terrain (with isolation: 34 M cells read 288 against 312 MiB, 60.5 M 386 against
+#: 478-485), but not on a raster with almost no relief (41 M smooth cells without isolation: peak 285 -> 300-314 MiB)
+READ_BESIDE_TARGET_CELLS = 1 << 25
 
 
 @click.command()
@@ -119,16 +126,18 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         # numba's target to start as far as LLVM goes, then the pages of files touched so far are
         # dropped (LLVM's, ~47-65 MB at 15 M cells, the imports'): resident with the raster they were
         # the process's peak. numba's implementations (~0.2 CPU s of Python) load beside the read
+        # (a raster of more than READ_BESIDE_TARGET_CELLS cells is read beside numba's start as well)
         started = threading.Event() if owns_process() else None
         with ThreadPoolExecutor(1) as pool:
             loading = pool.submit(_load_kernels, isolation=not no_isolation, started=started)
             try:
-                from orokit.io.dem import read_dem_array
+                from orokit.io.dem import raster_cell_count, read_dem_array
 
                 if started is not None:
                     limit_gdal_cache(GDAL_WHOLE_READ_CACHE_BYTES)  # a whole read (unless the user set it)
-                    started.wait()  # set by the loader in any case
-                    release_library_pages("")
+                    if (raster_cell_count(str(dem.path)) or 0) <= READ_BESIDE_TARGET_CELLS:
+                        started.wait()  # set by the loader in any case
+                        release_library_pages("")
                 da = read_dem_array(str(dem.path), z_units=z_units, cell_size_m=cell_size_m, band=band)
             finally:
                 loading.result()

@@ -166,3 +166,34 @@ def test_python_m_is_orokits_own_process_for_every_command_module(tmp_path):
     dem = str(_dem(tmp_path / "dem.tif"))
     args = ["-q", "analyze", dem, "--no-progress", "--min-prominence", "5", "-o", str(tmp_path / "m")]
     assert _analyze_calls(_console(*args, script=MODULE)) == (ANALYZE_CALLS, "system")
+
+
+#: the console script's process with numba's target start held until the read begins (10 s at most), and the
+#: raster-size bound of the read's wait for that start given as the first argument
+ORDER = SCRIPT.replace("import orokit.io.dem as dem\n", """import threading
+import orokit.analysis, orokit.cli.analyze
+orokit.cli.analyze.READ_BESIDE_TARGET_CELLS = int(sys.argv.pop(1))
+reading = threading.Event()
+_start = orokit.analysis.start_numba_target
+def start_numba_target():
+    reading.wait(10)
+    calls.append("target")
+    _start()
+orokit.analysis.start_numba_target = start_numba_target
+import orokit.io.dem as dem
+""").replace("calls.append(\"read\"))", "calls.append(\"read\"), reading.set())")
+
+
+def test_a_large_raster_is_read_beside_numbas_start(tmp_path):
+    """A raster of more than ``READ_BESIDE_TARGET_CELLS`` cells is read without waiting for numba's target to
+    start (its ~0.25 CPU s of Python beside the read: the 2-core run's start); a smaller one after it, LLVM's
+    pages dropped before the read (tested above). The 3,000-cell DEM stands for either by the bound."""
+    assert ORDER.count("reading.set()") == 1 and ORDER.count("READ_BESIDE_TARGET_CELLS") == 1
+    dem = str(_dem(tmp_path / "dem.tif"))
+    args = ["-q", "analyze", dem, "--no-progress", "--min-prominence", "5", "-o"]
+    calls = [c for c in _analyze_calls(_console("2999", *args, str(tmp_path / "a"), script=ORDER))[0]
+             if c in ("target", "read")]
+    assert calls == ["read", "target"]
+    calls = [c for c in _analyze_calls(_console("3000", *args, str(tmp_path / "b"), script=ORDER))[0]
+             if c in ("target", "read")]
+    assert calls == ["target", "read"]
