@@ -204,7 +204,7 @@ def analyze(
                                       chunk_stats=tiled_core.chunk_stats, known=tiled_core.chunk_isolation,
                                       release_known=True)
                 del peak_rows, peak_cols
-            del tiled_core  # the settled isolation (~90 bytes per candidate peak) is in iso now
+            del tiled_core  # the settled isolation's spill files go with it (the search closed them)
             if store is not None and iso is not None:  # to the store, freed before the tables are made
                 for name, dtype in engine.ISOLATION_ARRAYS:
                     store.put(name, iso[name].to_numpy(dtype))

@@ -24,7 +24,7 @@ from orokit.io.atomic import atomic_path, hold_run_path, is_no_space_error, remo
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["spill_folder", "remove_folder", "remove_stale_folders", "run_tag", "run_ended", "on_this_host", "may_remove",
+__all__ = ["spill_folder", "SpillFolder", "remove_folder", "remove_stale_folders", "run_tag", "run_ended", "on_this_host", "may_remove",
            "write_spill", "read_spill", "SpilledColumns"]
 
 #: name prefixes of the temporary folders of a run (spills of the chunk tasks, the peak table's columns)
@@ -137,15 +137,32 @@ def remove_stale_folders(parent: PathLike) -> list[Path]:
     return removed
 
 
+class SpillFolder:
+    """A new temporary folder (in ``parent``, made if missing, else ``TMPDIR``) for the spills of one
+    run, removed by :meth:`close`, when the object is garbage-collected, or at exit (see
+    :func:`remove_folder`): its files can outlive the call that made them (the chunked engine's
+    settled isolation, read by the isolation search after the engine returned)."""
+
+    def __init__(self, prefix: str = SPILL_PREFIX, parent: PathLike | None = None) -> None:
+        import weakref
+
+        self.path, held = _make_folder(prefix, parent)
+        self._finalizer = weakref.finalize(self, _remove_and_close, str(self.path), held)
+
+    def close(self) -> None:
+        """Remove the folder and its files."""
+        self._finalizer()
+
+
 @contextmanager
 def spill_folder(prefix: str = SPILL_PREFIX, parent: PathLike | None = None) -> Iterator[Path]:
     """A new temporary folder (in ``parent``, made if missing, else ``TMPDIR``) for the spills of
     one run, removed on exit (see :func:`remove_folder`)."""
-    folder, held = _make_folder(prefix, parent)
+    owner = SpillFolder(prefix, parent)
     try:
-        yield folder
+        yield owner.path
     finally:
-        _remove_and_close(str(folder), held)
+        owner.close()
 
 
 def remove_folder(folder: PathLike, attempts: int = 20) -> None:

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import hashlib
 import logging
-from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,8 +21,8 @@ import numpy as np
 
 from orokit.errors import TilingError
 from orokit.io.checkpoint_io import chunk_path, discard_chunk, open_checkpoint, read_chunk, write_chunk
-from orokit.io.spill_io import read_spill, remove_stale_folders, spill_folder, write_spill
-from orokit.tiling.isolation import block_stats, chunk_isolation
+from orokit.io.spill_io import SpillFolder, read_spill, remove_stale_folders, write_spill
+from orokit.tiling.isolation import SettledIsolation, block_stats, chunk_isolation
 from orokit.tiling.memory import release_free_heap
 from orokit.tiling.summary import ChunkSummary, chunk_summary, finalize_summary, merge_summaries
 from orokit.topology.engine import Orometry
@@ -43,12 +42,14 @@ class TiledOrometry:
     chunk_stats : (chunk rows, chunk cols, 2) array: maximum of each chunk (-inf if
         empty) and 1.0 if it holds a NaN; the isolation search skips chunks with it.
     chunk_isolation : isolation settled inside the chunks (arrays ``key``, ``best``,
-        ``cand``, ``nan``), or None without an isolation metric.
+        ``cand``, ``nan``): a dict when carried up the merges, a
+        :class:`~orokit.tiling.isolation.SettledIsolation` of the chunks' spill files when spilled
+        (the files stay until it is closed or let go), or None without an isolation metric.
     """
 
     orometry: Orometry
     chunk_stats: np.ndarray
-    chunk_isolation: dict | None
+    chunk_isolation: dict | SettledIsolation | None
 
 
 def get_compute(scheduler: Any = None):
@@ -134,45 +135,29 @@ def _spill_iso(iso: dict | None, spill: str | None) -> dict | None:
     return None
 
 
-def _read_spilled(paths: list[str], cells: np.ndarray) -> dict | None:
-    """Settled isolation of the peaks at ``cells`` (flat, increasing) from the chunks' spill files.
+def _spilled_isolation(spills: dict[tuple[int, int], str], rb: np.ndarray, owner: SpillFolder) -> SettledIsolation:
+    """The settled isolation left in the chunks' spill files ``spills`` ((i, j): path), by rows of chunks
+    (``rb``: row edges); the folder ``owner`` is removed when the source is closed or let go."""
+    nby = len(rb) - 1
+    rows_of: list[list[str]] = [[] for _ in range(nby)]
+    for (i, _j), path in sorted(spills.items()):
+        if Path(path).exists():  # a reused chunk of an old checkpoint may have none
+            rows_of[i].append(path)
 
-    The others (candidate peaks the merges dropped) are left out. Two passes: the keys of every
-    file are read to size the output, then each file fills its rows, so only the output and one
-    file's arrays are in memory (not every file's rows and their concatenation).
-    """
-    if not paths:
-        return None
+    def read(band: int, names: tuple[str, ...] | None) -> dict:
+        parts = [read_spill(path, names) for path in rows_of[band]]
+        if not parts:
+            empty = {"key": np.empty(0, np.int64), "best": np.empty(0), "nan": np.empty(0),
+                     "cand": np.empty((0, 0), np.int64)}
+            return {f: empty[f] for f in (names or _ISO_FIELDS)}
+        out = _merge_iso(parts)
+        assert out is not None  # parts is not empty
+        return out
 
-    def selected(key: np.ndarray) -> np.ndarray:
-        if not cells.size:
-            return np.zeros(key.size, bool)
-        return cells[np.minimum(np.searchsorted(cells, key), cells.size - 1)] == key
-
-    counts, width = [], 0
-    for path in paths:
-        data = read_spill(path, ("key", "cand"))
-        sel = selected(data["key"])
-        counts.append(int(sel.sum()))
-        if counts[-1]:
-            width = max(width, int((data["cand"][sel] >= 0).sum(axis=1).max(initial=0)))
-    total = sum(counts)
-    out = {"key": np.empty(total, np.int64), "best": np.empty(total), "nan": np.empty(total),
-           "cand": np.full((total, width), -1, np.int64)}
-    at = 0
-    for path, count in zip(paths, counts):
-        if not count:
-            continue
-        data = read_spill(path)
-        sel = selected(data["key"])
-        for f in ("key", "best", "nan"):
-            out[f][at:at + count] = data[f][sel]
-        c = data["cand"][sel]
-        m = min(width, c.shape[1])
-        out["cand"][at:at + count, :m] = c[:, :m]
-        at += count
-        del data, sel, c
-    return out
+    def close() -> None:
+        rows_of.clear()
+        owner.close()
+    return SettledIsolation([(int(rb[i]), int(rb[i + 1])) for i in range(nby)], read, close)
 
 
 def _corrupt_chunk(path: str) -> bool:
@@ -205,14 +190,15 @@ def _tile_task(window: _Window, ij: tuple[int, int], row0: int, col0: int, shape
 
 
 def _merge_iso(parts: list, keep: np.ndarray | None = None) -> dict | None:
-    """Settled isolation of several parts in one, only for the peaks in ``keep`` (global cells).
+    """Settled isolation of several parts in one (the fields of the first), only for the peaks in ``keep``
+    (global cells).
     The parts' dicts are emptied (their owner, a merge, passes them on)."""
     parts = [p for p in parts if p is not None]
     if not parts:
         return None
-    width = max(p["cand"].shape[1] for p in parts)
+    width = max(p["cand"].shape[1] for p in parts) if "cand" in parts[0] else 0
     out = {}
-    for f in _ISO_FIELDS:  # one field at a time, each part's field freed once joined
+    for f in [f for f in _ISO_FIELDS if f in parts[0]]:  # one field at a time, each part's field freed once joined
         if f == "cand":
             out[f] = np.concatenate([np.pad(p[f], ((0, 0), (0, width - p[f].shape[1])), constant_values=-1)
                                      for p in parts])
@@ -326,8 +312,10 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
     inside it (``result.chunk_isolation``), so the cross-chunk search reads few chunks.
     On a scheduler whose tasks run on this machine, each chunk's settled isolation is
     spilled to a temporary file instead of travelling up the merges with the summaries
-    (~50 bytes per candidate peak alive through the top merges and the finalize), and read
-    back, for the kept peaks only, after the finalize. The spill folder goes in the
+    (~50 bytes per candidate peak alive through the top merges and the finalize), and left
+    there: ``result.chunk_isolation`` reads it by rows of chunks (the isolation search holds one
+    row's at a time, ~40 bytes per settled peak otherwise), and removes the files when it is
+    closed or let go. The spill folder goes in the
     ``checkpoint`` folder when one is given, else in dask's ``temporary-directory`` if set, else in
     ``TMPDIR`` (on a RAM-backed ``TMPDIR`` the spills take memory that the RSS does not show).
     The spill and column folders that a killed run left in the ``checkpoint`` folder are removed
@@ -341,17 +329,21 @@ def tiled_orometry(data, *, min_prominence_m: float, outside: str = "unknown", s
         raise TilingError("a column store needs a scheduler running in this process (threads or synchronous)")
     if checkpoint is not None:  # a killed run's temporary folders (its finished chunks are reused)
         remove_stale_folders(checkpoint)
-    with ExitStack() as stack:
-        spill = None
-        if isolation_metric is not None and _same_disk(scheduler):
-            spill = stack.enter_context(spill_folder(parent=spill_parent(checkpoint)))
+    spill = None
+    if isolation_metric is not None and _same_disk(scheduler):
+        spill = SpillFolder(parent=spill_parent(checkpoint))
+    try:
         return _tiled_orometry(data, min_prominence_m=min_prominence_m, outside=outside, scheduler=scheduler,
                                checkpoint=checkpoint, progress=progress, isolation_metric=isolation_metric,
                                spill=spill, store=store)
+    except BaseException:
+        if spill is not None:
+            spill.close()
+        raise
 
 
 def _tiled_orometry(data, *, min_prominence_m: float, outside: str, scheduler: Any, checkpoint, progress: bool,
-                    isolation_metric, spill: Path | None, store: Any = None) -> TiledOrometry:
+                    isolation_metric, spill: SpillFolder | None, store: Any = None) -> TiledOrometry:
     import dask
 
     if data.ndim != 2:
@@ -365,7 +357,7 @@ def _tiled_orometry(data, *, min_prominence_m: float, outside: str, scheduler: A
     ckpt = _checkpoint_dir(checkpoint, data, min_prominence_m)
     tiles = {}
     reused = 0
-    spills = {} if spill is None else {(i, j): str(spill / f"iso_{i:05d}_{j:05d}.npz")
+    spills = {} if spill is None else {(i, j): str(spill.path / f"iso_{i:05d}_{j:05d}.npz")
                                        for i in range(nby) for j in range(nbx)}
     for i in range(nby):
         for j in range(nbx):
@@ -418,12 +410,10 @@ def _tiled_orometry(data, *, min_prominence_m: float, outside: str, scheduler: A
             ((result, iso, st),) = compute([final])
     else:
         ((result, iso, st),) = compute([final])
-    if spill is not None:  # the merges carried no settled isolation: read it back for the kept peaks
-        release_free_heap()  # first, the root's and the finalize's arrays freed inside the heap
-        iso = _read_spilled([p for p in spills.values() if Path(p).exists()], result.peak_cell)
-        logger.info("settled isolation read back from %d spill files: %d peaks, %.1f MB", len(spills),
-                    0 if iso is None else iso["key"].size,
-                    0 if iso is None else sum(v.nbytes for v in iso.values()) / 2**20)
+    if spill is not None:  # the merges carried no settled isolation: the search reads the files by rows of chunks
+        iso = _spilled_isolation(spills, rb, spill)
+        logger.info("settled isolation left in %d spill files, %.1f MB", len(spills),
+                    sum(Path(p).stat().st_size for p in spills.values() if Path(p).exists()) / 2**20)
     release_free_heap()  # the chunks' and merges' arrays, freed inside the heap
     return TiledOrometry(orometry=result, chunk_stats=st, chunk_isolation=iso)
 

@@ -10,7 +10,7 @@ most; memory stays at one chunk plus the batch.
 from __future__ import annotations
 
 import logging
-from typing import Any
+from collections.abc import Callable
 
 import numpy as np
 import pandas as pd
@@ -22,7 +22,7 @@ from orokit.tiling.memory import release_free_heap
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["tiled_isolation", "chunk_isolation", "block_stats", "cell_places"]
+__all__ = ["tiled_isolation", "chunk_isolation", "block_stats", "cell_places", "SettledIsolation"]
 
 _BATCH = 4096
 _BOUNDS_CELLS = 2**20  # peaks x chunks of one batch's distance bounds (8 MB each array): flat in the chunk count
@@ -170,8 +170,47 @@ def block_stats(block: np.ndarray) -> tuple[float, float]:
     return (float(block[valid].max()) if valid.any() else -np.inf), float((~valid).any())
 
 
+class SettledIsolation:
+    """Isolation that the chunks settled (:func:`chunk_isolation`'s arrays ``key``, ``best``, ``cand``,
+    ``nan``), read by bands of raster rows: the search reads the keys of one band at a time, the
+    finish one band's arrays, so no array of every settled peak is held (~40 bytes per settled peak).
+
+    ``bands`` lists each band's rows as (first, end); ``read(band, names)`` returns that band's
+    arrays (``names``, or all four; a band's cells are all in its rows); ``close`` (optional) lets the
+    source go (e.g. removes its spill files).
+    """
+
+    def __init__(self, bands: list[tuple[int, int]], read: Callable[[int, tuple[str, ...] | None], dict],
+                 close: Callable[[], None] | None = None):
+        self.bands = bands
+        self._read = read
+        self._close = close
+
+    def read(self, band: int, names: tuple[str, ...] | None = None) -> dict[str, np.ndarray]:
+        """The arrays of band ``band`` (all four, or ``names``)."""
+        return self._read(band, names)
+
+    def close(self) -> None:
+        """Let the source go (its files are removed); later reads fail."""
+        if self._close is not None:
+            self._close()
+
+    @classmethod
+    def of(cls, arrays: dict[str, np.ndarray], row_bounds: np.ndarray, width: int) -> SettledIsolation:
+        """The settled isolation ``arrays`` (in memory) by the bands ``row_bounds`` (row edges)."""
+        bands = [(int(a), int(b)) for a, b in zip(row_bounds[:-1], row_bounds[1:])]
+
+        def read(band: int, names: tuple[str, ...] | None) -> dict:
+            r0, r1 = bands[band]
+            key = arrays["key"]
+            sel = np.flatnonzero((key >= r0 * width) & (key < r1 * width))
+            return {f: arrays[f][sel] for f in (names or tuple(arrays))}
+        return cls(bands, read)
+
+
 def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk_stats=None,
-                    known: dict[str, np.ndarray] | None = None, release_known: bool = False) -> pd.DataFrame:
+                    known: dict[str, np.ndarray] | SettledIsolation | None = None,
+                    release_known: bool = False) -> pd.DataFrame:
     """Isolation of peaks at (rows, cols) with elevations pz on a dask array.
 
     Same result as :func:`orokit.metrics.isolation.isolation` on the whole array.
@@ -179,17 +218,21 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
     ``dask.compute``), so a distributed client can be used. ``chunk_stats`` (nby, nbx, 2)
     holds each chunk's maximum and NaN flag when already known (the tiled engine
     computes them while reading the chunks). ``known`` holds the peaks already settled
-    inside their own chunk by :func:`chunk_isolation` (only the others are searched);
-    with ``release_known`` its arrays are dropped from the dict once read (~45 bytes per
-    settled peak that the search does not need).
+    inside their own chunk by :func:`chunk_isolation` (only the others are searched): a dict
+    of its arrays, or a :class:`SettledIsolation` read band by band. With ``release_known`` the
+    dict is emptied (the source closed) once read.
+
+    Memory: only the searched peaks (those ``known`` does not settle: a few percent of them on
+    real terrain) have search state; the settled ones are read one band of rows at a time, twice
+    (their keys to find the searched peaks, then their arrays as the table is finished by bands).
     """
     import dask
 
     compute = compute or (lambda objs: dask.compute(*objs))
     metric = KernelMetric.from_grid(transform, crs)
     H, W = data.shape
-    # per-peak state in the narrowest exact types (int32 places and slots while they fit, the
-    # elevations in their own float type): ~40 bytes per peak instead of ~90
+    # per-peak arrays in the narrowest exact types (int32 places while they fit, the elevations in
+    # their own float type)
     index = np.int32 if max(H, W, np.asarray(rows).size) < 2**31 else np.int64
     rows = np.asarray(rows).astype(index, copy=False)
     cols = np.asarray(cols).astype(index, copy=False)
@@ -207,93 +250,151 @@ def tiled_isolation(data, rows, cols, pz, *, transform, crs, compute=None, chunk
     cmax = chunk_stats[:, 0]
     cnan = chunk_stats[:, 1] > 0.5
     n = rows.size
-    best = np.full(n, np.inf)
-    edge = np.empty(n)
-    for s0 in range(0, n, _FINISH_ROWS):  # by blocks: the kernel's int64 places, not the whole arrays'
-        s1 = min(n, s0 + _FINISH_ROWS)
-        edge[s0:s1] = _mk.outside_distance(rows[s0:s1].astype(np.int64), cols[s0:s1].astype(np.int64), H, W,
-                                           *metric.args())
-    cache = _BlockCache(blocks, nbx, compute, cnan)
+    given = known
+    settled = None
+    if isinstance(known, SettledIsolation):
+        settled = known
+    elif known is not None and known["key"].size:
+        settled = SettledIsolation.of(known, rb, W)
+    bands = settled.bands if settled is not None else [(int(a), int(b)) for a, b in zip(rb[:-1], rb[1:])]
+    peaks = _PeaksByRows(rows, cols, W)
+    # the searched peaks: those no chunk settled (one band of settled keys in memory at a time)
     todo = np.ones(n, bool)
-    known_cand = known_slot = None
-    if known is not None and known["key"].size:
-        # each settled peak's row among the peaks (-1: not a peak here): peaks in raster order (the
-        # engine's) are found by one search of the keys in them, with no sorted copies of the keys
-        at = _known_rows(known["key"], rows, cols, W)
-        hit: Any = slice(None)  # every settled peak is a peak here (the spilled read-back's case): no gathers
-        if at.size and at.min() < 0:
-            hit = np.flatnonzero(at >= 0)
-            at = at[hit]
-        best[at] = known["best"][hit]
-        edge[at] = np.minimum(edge[at], known["nan"][hit])
-        known_cand = known["cand"]
-        if release_known:
-            known.clear()
-        todo[at] = False
-        known_slot = np.full(n, -1, index)  # each peak's row of known_cand
-        known_slot[at] = np.arange(known_cand.shape[0], dtype=index)[hit]
-        del at, hit
-    # candidate cells (ncand per peak: 64 on geographic grids) only for the peaks searched here;
-    # those settled in their chunk keep their own short rows
+    if settled is not None:
+        for b, (r0, r1) in enumerate(bands):
+            members = peaks.members(r0, r1)
+            at = peaks.find(settled.read(b, ("key",))["key"], members)
+            todo[members[at[at >= 0]]] = False
+            del members, at
     searched = np.flatnonzero(todo).astype(index, copy=False)
-    slot = np.full(n, -1, index)
-    slot[searched] = np.arange(searched.size)
-    cand = np.full((searched.size, metric.ncand), -1, np.int64)
-    ncand = np.zeros(cand.shape[0], np.int64)
+    del todo
+    n_searched = searched.size
+    # search state of the searched peaks only, by their position in ``searched``
+    rs, cs, zs = rows[searched], cols[searched], pz[searched]
+    best = np.full(n_searched, np.inf)
+    edge = _outside(rs, cs, H, W, metric)
+    cand = np.full((n_searched, metric.ncand), -1, np.int64)
+    ncand = np.zeros(n_searched, np.int64)
+    cache = _BlockCache(blocks, nbx, compute, cnan)
     # the searched peaks grouped by their own chunk, chunks along a Hilbert curve: the chunks
     # around the current one were mostly visited just before and are still in the cache
     # (in raster order a row of chunks is longer than the cache, so each chunk was read
     # again for the row above and the row below: 740 loads for 256 chunks at 1 G cells)
-    rs, cs = rows[searched], cols[searched]
     curve = _hilbert_rank(nby, nbx)
     home = curve[(np.searchsorted(rb, rs, side="right") - 1) * nbx + np.searchsorted(cb, cs, side="right") - 1]
-    order = searched[np.lexsort((cs, rs, home))]
+    order = np.lexsort((cs, rs, home))
     bounds = np.flatnonzero(np.diff(np.sort(home))) + 1
-    del home, rs, cs, searched
+    del home
     slack = 1.0 + metric.slack
     batch = max(64, min(_BATCH, _BOUNDS_CELLS // (nby * nbx)))
     for group in np.split(order, bounds):
         for start in range(0, group.size, batch):
             idx = group[start:start + batch]
-            lb = _chunk_bounds(rows[idx], cols[idx], rb, cb, metric)
+            lb = _chunk_bounds(rs[idx], cs[idx], rb, cb, metric)
             lb_nan = np.where(cnan[None, :], lb, np.inf)
-            lb = np.where(cmax[None, :] > pz[idx, None], lb, np.inf)
-            _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, slot, pz, rows, cols, W, slack)
+            lb = np.where(cmax[None, :] > zs[idx, None], lb, np.inf)
+            _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, zs, rs, cs, W, slack)
             # nearest NaN cell, only where it could be closer than the edge and the target
-            _visit_nan(lb_nan, idx, cache, rb, cb, nbx, metric, best, edge, rows, cols)
+            _visit_nan(lb_nan, idx, cache, rb, cb, nbx, metric, best, edge, rs, cs)
     logger.info("isolation of %d peaks (%d settled in their chunk): %d chunk loads for %d chunks",
-                n, int((~todo).sum()), cache.loads, nby * nbx)
-    del cache, order, bounds
+                n, n - n_searched, cache.loads, nby * nbx)
+    del cache, order, bounds, rs, cs, zs
     release_free_heap()  # the chunks and pyramids the search read
-    # candidates as wide as the longest row (one or two columns on projected grids), assembled
-    # and finished by blocks of peaks (each peak's choice is its own: the same table)
-    width = int(ncand.max(initial=0))
-    if known_slot is not None:
-        assert known_cand is not None  # set with known_slot
-        used = known_slot[known_slot >= 0]
-        for s0 in range(0, used.size, _FINISH_ROWS):  # by blocks: no gathered copy of every row
-            width = max(width, int((known_cand[used[s0:s0 + _FINISH_ROWS]] >= 0).sum(axis=1).max(initial=0)))
-        del used
+    # the table finished by bands of rows: each band's settled peaks read again, its searched peaks'
+    # state gathered, the nearest candidate chosen by blocks of peaks (each peak's choice is its own)
     out = {"isolation": np.empty(n), "isolation_row": np.empty(n, np.int64), "isolation_col": np.empty(n, np.int64),
            "isolation_exact": np.empty(n, bool)}
-    for s0 in range(0, n, _FINISH_ROWS):
-        s1 = min(n, s0 + _FINISH_ROWS)
-        block = np.full((s1 - s0, width), -1, np.int64)
-        sl = slot[s0:s1]
-        mine = sl >= 0
-        block[mine] = cand[sl[mine], :width]
-        if known_slot is not None:
-            assert known_cand is not None  # set with known_slot
-            ks = known_slot[s0:s1]
-            have = ks >= 0
-            m = min(width, known_cand.shape[1])
-            block[have, :m] = known_cand[ks[have], :m]
-        part = finish_isolation(metric, rows[s0:s1].astype(np.int64), cols[s0:s1].astype(np.int64), best[s0:s1],
-                                block, W, edge[s0:s1])
-        for f in out:
-            out[f][s0:s1] = part[f].to_numpy()
-        del part, block
+    for b, (r0, r1) in enumerate(bands):
+        members = peaks.members(r0, r1)
+        k = members.size
+        if not k:
+            continue
+        r, c = rows[members].astype(np.int64), cols[members].astype(np.int64)
+        bb = np.full(k, np.inf)
+        ee = _outside(r, c, H, W, metric)
+        pos = np.minimum(np.searchsorted(searched, members), max(n_searched - 1, 0))
+        mine = np.flatnonzero(searched[pos] == members) if n_searched else np.empty(0, np.int64)
+        pos = pos[mine]
+        bb[mine], ee[mine] = best[pos], edge[pos]
+        width = int(ncand[pos].max(initial=0))
+        kc = None
+        if settled is not None:
+            part = settled.read(b)
+            at = peaks.find(part["key"], members)
+            hit = np.flatnonzero(at >= 0)
+            at = at[hit]
+            bb[at] = part["best"][hit]
+            ee[at] = np.minimum(ee[at], part["nan"][hit])
+            kc = part["cand"][hit]
+            del part, hit
+            width = max(width, int((kc >= 0).sum(axis=1).max(initial=0)))
+        block = np.full((k, width), -1, np.int64)
+        block[mine] = cand[pos, :width]
+        if kc is not None:
+            m = min(width, kc.shape[1])
+            block[at, :m] = kc[:, :m]
+        del kc, mine, pos
+        for s0 in range(0, k, _FINISH_ROWS):
+            s1 = min(k, s0 + _FINISH_ROWS)
+            done = finish_isolation(metric, r[s0:s1], c[s0:s1], bb[s0:s1], block[s0:s1], W, ee[s0:s1])
+            for f in out:
+                out[f][members[s0:s1]] = done[f].to_numpy()
+            del done
+        del members, r, c, bb, ee, block
+    if release_known:
+        if isinstance(given, SettledIsolation):
+            given.close()
+        elif given is not None:
+            given.clear()
     return pd.DataFrame(out, copy=False)
+
+
+def _outside(rows: np.ndarray, cols: np.ndarray, H: int, W: int, metric: KernelMetric) -> np.ndarray:
+    """Distance from each cell to the nearest cell outside the raster, by blocks (the kernel's int64 places)."""
+    edge = np.empty(rows.size)
+    for s0 in range(0, rows.size, _FINISH_ROWS):
+        s1 = min(rows.size, s0 + _FINISH_ROWS)
+        edge[s0:s1] = _mk.outside_distance(rows[s0:s1].astype(np.int64), cols[s0:s1].astype(np.int64), H, W,
+                                           *metric.args())
+    return edge
+
+
+class _PeaksByRows:
+    """The peaks of a band of rows, in raster order, and the rows of cells among them.
+
+    Peaks in raster order (the engine's) are ranges of the arrays as they are; others are
+    ranked once (an int64 order, 8 bytes per peak).
+    """
+
+    def __init__(self, rows: np.ndarray, cols: np.ndarray, width: int):
+        self.rows, self.cols, self.width = rows, cols, width
+        self.order: np.ndarray | None = None
+        ordered = True
+        for s0 in range(0, max(rows.size - 1, 0), _FINISH_ROWS):  # by blocks: no whole int64 cells
+            s1 = min(rows.size, s0 + _FINISH_ROWS + 1)
+            cell = rows[s0:s1].astype(np.int64) * width + cols[s0:s1]
+            if not bool((cell[1:] > cell[:-1]).all()):
+                ordered = False
+                break
+        if not ordered:
+            self.order = np.argsort(rows.astype(np.int64) * width + cols, kind="stable")
+        self.sorted_rows = rows if self.order is None else rows[self.order]
+
+    def members(self, r0: int, r1: int) -> np.ndarray:
+        """Indices of the peaks in rows ``r0`` to ``r1`` (excluded), in raster order."""
+        p0, p1 = np.searchsorted(self.sorted_rows, [r0, r1], side="left")
+        if self.order is None:
+            return np.arange(p0, p1, dtype=np.int64)
+        return self.order[p0:p1]
+
+    def find(self, keys: np.ndarray, members: np.ndarray) -> np.ndarray:
+        """Position of each flat cell ``keys`` in ``members`` (raster order), -1 where it is no peak."""
+        cell = self.rows[members].astype(np.int64) * self.width + self.cols[members]
+        if not cell.size:
+            return np.full(keys.size, -1, np.int64)
+        at = np.minimum(np.searchsorted(cell, keys), cell.size - 1)
+        at[cell[at] != keys] = -1
+        return at
 
 
 def cell_places(cell: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
@@ -307,27 +408,7 @@ def cell_places(cell: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
     return rows, cols
 
 
-def _known_rows(keys: np.ndarray, rows: np.ndarray, cols: np.ndarray, width: int) -> np.ndarray:
-    """Row of each flat cell ``keys`` among the peaks at (``rows``, ``cols``), -1 where none.
-
-    Peaks in raster order (the engine's) are searched as they are; others through their order.
-    """
-    cell = rows.astype(np.int64) * width + cols
-    order = None
-    if cell.size > 1 and not bool((cell[1:] > cell[:-1]).all()):
-        order = np.argsort(cell, kind="stable")
-        cell = cell[order]
-    at = np.searchsorted(cell, keys)
-    np.minimum(at, cell.size - 1, out=at)
-    found = cell[at] == keys if cell.size else np.zeros(keys.size, bool)
-    del cell
-    if order is not None:
-        at = order[at]
-    at[~found] = -1
-    return at
-
-
-def _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, slot, pz, rows, cols, W, slack):
+def _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, pz, rows, cols, W, slack):
     while True:
         nxt = np.argmin(lb, axis=1)
         val = lb[np.arange(idx.size), nxt]
@@ -346,12 +427,11 @@ def _visit(lb, idx, cache, rb, cb, nbx, metric, best, cand, ncand, slot, pz, row
             )
             bw = block["shape"][1]
             # append each peak's candidates (a prefix of its row of cl) while its row of cand has room
-            q = slot[p]
-            take = np.minimum((cl >= 0).sum(axis=1), cand.shape[1] - ncand[q])
+            take = np.minimum((cl >= 0).sum(axis=1), cand.shape[1] - ncand[p])
             t, j = np.nonzero(np.arange(cl.shape[1])[None, :] < take[:, None])
             found = cl[t, j]
-            cand[q[t], ncand[q[t]] + j] = (r0 + found // bw) * W + c0 + found % bw
-            ncand[q] += take
+            cand[p[t], ncand[p[t]] + j] = (r0 + found // bw) * W + c0 + found % bw
+            ncand[p] += take
             best[p] = np.minimum(best[p], b)
             lb[sel, k] = np.inf
 

@@ -13,6 +13,7 @@ from pyproj import CRS
 import orokit
 import orokit.tiling.engine as te
 from orokit.metrics.isolation import KernelMetric
+from orokit.tiling.isolation import SettledIsolation
 
 from helpers.outputs import assert_same_table_files
 
@@ -27,6 +28,12 @@ def _grid():
     z = np.round(rng.normal(size=(90, 110)).cumsum(0) + rng.normal(size=(90, 110)) * 2, 1)
     z[40:44, 50:57] = np.nan  # a void across a chunk corner
     return z
+
+
+def _gathered(settled):
+    """Every band of a spilled ``SettledIsolation`` in one dict of arrays."""
+    assert isinstance(settled, SettledIsolation)
+    return te._merge_iso([settled.read(b) for b in range(len(settled.bands))])
 
 
 def _by_key(iso, cells):
@@ -56,7 +63,12 @@ def test_spilled_settled_isolation_equals_the_carried_one(grid, tmp_path, monkey
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     spilled = te.tiled_orometry(data, min_prominence_m=1.0, scheduler="synchronous", isolation_metric=metric)
     assert len(carried_parts) == 2 * 29 and all(p is None for p in carried_parts)  # nothing travelled
-    assert list(tmp_path.iterdir()) == []  # the spill folder is gone
+    # the spill files stay for the isolation search, which reads them by rows of chunks
+    (folder,) = tmp_path.iterdir()
+    assert len(list(folder.iterdir())) == 30 and len(spilled.chunk_isolation.bands) == 6
+    settled = _gathered(spilled.chunk_isolation)
+    spilled.chunk_isolation.close()
+    assert list(tmp_path.iterdir()) == []  # closed: the spill folder is gone
     carried_parts.clear()
     monkeypatch.setattr(te, "_same_disk", lambda scheduler: False)
     carried = te.tiled_orometry(data, min_prominence_m=1.0, scheduler="synchronous", isolation_metric=metric)
@@ -67,9 +79,9 @@ def test_spilled_settled_isolation_equals_the_carried_one(grid, tmp_path, monkey
     np.testing.assert_array_equal(spilled.chunk_stats, carried.chunk_stats)
     cells = a.peak_cell
     assert cells.size > 50
-    # only kept peaks are read back; the carried one may hold candidates the finalize dropped
-    assert np.isin(spilled.chunk_isolation["key"], cells).all()
-    got, want = _by_key(spilled.chunk_isolation, cells), _by_key(carried.chunk_isolation, cells)
+    # both may hold candidates the finalize dropped (the search leaves them out): the kept peaks' rows compared
+    assert np.isin(carried.chunk_isolation["key"], settled["key"]).all()
+    got, want = _by_key(settled, cells), _by_key(carried.chunk_isolation, cells)
     assert got["key"].size > 20
     for f in got:
         np.testing.assert_array_equal(got[f], want[f], err_msg=f)
@@ -172,7 +184,7 @@ def test_reused_checkpoint_chunks_spill_their_isolation(make_dem, tmp_path):
     reused = te.tiled_orometry(data, min_prominence_m=1.0, scheduler="synchronous", isolation_metric=metric,
                                checkpoint=ck)
     cells = fresh.orometry.peak_cell
-    got, want = _by_key(reused.chunk_isolation, cells), _by_key(fresh.chunk_isolation, cells)
+    got, want = _by_key(_gathered(reused.chunk_isolation), cells), _by_key(_gathered(fresh.chunk_isolation), cells)
     assert want["key"].size > 20
     for f in want:
         np.testing.assert_array_equal(got[f], want[f], err_msg=f)
@@ -323,8 +335,9 @@ def test_a_rerun_after_a_killed_checkpoint_run_removes_its_folders_and_keeps_its
     child = subprocess.run([sys.executable, "-c", _KILLED_RUN, str(tif), str(ck), where], capture_output=True)
     assert child.returncode == -9, child.stderr.decode()[-2000:]
     left = sorted(p.name.split("-")[1] for p in ck.iterdir() if p.name.startswith("orokit-"))
-    # the column store exists from the start of the chunk pass (the finalize fills it)
-    assert left == (["columns"] if where == "isolation" else ["columns", "spill"])
+    # the column store exists from the start of the chunk pass (the finalize fills it), the spill folder until
+    # the isolation search has read it
+    assert left == ["columns", "spill"]
     assert len(list(ck.glob(".chunk_*.tmp-*"))) == (1 if where == "write" else 0)
     if same_pid:
         for p in [*ck.glob("orokit-*"), *ck.glob(".chunk_*.tmp-*")]:
