@@ -306,20 +306,25 @@ def finalize_graph(
     no_bmax, no_nmin = np.empty(0, bmax.dtype), np.empty(0, node_nmin.dtype)
     del bmax, node_bmax
     is_root = key_edge < 0
-    prom = node_z.copy()
-    step = 1 << 18  # by blocks: the whole arrays' gathers were ~24 bytes per node beside the root's graph
-    for s0 in range(0, n, step):
-        ke = key_edge[s0:s0 + step]
-        below = ke >= 0
-        prom[s0:s0 + step][below] = node_z[s0:s0 + step][below] - ez[ke[below]]
     # a domain whose cells all have the root's elevation is flat: no peak
     dom = _kernels.forest_components_like(n, ea, eb, in_tree, _kernels.index_like(n, ea.size))
     del in_tree  # the finalize of a 4 G-cell mosaic's root holds ~6.5 M nodes: free what is done
     flat_root = _kernels.flat_roots(dom, node_nmin, node_z, is_root)
     del node_nmin
-    keep = np.where(is_root, (min_prominence_m <= 0) | (node_z >= min_prominence_m), prom >= min_prominence_m)
-    keep &= is_root | (prom > 0)
-    keep &= ~flat_root & node_ismax
+    # kept: by blocks, each block's prominences made and let go (no whole prominence array: 8 bytes per
+    # node; the kept peaks' own are made again below by the same expression)
+    keep = np.empty(n, bool)
+    step = 1 << 18
+    for s0 in range(0, n, step):
+        ke, z, root = key_edge[s0:s0 + step], node_z[s0:s0 + step], is_root[s0:s0 + step]
+        below = ke >= 0
+        prom = z.copy()
+        prom[below] = z[below] - ez[ke[below]]
+        k = np.where(root, (min_prominence_m <= 0) | (z >= min_prominence_m), prom >= min_prominence_m)
+        k &= root | (prom > 0)
+        k &= ~flat_root[s0:s0 + step] & node_ismax[s0:s0 + step]
+        keep[s0:s0 + step] = k
+        del prom, k
     del flat_root
     # a kept peak needs its parent: keep the root of every domain with a kept peak
     # (the root's prominence "= elevation" can be below the threshold when saddles
@@ -329,28 +334,37 @@ def finalize_graph(
     keep |= is_root & node_ismax & dom_has[dom]
     del dom, dom_has, node_ismax
     # the kept peaks' columns first (the prune does not change ``keep``), so the sweep's per-node
-    # arrays are freed before the prune's own state exists (~26 bytes per node at a 6.5 M-node root)
-    new_id = np.full(n, -1, np.int64)
+    # arrays are freed before the prune's own state exists (~26 bytes per node at a 6.5 M-node root);
+    # each column is put in the store as soon as it is made
     kept = np.flatnonzero(keep)
     # kept peaks in raster order
     rank = np.argsort(node_key[kept], kind="stable")
     kept = kept[rank]
     del rank
+    new_id = np.full(n, -1, _kernels.index_like(n, ea.size).dtype)  # ids of kept peaks: int32 while they fit
     new_id[kept] = np.arange(kept.size)
     nonroot = ~is_root[kept]
+    del is_root
+    kept_nonroot = kept[nonroot]
+    edge_of = key_edge[kept_nonroot]
+    del key_edge
     ks = np.full(kept.size, -1, np.int64)
+    ks[nonroot] = ekey[edge_of]
+    ks = _to_store(store, "key_saddle_cell", ks)
     ksz = np.full(kept.size, np.nan)
-    ks[nonroot] = ekey[key_edge[kept][nonroot]]
-    ksz[nonroot] = ez[key_edge[kept][nonroot]]
+    ksz[nonroot] = ez[edge_of]
+    ksz = _to_store(store, "key_saddle_z", ksz)
+    kept_prom = node_z[kept]  # the root's "prominence" is its elevation
+    kept_prom[nonroot] = node_z[kept_nonroot] - ez[edge_of]
+    kept_prom = _to_store(store, "prominence", kept_prom)
+    del edge_of
     par = np.full(kept.size, -1, np.int64)
-    par[nonroot] = new_id[parent[kept][nonroot]]
+    par[nonroot] = new_id[parent[kept_nonroot]]
+    del parent, kept_nonroot
+    par = _to_store(store, "parent", par)
     exact = ~touched[kept] & nonroot if outside == "unknown" else np.ones(kept.size, bool)
-    kept_prom = prom[kept]
-    del key_edge, parent, touched, prom, is_root, nonroot
-    if store is not None:
-        ks, ksz, par, exact, kept_prom = (_to_store(store, f, v) for f, v in (
-            ("key_saddle_cell", ks), ("key_saddle_z", ksz), ("parent", par), ("prominence_exact", exact),
-            ("prominence", kept_prom)))
+    del touched, nonroot
+    exact = _to_store(store, "prominence_exact", exact)
     # every edge: of several edges at one saddle, the prune picks the same one in both engines
     oa, ob, oe, _, _, _ = _kernels.prune_edges(n, ea, eb, ez, ekey, keep, no_bmax, no_nmin, node_z, node_key, False,
                                                _kernels.index_like(n, ea.size))
@@ -360,9 +374,9 @@ def finalize_graph(
     del ekey
     ridge_saddle_z = _to_store(store, "ridge_saddle_z", ez[oe].astype(np.float64, copy=False))
     del ez, oe
-    ridge_a = _to_store(store, "ridge_a", new_id[oa])
+    ridge_a = _to_store(store, "ridge_a", new_id[oa].astype(np.int64))
     del oa
-    ridge_b = _to_store(store, "ridge_b", new_id[ob])
+    ridge_b = _to_store(store, "ridge_b", new_id[ob].astype(np.int64))
     del ob, new_id
     peak_cell = node_key[kept]
     del node_key
