@@ -462,7 +462,9 @@ def load_kernels(*, isolation: bool = True) -> None:
     from orokit.topology import _kernels
 
     rank, ea, eb = np.arange(3, dtype=np.int64), np.array([2, 1], np.int64), np.array([1, 0], np.int64)
-    line_parent, _ = _kernels.line_parents(rank, ea, eb)
+    # the parents' sweep takes the ridges' ends in the narrowest index type (DivideTree.parents)
+    line_parent, _ = _kernels.line_parents(rank, ea.astype(_kernels.index_like(3, 2).dtype),
+                                           eb.astype(_kernels.index_like(3, 2).dtype))
     _kernels.first_ancestor_above(line_parent, np.zeros(3), rank)
     ea.flags.writeable = eb.flags.writeable = False
     _kernels.forest_components(3, ea, eb)

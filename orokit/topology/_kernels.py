@@ -886,7 +886,8 @@ def line_parents(rank, ea, eb):
     """Line parent of every node of a tree (forest), in one Kruskal sweep.
 
     ``rank`` orders the nodes (larger = higher, all distinct); ``ea``/``eb`` are the
-    tree edges sorted from the highest to the lowest saddle. When two components meet,
+    tree edges sorted from the highest to the lowest saddle (any integer type: the union-find
+    state takes theirs). When two components meet,
     the one with the lower top loses: its top's line parent is the first node higher
     than that top on the chain ``v, lp[v], lp[lp[v]], ...`` that starts at the edge's
     endpoint ``v`` on the winning side. That chain is the walk along the ridge staying
@@ -897,8 +898,11 @@ def line_parents(rank, ea, eb):
     tree) and the total number of chain steps taken (a cost diagnostic).
     """
     n = rank.size
-    uf = np.arange(n)
-    top = np.arange(n)
+    uf = np.empty(n, ea.dtype)  # the union-find state in the edges' index type (int32: 8 bytes per node less)
+    top = np.empty(n, ea.dtype)
+    for i in range(n):
+        uf[i] = i
+        top[i] = i
     lp = np.full(n, -1, np.int64)
     steps = 0
     for e in range(ea.size):

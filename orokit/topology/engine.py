@@ -556,9 +556,12 @@ def build_result(core: Orometry, *, transform, crs, isolation: pd.DataFrame | No
     if moved:
         sc_sorted = store.column("saddle_cell")
     key_of = np.full(sc_sorted.size, -1, np.int64)  # the peak whose key saddle each saddle is (-1 for none)
-    kp = np.flatnonzero(key_saddle >= 0)
-    key_of[np.searchsorted(sc_sorted, key_saddle[kp])] = kp
-    del kp, key_saddle
+    for s0 in range(0, key_saddle.size, 1 << 18):  # by blocks of peaks, in order: no whole gathers beside key_of
+        ks = key_saddle[s0:s0 + (1 << 18)]
+        kp = np.flatnonzero(ks >= 0)
+        key_of[np.searchsorted(sc_sorted, ks[kp])] = kp + s0
+        del ks, kp
+    del key_saddle
     # the places (row, col, x, y, elevation) of peaks and saddles from their cells and elevations: with
     # ``blocks`` made when read (the tree's frames and both tables are TableBlocks: 16 bytes per peak and
     # per saddle held instead of 40; the files are written by blocks), otherwise made whole once
