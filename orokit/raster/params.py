@@ -201,6 +201,10 @@ class RenderParams:
         plain the crest crosses, and the ground beside it stays near its level instead of falling at the flank slope
         (a thin spoke across the plateau; session 18: andes-chile's render's ground 400 m beside its selected pieces
         lay 172 m below the line, the real DEM's 19 m); None = the flank slope.
+    flank_apex_m : the flank cones have a rounded apex of this radius r0 (metres): a ridge point's cone lies
+        ``s d^2 / (2 r0)`` below it within r0, ``s (d - r0 / 2)`` beyond (:func:`orokit.raster.interpolate.flank_envelope`):
+        every render's crest was a knife edge (session 18, :mod:`orokit.validate.crest`: 100 m beside the crest the
+        renders' ground lay 17-51 m down, the real DEMs' 2-36 m); None = sharp cones.
     smooth_m : Gaussian sigma (metres) that rounds the skeleton raster's planar facets and creases
         (the TIN carries no information below its meshing distance ``lam``), faded to 0 within
         ``texture_clearance_m`` of peaks and saddles; 0 = off.
@@ -287,6 +291,7 @@ class RenderParams:
     ridge_plateau_spread: float | None = 0.25
     ridge_plateau_relief_m: float = 300.0
     ridge_tail_flank_slope: float | None = None
+    flank_apex_m: float | None = None
     flank_depth_saddle_k: int = 16
     keep_hill_ratio: float = 0.0
     cut_slope: float = 0.0
@@ -359,6 +364,8 @@ class RenderParams:
                 raise InputError(f"ridge_tail_flank_slope must be >= the crest's tail slope {RIDGE_TAIL_SLOPE} "
                                  f"(m/m; gentler cones would rise above the saddle) or None, got "
                                  f"{self.ridge_tail_flank_slope!r}")
+        if self.flank_apex_m is not None and not float(self.flank_apex_m) > 0.0:  # NaN too
+            raise InputError(f"flank_apex_m must be > 0 metres or None, got {self.flank_apex_m!r}")
         if self.river_blend_k is not None and not self.river_blend_k >= 2:
             raise InputError(f"river_blend_k must be >= 2 or None, got {self.river_blend_k!r}")
         if self.river_foot_band is not None and not float(self.river_foot_band) > 0.0:

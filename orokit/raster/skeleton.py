@@ -388,7 +388,8 @@ def build_skeleton(
     rtree = cKDTree(rxy)
 
     def envelope(xy: np.ndarray) -> np.ndarray:
-        return flank_envelope(xy, rxy, rz, rs, ridge_floor=rfloor, tree=rtree, k_neighbours=params.flank_neighbours)
+        return flank_envelope(xy, rxy, rz, rs, ridge_floor=rfloor, tree=rtree, k_neighbours=params.flank_neighbours,
+                              apex_m=params.flank_apex_m)
 
     # the rivers' base cap and floor ask for the tree's relief at the same river nodes (k 16 both by default):
     # one search (the last points asked for are kept)
@@ -458,7 +459,8 @@ def build_skeleton(
                                  valley_floor_slope=params.valley_floor_slope, tree=rtree,
                                  border_distance=border, beyond_slope=params.border_beyond_slope,
                                  river_blend_k=params.river_blend_k, river_foot_band=params.river_foot_band,
-                                 river_foot_slope=params.river_foot_slope, river_foot_k=params.river_foot_k)
+                                 river_foot_slope=params.river_foot_slope, river_foot_k=params.river_foot_k,
+                                 apex_m=params.flank_apex_m)
     if floor is not None:
         h = np.maximum(h, floor(pts))  # no ground below the tree's own floor (below every nearby saddle)
     far = (np.minimum(dT, dR) >= 0.5 * lam)

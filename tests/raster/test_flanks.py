@@ -96,3 +96,39 @@ def test_local_relief_against_brute_force():
         np.testing.assert_allclose(lo, saddles[np.argsort(ds, axis=1)[:, :k], 2].min(axis=1))
         np.testing.assert_allclose(hi, peaks[np.argsort(dp, axis=1)[:, :k], 2].max(axis=1))
         np.testing.assert_allclose(far, np.sort(dp, axis=1)[:, k - 1])
+
+
+def test_rounded_cone_apex_rounds_the_crest_and_keeps_the_orometry():
+    """``flank_apex_m``: each cone lies s d^2 / 2 r0 below its ridge point within r0 and s (d - r0 / 2) beyond
+    (continuous, at the sharp cone's slope there): never below the sharp cone, higher by exactly s r0 / 2 past r0
+    (brute force over random cones); a render of the small tree keeps its peaks and prominences."""
+    import orokit
+    from orokit.raster.interpolate import flank_envelope
+    from orokit.raster.render import render_elevation
+    from orokit.validate.roundtrip import compare_peaks
+
+    rng = np.random.default_rng(4)
+    q = rng.uniform(0.0, 5000.0, (40, 2))
+    z = rng.uniform(500.0, 1500.0, 40)
+    s = rng.uniform(0.2, 1.0, 40)
+    pts = rng.uniform(0.0, 5000.0, (500, 2))
+    r0 = 300.0
+    d = np.hypot(*(pts[:, None, :] - q[None, :, :]).transpose(2, 0, 1))
+    f = np.where(d < r0, d * d / (2 * r0), d - r0 / 2)
+    expect = np.max(z[None, :] - s[None, :] * f, axis=1)
+    got = flank_envelope(pts, q, z, s, k_neighbours=40, apex_m=r0)
+    np.testing.assert_allclose(got, expect, atol=1e-9)
+    sharp = flank_envelope(pts, q, z, s, k_neighbours=40)
+    assert (got >= sharp - 1e-9).all() and (got > sharp + 1.0).any()
+    one = flank_envelope(np.array([[0.0, 100.0], [0.0, 1000.0]]), np.zeros((1, 2)), np.array([0.0]), np.array([0.6]),
+                         apex_m=r0)
+    np.testing.assert_allclose(one, [-0.6 * 100.0 ** 2 / (2 * r0), -0.6 * (1000.0 - r0 / 2)])
+    zr = render_elevation(small_tree(), cell_size_m=50.0, erosion=False, params=RenderParams(flank_apex_m=r0), rng=7)
+    res = orokit.analyze(zr, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(small_tree(), res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+    np.testing.assert_allclose(comp.peaks["raster_prominence"].to_numpy(), [1500.0, 200.0, 200.0, 150.0, 100.0],
+                               atol=1.0)
+    for bad in (0.0, -5.0, float("nan")):
+        with pytest.raises(InputError, match="flank_apex_m"):
+            RenderParams(flank_apex_m=bad)
