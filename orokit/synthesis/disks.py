@@ -10,7 +10,10 @@ them (:func:`coverage_targets`).
 ``top_rank`` of a disk is the share of all the peaks that are higher than the disk's
 highest peak: 0 for a disk holding the highest peak, small when every disk holds one
 of the high peaks. It does not depend on the elevation scale, so it survives edits
-of the elevation histogram.
+of the elevation histogram. ``median_rank`` of a disk is the median elevation rank
+``(i + 0.5) / n`` of the peaks it holds: how low the lowest 10 km neighbourhoods lie among the
+region's peaks (its low quantiles; a twin whose lowest peaks gather in one wide basin has
+disks far lower than any real one, which the classifier reads as another region).
 """
 from __future__ import annotations
 
@@ -24,6 +27,7 @@ from scipy.spatial import cKDTree
 from orokit.errors import SchemaError
 
 __all__ = ["DISK_RADIUS_M", "DISK_LEVELS", "BORDER_BANDS", "disk_centres", "disk_statistics", "disk_quantiles",
+           "median_rank_quantiles",
            "check_disk_quantiles", "coverage_targets", "border_distance", "border_rank", "border_density", "shrink_border_density",
            "band_areas", "interior_share"]
 
@@ -65,18 +69,18 @@ def disk_centres(extent: tuple[float, float, float, float], radius_m: float = DI
 def disk_statistics(x: np.ndarray, y: np.ndarray, elevation: np.ndarray, prominence: np.ndarray,
                     extent: tuple[float, float, float, float], *, radius_m: float = DISK_RADIUS_M,
                     min_prominence_m: float = 30.0, step_m: float | None = None) -> dict[str, np.ndarray]:
-    """Per-disk peak count, maximum prominence and ``top_rank`` (see the module docstring).
+    """Per-disk peak count, maximum prominence, ``top_rank`` and ``median_rank`` (see the module docstring).
 
     Only peaks with prominence >= ``min_prominence_m`` count (x, y in metres of a planar
-    frame). Disks with no peak have ``max_prominence_m`` 0 and ``top_rank`` 1.
+    frame). Disks with no peak have ``max_prominence_m`` 0, ``top_rank`` 1 and ``median_rank`` NaN.
 
     Examples
     --------
     >>> import numpy as np
     >>> s = disk_statistics(np.array([15e3, 40e3]), np.array([15e3, 15e3]), np.array([900., 500.]),
     ...                     np.array([800., 100.]), (0, 0, 50e3, 30e3), step_m=5e3)
-    >>> s["peaks"].tolist()[:7], s["top_rank"].tolist()[:7]
-    ([1, 1, 1, 0, 0, 1, 1], [0.0, 0.0, 0.0, 1.0, 1.0, 0.5, 0.5])
+    >>> s["peaks"].tolist()[:7], s["top_rank"].tolist()[:7], s["median_rank"].tolist()[:2]
+    ([1, 1, 1, 0, 0, 1, 1], [0.0, 0.0, 0.0, 1.0, 1.0, 0.5, 0.5], [0.75, 0.75])
     """
     x, y = np.asarray(x, float), np.asarray(y, float)
     z, prom = np.asarray(elevation, float), np.asarray(prominence, float)
@@ -86,16 +90,26 @@ def disk_statistics(x: np.ndarray, y: np.ndarray, elevation: np.ndarray, promine
     n = np.zeros(cx.size, np.int64)
     mp = np.zeros(cx.size)
     top = np.ones(cx.size)
+    med = np.full(cx.size, np.nan)
     if x.size and cx.size:
-        # rank of every peak: share of the peaks strictly higher than it
+        # rank of every peak: share of the peaks strictly higher than it; mid-point rank in increasing elevation
         zs = np.sort(z)
         higher = (z.size - np.searchsorted(zs, z, side="right")) / z.size
+        rank = (np.argsort(np.argsort(z, kind="stable"), kind="stable") + 0.5) / z.size
         for i, members in enumerate(cKDTree(np.c_[x, y]).query_ball_point(np.c_[cx, cy], radius_m)):
             if members:
                 n[i] = len(members)
                 mp[i] = prom[members].max()
                 top[i] = higher[members].min()
-    return {"x": cx, "y": cy, "peaks": n, "max_prominence_m": mp, "top_rank": top}
+                med[i] = np.median(rank[members])
+    return {"x": cx, "y": cy, "peaks": n, "max_prominence_m": mp, "top_rank": top, "median_rank": med}
+
+
+def median_rank_quantiles(median_rank: np.ndarray) -> list[float] | None:
+    """Quantiles at :data:`DISK_LEVELS` of the disks' ``median_rank`` (empty disks left out; None without any)."""
+    v = np.asarray(median_rank, float)
+    v = v[np.isfinite(v)]
+    return [float(q) for q in np.quantile(v, np.asarray(DISK_LEVELS))] if v.size else None
 
 
 def border_distance(x: np.ndarray, y: np.ndarray, extent: tuple[float, float, float, float]) -> np.ndarray:
@@ -270,6 +284,15 @@ def check_disk_quantiles(disks: Mapping[str, Any]) -> dict[str, Any]:
             raise SchemaError(f"terrain type disks record: border_density needs {len(BORDER_BANDS) - 1} relative "
                               f"densities >= 0, not all 0 (one per border band), got {disks['border_density']!r}")
         out["border_density"] = bd
+    if disks.get("median_rank") is not None:  # optional: types made before session 18 lack it
+        try:
+            mr = [float(v) for v in disks["median_rank"]]
+        except (TypeError, ValueError) as exc:
+            raise SchemaError(f"terrain type disks record: median_rank must be a list of numbers ({exc})") from exc
+        if len(mr) != lv.size or not all(0.0 <= v <= 1.0 for v in mr) or np.any(np.diff(mr) < 0):
+            raise SchemaError(f"terrain type disks record: median_rank needs {lv.size} non-decreasing quantiles "
+                              f"in [0, 1] (one per level), got {disks['median_rank']!r}")
+        out["median_rank"] = mr
     return out
 
 

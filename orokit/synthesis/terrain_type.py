@@ -202,7 +202,9 @@ class TerrainType:
         from data narrower than 20 km. The dart throwing follows ``top_rank``. Its optional
         ``border_rank`` (:func:`orokit.synthesis.disks.border_rank`: mean elevation rank of the
         peaks by distance to the data border) shapes the default C_H, so a twin of a DEM cropped
-        around its relief holds its high ground inside as the DEM does.
+        around its relief holds its high ground inside as the DEM does; its optional ``median_rank``
+        (quantiles of the disks' median elevation rank; types before session 18 lack it) is what
+        ``follow_disk_rank`` synthesis keeps the lowest disks above.
     bands : optional joint statistics (orokit): ``{"elevation_bins": [i0, ..., iK],
         "prominence": [[...]] * K, "dominance": [[...]] * K}``: prominence and dominance
         counts (on the marginal histograms' bins) of the peaks whose elevation falls in
@@ -748,7 +750,8 @@ def _check_range(feature: str, h: FeatureHistogram) -> None:
 def _disk_record(x: np.ndarray, y: np.ndarray, z: np.ndarray, prom: np.ndarray, crs: Any,
                  extent: tuple[float, float, float, float] | None, min_prominence_m: float) -> dict[str, Any] | None:
     """The ``disks`` record of a type (None when the data holds no 10 km disk)."""
-    from orokit.synthesis.disks import border_density, border_rank, disk_quantiles, disk_statistics
+    from orokit.synthesis.disks import (border_density, border_rank, disk_quantiles, disk_statistics,
+                                        median_rank_quantiles)
     from orokit.synthesis.orometry import planar_xy
 
     if extent is None:
@@ -761,10 +764,12 @@ def _disk_record(x: np.ndarray, y: np.ndarray, z: np.ndarray, prom: np.ndarray, 
     px, py = planar_xy(np.concatenate([x, cx.ravel()]), np.concatenate([y, cy.ravel()]), crs)
     k = x.size
     box = (float(px[k:].min()), float(py[k:].min()), float(px[k:].max()), float(py[k:].max()))
-    rec = disk_quantiles(disk_statistics(px[:k], py[:k], z, prom, box, min_prominence_m=min_prominence_m))
+    stats = disk_statistics(px[:k], py[:k], z, prom, box, min_prominence_m=min_prominence_m)
+    rec = disk_quantiles(stats)
     if rec is not None:
         rec["border_rank"] = border_rank(px[:k], py[:k], z, box)
         rec["border_density"] = border_density(px[:k], py[:k], box)
+        rec["median_rank"] = median_rank_quantiles(stats["median_rank"])
     return rec
 
 

@@ -196,6 +196,13 @@ class SynthesisParams:
         type's ``saddle_level``, or the one before it if that came closer (off, with an
         :class:`~orokit.errors.OrokitWarning`, for a type without it or with several types). An option, off
         (issue 11, session 17: see NOTES).
+    follow_disk_rank : the automatic C_H is drawn and the peaks thrown up to ``disk_rank_draws`` times (new noises
+        and draws each), and the first placement whose 10 km disks' ``median_rank`` (:mod:`orokit.synthesis.disks`)
+        has its :data:`DISK_RANK_LEVEL` quantile no lower than the type's is kept (else the highest), so the lowest
+        peaks do not gather in a basin wider than any of the source's lowest 10 km neighbourhoods (off for a type without the record, with a user C_H or several
+        types). An option, off (issue 11, session 18: a twin disk far lower than every real disk was what
+        rockies' and andes-aconcagua's missed disks had in common; see NOTES).
+    disk_rank_draws : at most this many C_H draws for ``follow_disk_rank`` (>= 1).
     Measured for ``follow_gradient`` and the 4 km ``auto_elevation_m`` (``benchmarks/realism.py
     --twin-only``, 13 regions, seeds 0-2, session 7, load 6-9): twins' disks classified as their own
     region at least as often as the real disks under the spatial hold-out in 10, 9, 10 of 12 regions
@@ -232,17 +239,19 @@ class SynthesisParams:
     gradient_tail: float | None = 2.0
     saddle_level_weight: float = 0.0
     follow_saddle_level: bool = False
+    follow_disk_rank: bool = False
+    disk_rank_draws: int = 8
 
     def __post_init__(self) -> None:
         if self.use_bands not in ("auto", True, False):
             raise InputError(f"use_bands must be 'auto', True or False, got {self.use_bands!r}")
         for name in ("border_trend", "border_density", "follow_gradient", "follow_ridge_contrast", "follow_ridge_slope",
-                     "follow_neighbour_gradient", "fine_needs_reach", "follow_saddle_level"):
+                     "follow_neighbour_gradient", "fine_needs_reach", "follow_saddle_level", "follow_disk_rank"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise InputError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.saddle_placement not in ("targeted", "paper"):
             raise InputError(f"saddle_placement must be 'targeted' or 'paper', got {self.saddle_placement!r}")
-        for name in ("n_passes", "n_candidates", "max_ot_iterations"):
+        for name in ("n_passes", "n_candidates", "max_ot_iterations", "disk_rank_draws"):
             if int(getattr(self, name)) < 1:
                 raise InputError(f"{name} must be >= 1, got {getattr(self, name)!r}")
         if not (isinstance(self.elevation_tolerance, (int, float)) and 0 < float(self.elevation_tolerance) < np.inf):
@@ -405,17 +414,27 @@ def synthesize_divide_tree(
     nn_target = types[0].neighbour_gradient if p.follow_neighbour_gradient else None
     fit_fine = auto_m is not None and nn_target is not None
     fields = None
+    rank_fit: dict[str, Any] | None = None
+    rank_disks: Any = None
+    rank_seed = 0
     if auto_m is not None:
         from orokit.synthesis.controls import random_elevation_fields
 
         disks = types[0].disks or {}
-        fields = random_elevation_fields(
-            domain, types[0].histograms["elevation"], correlation_m=float(auto_m),
-            rng=rng.integers(2**63) if fit_fine else rng,
-            border_rank=disks.get("border_rank") if p.border_trend else None, fine_m=float(p.fine_elevation_m),
-            fine_weights=FINE_WEIGHTS if fit_fine else (0.0,), density=None if profile is None else controls.density,
-            valley_weight=float(p.valley_network))
-        if not fit_fine:
+
+        def draw_fields(seed: Any) -> Any:
+            return random_elevation_fields(
+                domain, types[0].histograms["elevation"], correlation_m=float(auto_m), rng=seed,
+                border_rank=disks.get("border_rank") if p.border_trend else None, fine_m=float(p.fine_elevation_m),
+                fine_weights=FINE_WEIGHTS if fit_fine else (0.0,),
+                density=None if profile is None else controls.density, valley_weight=float(p.valley_network))
+
+        rank_disks = disks if p.follow_disk_rank and disks.get("median_rank") is not None else None
+        if rank_disks is None:
+            fields = draw_fields(rng.integers(2**63) if fit_fine else rng)
+        else:
+            rank_seed = int(rng.integers(2**63))  # the draws of follow_disk_rank come from here
+        if fields is not None and not fit_fine:
             controls = replace(controls, elevation=next(fields))
     peaks = _peak_elevations(types, free_t, fixed_xyz, fixed_type, fragment, eps, rng)
     timings["elevations"] = time.perf_counter() - t0
@@ -435,14 +454,24 @@ def synthesize_divide_tree(
             gradient_tail=None if p.gradient_tail is None else float(p.gradient_tail), rng=gen,
         )
 
-    fine_fit = None
-    if fit_fine:
-        assert fields is not None and nn_target is not None
-        controls, (px, py, dart_info), fine_fit = _fit_fine_elevation(
-            fields, controls, throw, peaks.z, float(nn_target), int(rng.integers(2**63)),
-            needs_reach=bool(p.fine_needs_reach))
+    def place(fields: Any, ctrl: Any, gen: Any) -> tuple[Any, np.ndarray, np.ndarray, Any, Any]:
+        if fit_fine:
+            assert fields is not None and nn_target is not None
+            ctrl, (x_, y_, info_), fit_ = _fit_fine_elevation(
+                fields, ctrl, throw, peaks.z, float(nn_target), int(gen.integers(2**63)),
+                needs_reach=bool(p.fine_needs_reach))
+            return ctrl, x_, y_, info_, fit_
+        if fields is not None:
+            ctrl = replace(ctrl, elevation=next(fields))
+        x_, y_, info_ = throw(ctrl, gen)
+        return ctrl, x_, y_, info_, None
+
+    if rank_disks is not None:
+        (controls, px, py, dart_info, fine_fit), rank_fit = _fit_disk_rank(
+            lambda sub: place(draw_fields(sub.integers(2**63)), controls, sub), rank_seed, rank_disks, peaks.z,
+            domain, int(p.disk_rank_draws))
     else:
-        px, py, dart_info = throw(controls, rng)
+        controls, px, py, dart_info, fine_fit = place(fields if fit_fine else None, controls, rng)
     timings["dart_throwing"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
@@ -518,11 +547,41 @@ def synthesize_divide_tree(
             "neighbour_gradient": fine_fit,
             "max_ridge_slope": slope_cap,
             "saddle_level": level_fit,
+            "disk_rank": rank_fit,
         },
     )
     logger.info("synthesized %d peaks, %d ridges in %.2f s (OT rounds %d)", tree.n_peaks, a.size,
                 timings["total"], ot_info["iterations"])
     return tree
+
+
+#: quantile level of the disks' ``median_rank`` that ``follow_disk_rank`` keeps no lower than the type's
+DISK_RANK_LEVEL = 0.05
+
+
+def _fit_disk_rank(place: Any, seed: int, disks: Any, z: np.ndarray, domain: Any,
+                   draws: int) -> tuple[Any, dict[str, Any]]:
+    """The placement (what ``place(rng)`` returns: controls, x, y, ...) of the first of ``draws`` C_H draws
+    whose peaks' 10 km disks have their ``median_rank`` at :data:`DISK_RANK_LEVEL` no lower than the type's
+    (else the highest), and a record of the fit. Draw k uses ``default_rng([seed, k])``."""
+    from orokit.synthesis.disks import disk_statistics
+
+    target = float(np.interp(DISK_RANK_LEVEL, np.asarray(disks["levels"], float),
+                             np.asarray(disks["median_rank"], float)))
+    ext = (domain.x0, domain.y0, domain.x0 + domain.width, domain.y0 + domain.height)
+    best: tuple[float, int, Any] | None = None
+    for k in range(max(int(draws), 1)):
+        out = place(np.random.default_rng([int(seed), k]))
+        med = disk_statistics(out[1], out[2], z, np.full(z.size, np.inf), ext, radius_m=float(disks["radius_m"]),
+                              step_m=float(disks["radius_m"]) / 4.0)["median_rank"]
+        med = med[np.isfinite(med)]
+        got = float(np.quantile(med, DISK_RANK_LEVEL)) if med.size else target
+        if best is None or got > best[0]:
+            best = (got, k, out)
+        if got >= target:
+            break
+    assert best is not None
+    return best[2], {"target": round(target, 4), "reached": round(best[0], 4), "draw": best[1], "draws": k + 1}
 
 
 #: weights of the saddle OT's level term tried, in order, by ``follow_saddle_level``
