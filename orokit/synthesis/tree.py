@@ -199,9 +199,9 @@ class SynthesisParams:
     follow_disk_rank : the automatic C_H is drawn and the peaks thrown up to ``disk_rank_draws`` times (new noises
         and draws each), and the first placement whose 10 km disks' ``median_rank`` (:mod:`orokit.synthesis.disks`)
         has its quantiles at :data:`DISK_RANK_LEVELS` no lower than the type's is kept (else the one short by
-        least), so the lowest
-        peaks do not gather in a basin wider than any of the source's lowest 10 km neighbourhoods (off for a type without the record, with a user C_H or several
-        types). An option, off (issue 11, session 18: a twin disk far lower than every real disk was what
+        least), so the lowest peaks do not gather in a basin wider than any of the source's lowest 10 km
+        neighbourhoods (off, with an :class:`~orokit.errors.OrokitWarning`, for a type without the record, with a
+        user C_H or several types). An option, off (issue 11, session 18: a twin disk far lower than every real disk was what
         rockies' and andes-aconcagua's missed disks had in common; see NOTES).
     disk_rank_draws : at most this many C_H draws for ``follow_disk_rank`` (>= 1).
     Measured for ``follow_gradient`` and the 4 km ``auto_elevation_m`` (``benchmarks/realism.py
@@ -437,6 +437,11 @@ def synthesize_divide_tree(
             rank_seed = int(rng.integers(2**63))  # the draws of follow_disk_rank come from here
         if fields is not None and not fit_fine:
             controls = replace(controls, elevation=next(fields))
+    if p.follow_disk_rank and rank_disks is None:
+        why = ("there is no automatic C_H to redraw (a user C_H, several types or auto_elevation_m None)"
+               if auto_m is None else f"terrain type {types[0].name!r} records no disks median_rank (a type made "
+               "before session 18, or from data narrower than 20 km); remake it with `orokit type` to follow it")
+        warnings.warn(f"follow_disk_rank does nothing here: {why}", OrokitWarning, stacklevel=2)
     peaks = _peak_elevations(types, free_t, fixed_xyz, fixed_type, fragment, eps, rng)
     timings["elevations"] = time.perf_counter() - t0
 

@@ -8,7 +8,7 @@ import hashlib
 import numpy as np
 import pytest
 
-from orokit.errors import InputError, SchemaError
+from orokit.errors import InputError, OrokitWarning, SchemaError
 from orokit.synthesis.disks import DISK_RADIUS_M, disk_centres, disk_statistics
 from orokit.synthesis.terrain_type import TerrainType
 from orokit.synthesis.tree import DISK_RANK_LEVELS, SynthesisParams, peaks_table, synthesize_divide_tree
@@ -79,8 +79,13 @@ def test_type_records_median_rank_and_old_types_are_unchanged(small_type):
     assert "median_rank" not in old_type.disks
     fast = {"follow_neighbour_gradient": False}
     plain = synthesize_divide_tree(old_type, size_m=30_000, rng=4, params=SynthesisParams(**fast))
-    on = synthesize_divide_tree(old_type, size_m=30_000, rng=4, params=SynthesisParams(follow_disk_rank=True, **fast))
+    with pytest.warns(OrokitWarning, match="follow_disk_rank does nothing here.*median_rank"):
+        on = synthesize_divide_tree(old_type, size_m=30_000, rng=4,
+                                    params=SynthesisParams(follow_disk_rank=True, **fast))
     assert _digest(on) == _digest(plain) and on.attrs["disk_rank"] is None
+    with pytest.warns(OrokitWarning, match="no automatic C_H"):
+        synthesize_divide_tree(small_type, size_m=30_000, rng=4,
+                               params=SynthesisParams(follow_disk_rank=True, auto_elevation_m=None, **fast))
     for bad_params in ({"follow_disk_rank": 1}, {"disk_rank_draws": 0}):
         with pytest.raises(InputError):
             SynthesisParams(**bad_params)
