@@ -8,6 +8,7 @@ import hashlib
 import numpy as np
 import pytest
 
+from helpers.peak_fields import random_peak_field
 from orokit.errors import InputError, OrokitWarning, SchemaError
 from orokit.synthesis.disks import DISK_RADIUS_M, disk_centres, disk_statistics
 from orokit.synthesis.terrain_type import TerrainType
@@ -47,11 +48,7 @@ def _digest(tree) -> str:
 
 
 def test_median_rank_matches_brute_force():
-    rng = np.random.default_rng(11)
-    n = 250
-    x, y = rng.uniform(0, 40_000, n), rng.uniform(0, 30_000, n)
-    z = rng.uniform(100, 3000, n)
-    prom = rng.exponential(150, n) + 10
+    x, y, z, prom = random_peak_field(11, 250, 40_000, 30_000)
     ext = (0, 0, 40_000, 30_000)
     s = disk_statistics(x, y, z, prom, ext, min_prominence_m=30.0, step_m=2_500)
     keep = prom >= 30

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers.peak_fields import random_peak_field
 from orokit.errors import InputError, SchemaError
 from orokit.synthesis.disks import (
     DISK_RADIUS_M,
@@ -33,11 +34,7 @@ def test_disk_centres_lie_inside_and_none_fit_a_narrow_extent():
 
 
 def test_disk_statistics_match_brute_force():
-    rng = np.random.default_rng(3)
-    n = 300
-    x, y = rng.uniform(0, 40_000, n), rng.uniform(0, 35_000, n)
-    z = rng.uniform(100, 3000, n)
-    prom = rng.exponential(150, n) + 10
+    x, y, z, prom = random_peak_field(3, 300, 40_000, 35_000)
     s = disk_statistics(x, y, z, prom, (0, 0, 40_000, 35_000), min_prominence_m=30.0, step_m=2_500)
     keep = prom >= 30
     order = np.sort(z[keep])
