@@ -78,6 +78,11 @@ def validate(out, model_path, tree_path, type_file, label, min_prominence_m, z_u
     if append_to is not None and append_to.exists() and append_to.is_dir():
         raise click.BadParameter(f"{append_to} is a folder; give the CSV file to append to", param_hint="--append-to")
     if folder is not None and not raster.is_file():
+        if (folder / "analysis.json").exists():
+            raise click.UsageError(
+                f"{folder} is an `orokit analyze` folder (no dem.tif): validate a raster rendered from its tree, "
+                f"e.g. `orokit render {folder / 'dividetree.gpkg'} -o DEM.tif` then "
+                f"`orokit validate DEM.tif --tree {folder / 'dividetree.gpkg'}`")
         raise click.UsageError(f"{folder} has no dem.tif; run `orokit synthesize -o {folder}` (or give the raster)")
     if tree_path is None:
         if folder is None or not (folder / "dividetree.gpkg").exists():

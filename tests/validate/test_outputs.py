@@ -172,3 +172,17 @@ def test_validate_says_when_no_disk_fits(twin, tmp_path):
     assert r.exit_code == 0, r.output
     assert "not classified: no disk of radius 10 km fits" in r.output and "None" not in r.output
     assert json.loads((tmp_path / "v.json").read_text())["summary"]["n_disks"] == 0
+
+
+def test_validate_on_an_analysis_folder_says_what_to_validate(tmp_path):
+    """An `orokit analyze` folder has a Divide Tree but no raster: the hint is to render it, not to synthesize
+    into the analysis folder."""
+    folder = tmp_path / "analysis"
+    folder.mkdir()
+    (folder / "analysis.json").write_text("{}")
+    (folder / "dividetree.gpkg").write_bytes(b"")
+    r = CliRunner().invoke(cli, ["validate", str(folder)])
+    assert r.exit_code == 2
+    assert "orokit analyze" in r.output and "orokit render" in r.output
+    assert "synthesize -o" not in r.output
+    assert not (folder / "validation.json").exists()
