@@ -35,7 +35,14 @@ class SchemaError(OrokitError, ValueError):
 
 
 class OutputError(OrokitError):
-    """An output cannot be written: another orokit process is writing it, or no space is left."""
+    """An output cannot be written: another orokit process is writing it, or no space is left.
+
+    ``path``: the refused output, when known (the CLI names the option that gave it).
+    """
+
+    def __init__(self, message: str, *, path: object = None) -> None:
+        super().__init__(message)
+        self.path = path
 
 
 class DataError(OrokitError):

@@ -130,7 +130,7 @@ class LazyGroup(click.Group):
         except OrokitError as exc:
             if verbose:
                 raise
-            click.echo(f"Error: {exc}", err=True)
+            click.echo(f"Error: {exc}{_option_hint(ctx, getattr(exc, 'path', None))}", err=True)
             sys.exit(1)
         except (KeyboardInterrupt, SystemError) as exc:
             # Ctrl-C inside a numba/C stage may surface as a SystemError whose context is the
@@ -149,7 +149,8 @@ class LazyGroup(click.Group):
                 name = exc.filename or _where(ctx, exc)
                 verb = "write" if exc.errno == errno.EROFS else "access"
                 click.echo(f"Error: cannot {verb} {name}: {str(exc.strerror).lower()}; the previous outputs were kept. "
-                           "Check its permissions, or write to a folder you can write to", err=True)
+                           f"Check its permissions, or write to a folder you can write to{_option_hint(ctx, name)}",
+                           err=True)
                 sys.exit(1)
             if verbose or not is_no_space_error(exc):
                 raise
@@ -363,6 +364,14 @@ def _caused_by(exc: BaseException, kind: type[BaseException]) -> bool:
             return True
         e = e.__cause__ or e.__context__
     return False
+
+
+def _option_hint(ctx: click.Context, path: object) -> str:
+    """`` (--csv)``: the option that gave a refused output ``path``, or nothing."""
+    from orokit.cli.outputs import option_for
+
+    opt = option_for(ctx, path)
+    return f" ({opt})" if opt else ""
 
 
 def _is_access_error(exc: BaseException) -> bool:

@@ -18,7 +18,7 @@ import click
 
 from orokit.io.atomic import Staging, output_lock, remove_stale_temps
 
-__all__ = ["claim_outputs", "claimed_outputs"]
+__all__ = ["claim_outputs", "claimed_outputs", "option_for"]
 
 
 @contextlib.contextmanager
@@ -44,7 +44,7 @@ def _check_writable(path: Path) -> None:
         from orokit.errors import OutputError
 
         why = os.strerror(errno.EROFS if _read_only(path) else errno.EACCES).lower()
-        raise OutputError(f"cannot write into {path}: {why}; write to a folder you can write to (-o/--output)")
+        raise OutputError(f"cannot write into {path}: {why}; write to a folder you can write to", path=path)
 
 
 def _read_only(path: Path) -> bool:
@@ -69,7 +69,35 @@ def claim_outputs(*paths: Path | str | None, names: tuple[str, ...] | None = Non
     root = ctx.find_root()
     if isinstance(root.obj, dict):
         root.obj.setdefault("outputs", []).extend(chosen)
+        root.obj.setdefault("path_options", []).extend(_path_options(ctx))
     return ctx.with_resource(_claimed(chosen, names, Staging()))
+
+
+def _path_options(ctx: click.Context) -> list[tuple[Path, str]]:
+    """The command's path-valued parameters: (path, how the user names it: ``-o/--output``, ``--csv``, ``OUT``)."""
+    found = []
+    for param in ctx.command.params:
+        value = ctx.params.get(param.name or "")
+        values = value if isinstance(value, (list, tuple)) else [value]
+        name = "/".join(param.opts) if isinstance(param, click.Option) else param.human_readable_name
+        found += [(Path(v), name) for v in values if isinstance(v, Path)]
+    return found
+
+
+def option_for(ctx: click.Context, path: object) -> str | None:
+    """The option of the command run under ``ctx`` that gave ``path`` (it or a folder holding it), e.g.
+    ``--csv``; None when none did."""
+    import os
+
+    if path is None or not isinstance(ctx.find_root().obj, dict):
+        return None
+    target = Path(os.path.abspath(str(path)))
+    best: tuple[int, str] | None = None
+    for p, name in ctx.find_root().obj.get("path_options", []):
+        a = Path(os.path.abspath(p))
+        if (target == a or a in target.parents) and (best is None or len(a.parts) > best[0]):
+            best = (len(a.parts), name)
+    return None if best is None else best[1]
 
 
 def claimed_outputs() -> list[Path]:

@@ -356,7 +356,7 @@ def _acquire(target: Path, wait_s: float = 0.0) -> Path:
                 raise
             raise OutputError(
                 f"cannot write {target}: {exc.strerror.lower() if exc.strerror else exc} in {lock.parent}; write "
-                "to a folder you can write to (-o/--output)"
+                "to a folder you can write to", path=target
             ) from exc
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)

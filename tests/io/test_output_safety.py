@@ -442,6 +442,49 @@ def test_an_output_folder_that_cannot_be_written_into_is_refused_before_the_work
     assert {f.name: f.read_bytes() for f in out.iterdir()} == before
 
 
+def _refuse_files_in(monkeypatch, folder: Path, error: int) -> None:
+    """Creating a file inside ``folder`` fails with ``error`` (a folder of a read-only mount)."""
+    real = os.open
+
+    def failing(path, flags, *args, **kwargs):
+        if Path(path).parent == folder and flags & os.O_CREAT:
+            raise OSError(error, os.strerror(error), str(path))
+        return real(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", failing)
+
+
+def test_a_refused_csv_names_the_csv_option(tmp_path, dem_tif, monkeypatch):
+    """`compare --csv DIR/x.csv` where DIR refuses writes: the message names --csv, the option that gave the
+    path (before: '-o/--output', which compare does not have)."""
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    _refuse_files_in(monkeypatch, folder, errno.EACCES)
+    res = CliRunner().invoke(cli, ["compare", str(dem_tif), str(dem_tif), "--csv", str(folder / "x.csv"),
+                                   "--no-progress"])
+    assert isinstance(res.exception, SystemExit) and res.exit_code == 1, res.output
+    assert f"cannot write {folder / 'x.csv'}: permission denied" in res.output
+    assert "(--csv)" in res.output and "--output" not in res.output
+
+
+def test_a_refused_checkpoint_folder_names_the_checkpoint_option(tmp_path, dem_tif, monkeypatch):
+    """`analyze --checkpoint DIR` where DIR exists and refuses writes (its checkpoint.json's lock lies inside):
+    the message names --checkpoint; a refused -o folder still names -o/--output."""
+    ckpt = tmp_path / "ck"
+    ckpt.mkdir()
+    _refuse_files_in(monkeypatch, ckpt, errno.EROFS)
+    res = _analyze(dem_tif, tmp_path / "out", "--chunks", "16", "--checkpoint", str(ckpt))
+    assert isinstance(res.exception, SystemExit) and res.exit_code == 1, res.output
+    assert "read-only file system" in res.output and str(ckpt) in res.output
+    assert "(--checkpoint)" in res.output and "--output" not in res.output
+    assert not (tmp_path / "out").exists()
+    monkeypatch.undo()
+    _refuse_files_in(monkeypatch, tmp_path, errno.EROFS)
+    res = _analyze(dem_tif, tmp_path / "out2", "--chunks", "16", "--checkpoint", str(ckpt))
+    assert res.exit_code == 1 and f"cannot write {tmp_path / 'out2'}" in res.output
+    assert "(-o/--output)" in res.output and "--checkpoint" not in res.output
+
+
 def test_a_checkpoint_on_a_read_only_file_system_is_one_line(tmp_path, dem_tif, monkeypatch):
     """Any write a read-only file system refuses (here the checkpoint folder's) ends in one line naming the
     path, exit 1 (before: a traceback)."""
