@@ -67,7 +67,7 @@ SYNTH_TREES := $(DATASETS:%=$(REPORTS)/synthesis/trees/%/synthesis.json)
 SYNTHESIS_README := $(REPORTS)/synthesis/README.md
 REPORT_OUTPUTS += $(SYNTH_TYPES) $(SYNTHESIS_README)
 
-.PHONY: report test data venv clean-reports help analysis classification synthesis generators
+.PHONY: report test data venv clean-reports help analysis classification region-model synthesis generators
 
 .DEFAULT_GOAL := report
 
@@ -111,18 +111,27 @@ $(ANALYSIS_README): $(ANALYSIS_JSONS) orokit/reports/analysis_report.py orokit/v
 
 analysis: $(ANALYSIS_README)  ## exact analysis of every DEM, table + Divide Tree figures
 
-# grouped target: the report and the default model (terrain features) are written by one command
+# the region model (terrain features, R = 10 km, seed 0): a build product, not tracked (.gitignore). Built
+# alone from the analyses: the report's disks, the spatial hold-out its calibration comes from (30 runs),
+# the forest; the same trees and calibration as the report's model, without the report's other runs
 REGION_MODEL := models/regions-10km.skops
-$(CLASSIFICATION_README) $(REGION_MODEL) &: $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
-	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(REPORTS)/classification --radius 10km \
-	  --features terrain --classifier et --runs 30 --feature-runs 5 --block-runs 3 --open-set-runs 3 --model $(REGION_MODEL) --overwrite
+REGION_MODEL_ARGS := --radius 10km --features terrain --classifier et --runs 30
+$(REGION_MODEL): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
+	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) --model-only --model $@ -o .cache/region-model \
+	  $(REGION_MODEL_ARGS) --overwrite --no-progress
+
+region-model: $(REGION_MODEL)  ## the region model alone (models/regions-10km.skops, ~3 min): orokit classify, the round trip, benchmarks/realism.py
+
+$(CLASSIFICATION_README): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
+	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(REPORTS)/classification $(REGION_MODEL_ARGS) \
+	  --feature-runs 5 --block-runs 3 --open-set-runs 3 --overwrite
 
 # the paper's protocol and feature set (reference mode), kept beside the default figures
 $(CLASSIFICATION_PAPER_README): $(ANALYSIS_JSONS) $(CLASSIFY_SRC) | $(INSTALLED)
 	$(OROKIT) -q report $(ANALYSIS_JSONS:%/analysis.json=%) -o $(@D) --radius 10km --features paper \
 	  --classifier rf --runs 30 --feature-runs 5 --overwrite --no-progress
 
-classification: $(CLASSIFICATION_README) $(CLASSIFICATION_PAPER_README)  ## region classification reports (default and paper protocol), models/regions-10km.skops
+classification: $(CLASSIFICATION_README) $(CLASSIFICATION_PAPER_README) $(REGION_MODEL)  ## region classification reports (default and paper protocol), models/regions-10km.skops
 
 $(REPORTS)/synthesis/types/%.json: $(REPORTS)/analysis/%/analysis.json $(SYNTH_SRC) | $(INSTALLED)
 	$(OROKIT) -q type $(<D) -o $@ --name $* --overwrite
@@ -140,7 +149,7 @@ synthesis: $(SYNTHESIS_README)  ## terrain types per region, synthesized 90 km t
 # cell size, tree + eroded raster from the region's type, seed 0), its re-analysis and classification
 # by the region model (validation.json), then the table + side-by-side hillshades (README.md).
 ROUNDTRIP_SRC := $(wildcard orokit/raster/*.py orokit/validate/*.py) orokit/cli/synthesize.py orokit/cli/render.py
-ROUNDTRIP_MODEL := models/regions-10km.skops
+ROUNDTRIP_MODEL := $(REGION_MODEL)
 ROUNDTRIP_VALIDATIONS := $(DATASETS:%=$(REPORTS)/roundtrip/%/validation.json)
 ROUNDTRIP_README := $(REPORTS)/roundtrip/README.md
 REPORT_OUTPUTS += $(ROUNDTRIP_README)
@@ -149,7 +158,7 @@ REPORT_OUTPUTS += $(ROUNDTRIP_README)
 $(REPORTS)/roundtrip/%/hillshade.png: $(REPORTS)/synthesis/types/%.json $(DATA_STAMP) $(SYNTH_SRC) $(ROUNDTRIP_SRC) | $(INSTALLED)
 	$(OROKIT) -q synthesize --type $< --like $* --seed 0 -o $(@D) --overwrite
 
-$(REPORTS)/roundtrip/%/validation.json: $(REPORTS)/roundtrip/%/hillshade.png $(CLASSIFICATION_README) orokit/cli/validate.py | $(INSTALLED)
+$(REPORTS)/roundtrip/%/validation.json: $(REPORTS)/roundtrip/%/hillshade.png $(REGION_MODEL) orokit/cli/validate.py | $(INSTALLED)
 	$(OROKIT) -q validate $(@D) --model $(ROUNDTRIP_MODEL) --overwrite
 
 # the render of each region's own (real) Divide Tree on the real DEM's grid, defaults (issue 11)
@@ -157,7 +166,7 @@ ROUNDTRIP_RENDERS := $(DATASETS:%=$(REPORTS)/roundtrip/render/%.tif)
 $(REPORTS)/roundtrip/render/%.tif: $(REPORTS)/analysis/%/analysis.json $(ROUNDTRIP_SRC) | $(INSTALLED)
 	$(OROKIT) -q render $(<D)/dividetree.gpkg --like $* --seed 0 -o $@ --overwrite
 
-$(ROUNDTRIP_README): $(ROUNDTRIP_VALIDATIONS) $(ROUNDTRIP_RENDERS) orokit/reports/roundtrip.py orokit/reports/landform.py orokit/cli/roundtrip_report.py | $(INSTALLED)
+$(ROUNDTRIP_README): $(ROUNDTRIP_VALIDATIONS) $(ROUNDTRIP_RENDERS) $(CLASSIFICATION_README) orokit/reports/roundtrip.py orokit/reports/landform.py orokit/cli/roundtrip_report.py | $(INSTALLED)
 	$(OROKIT) -q roundtrip-report $(ROUNDTRIP_VALIDATIONS:%/validation.json=%) --model $(ROUNDTRIP_MODEL) \
 	  --renders $(REPORTS)/roundtrip/render \
 	  --classification $(REPORTS)/classification/tables/per_class_10km.csv -o $@ --overwrite --no-progress
@@ -171,10 +180,10 @@ REPORT_OUTPUTS += $(RELIEF_README)
 $(REPORTS)/roundtrip/relief/%/hillshade.png: $(REPORTS)/synthesis/types/%.json $(DATA_STAMP) $(SYNTH_SRC) $(ROUNDTRIP_SRC) | $(INSTALLED)
 	$(OROKIT) -q synthesize --type $< --like $* --control-elevation like --seed 0 -o $(@D) --overwrite
 
-$(REPORTS)/roundtrip/relief/%/validation.json: $(REPORTS)/roundtrip/relief/%/hillshade.png $(CLASSIFICATION_README) orokit/cli/validate.py | $(INSTALLED)
+$(REPORTS)/roundtrip/relief/%/validation.json: $(REPORTS)/roundtrip/relief/%/hillshade.png $(REGION_MODEL) orokit/cli/validate.py | $(INSTALLED)
 	$(OROKIT) -q validate $(@D) --model $(ROUNDTRIP_MODEL) --overwrite
 
-$(RELIEF_README): $(RELIEF_VALIDATIONS) orokit/reports/roundtrip.py orokit/cli/roundtrip_report.py | $(INSTALLED)
+$(RELIEF_README): $(RELIEF_VALIDATIONS) $(CLASSIFICATION_README) orokit/reports/roundtrip.py orokit/cli/roundtrip_report.py | $(INSTALLED)
 	$(OROKIT) -q roundtrip-report $(RELIEF_VALIDATIONS:%/validation.json=%) --model $(ROUNDTRIP_MODEL) \
 	  --classification $(REPORTS)/classification/tables/per_class_10km.csv -o $@ --overwrite --no-progress
 
@@ -205,12 +214,12 @@ $(GEN_RUNDIR)/$(1)/seed$(2)/tree/synthesis.json: $(REPORTS)/synthesis/types/$(1)
 	$(OROKIT) -q synthesize-tree --type $$< --size $(GEN_SIZE) --seed $(2) -o $$(@D) --overwrite --no-progress
 endef
 define GEN_RUN_RULE
-$(GEN_RUNDIR)/$(1)/seed$(2)/$(3)/result.json: $(GEN_RUNDIR)/$(1)/seed$(2)/tree/synthesis.json $(DATA_STAMP) $(CLASSIFICATION_README) $(GEN_SRC) | $(INSTALLED)
+$(GEN_RUNDIR)/$(1)/seed$(2)/$(3)/result.json: $(GEN_RUNDIR)/$(1)/seed$(2)/tree/synthesis.json $(DATA_STAMP) $(REGION_MODEL) $(GEN_SRC) | $(INSTALLED)
 	$(OROKIT) -q generators-run --tree $$(<D) --type $(REPORTS)/synthesis/types/$(1).json --like $(1) \
 	  --generator $(3) --seed $(2) --model $(REGION_MODEL) -o $$@ --overwrite
 endef
 define GEN_CROSS_RULE
-$(GEN_RUNDIR)/$(1)/seed$(2)/guerin-cross/result.json: $(GEN_RUNDIR)/$(1)/seed$(2)/tree/synthesis.json $(DATA_STAMP) $(CLASSIFICATION_README) $(GEN_SRC) | $(INSTALLED)
+$(GEN_RUNDIR)/$(1)/seed$(2)/guerin-cross/result.json: $(GEN_RUNDIR)/$(1)/seed$(2)/tree/synthesis.json $(DATA_STAMP) $(REGION_MODEL) $(GEN_SRC) | $(INSTALLED)
 	$(OROKIT) -q generators-run --tree $$(<D) --type $(REPORTS)/synthesis/types/$(1).json --like $(1) \
 	  --generator guerin --exemplar $(GEN_CROSS_$(1)) --label guerin-cross --seed $(2) --model $(REGION_MODEL) -o $$@ --overwrite
 endef

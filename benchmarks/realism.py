@@ -34,6 +34,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 TUNE = ("alaska", "andes-chile", "appalachians", "gobi", "himalaya-everest", "norway")
 HOLD = ("andes-aconcagua", "highlands", "himalaya-annapurna", "karakoram", "pyrenees", "rockies", "sahara")
 EPS = 30.0
+#: the region model of the reclassification: a build product (`make region-model`), not tracked
+REGION_MODEL = Path(__file__).resolve().parents[1] / "models" / "regions-10km.skops"
 #: shares of the highest peaks whose position inside the border is recorded (``top_interior``)
 TOP_SHARES = (0.02, 0.05, 0.1)
 
@@ -311,8 +313,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-record", dest="record", action="store_false",
                     help="do not write reports/benchmarks/realism.json")
     ap.add_argument("--json", type=Path, default=None, help="also write the results to this file")
-    ap.add_argument("--model", type=Path, default=Path(__file__).resolve().parents[1] / "models" / "regions-10km.skops",
-                    help="region model: the twins' disks are classified (reclassification)")
+    ap.add_argument("--model", type=Path, default=REGION_MODEL,
+                    help="region model: the twins' disks are classified (reclassification); the default is a build "
+                    "product: `make region-model`")
+    ap.add_argument("--no-model", dest="model", action="store_const", const=None,
+                    help="no reclassification (no region model needed)")
     ap.add_argument("--real-accuracy", type=Path,
                     default=Path(__file__).resolve().parents[1] / "reports" / "classification" / "tables"
                     / "per_class_10km.csv", help="real disks' per-region accuracy (classification report)")
@@ -324,7 +329,11 @@ def main(argv: list[str] | None = None) -> int:
     names = a.regions.split(",") if a.regions else list(groups[a.group])
     results: dict = {}
     model = None
-    if a.model is not None and a.model.is_file():
+    if a.model is not None:
+        if not a.model.is_file():
+            how = "build it with `make region-model` (about 3 min)" if a.model == REGION_MODEL else "check the path"
+            raise SystemExit(f"region model {a.model} not found: {how}, or pass --no-model to skip the "
+                             "reclassification")
         from orokit.classify.model import load_model
 
         model = load_model(a.model)

@@ -30,6 +30,10 @@ from orokit.cli.options import (
 @click.option("--min-peaks", type=int, default=20, show_default=True, help="Skip disks with fewer peaks.")
 @click.option("--model", "model_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also save a model trained on all disks at the first radius (e.g. models/regions-10km.skops).")
+@click.option("--model-only", is_flag=True,
+              help="Write only --model (`make region-model`): the features at the first radius (into "
+                   "OUTPUT/features/), the spatial hold-out of --runs runs its calibration comes from, and the "
+                   "forest; the same predictions as the report's model, without the report's other runs.")
 @z_units_option(help="Elevation units of DEM inputs that do not declare them (PNG).")
 @cell_size_option(help="Cell size of DEM inputs without georeference (PNG)")
 @click.option("--features", "feature_set", type=click.Choice(["orometry", "terrain", "paper"]), default="orometry",
@@ -51,9 +55,9 @@ from orokit.cli.options import (
 @click.option("--n-jobs", type=int, default=2, show_default=True, help="Parallel fits.")
 @overwrite_option("an existing report and model")
 @progress_option()
-def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominence_m, min_peaks, model_path, z_units,
-           cell_size_m, feature_set, classifier, separation, max_disks, max_train, block_runs, open_set_runs, seed, n_jobs,
-           overwrite, progress):
+def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominence_m, min_peaks, model_path, model_only,
+           z_units, cell_size_m, feature_set, classifier, separation, max_disks, max_train, block_runs, open_set_runs, seed,
+           n_jobs, overwrite, progress):
     """Classification report on INPUTs (DEMs, analysis folders or peak lists; one region each).
 
     Accuracies in the tables are percentages; radii in km.
@@ -68,12 +72,25 @@ def report(inputs, analysis_dir, output, radii, runs, feature_runs, min_prominen
             raise click.UsageError(f"{analysis_dir} holds no analysis folder (sub-folders with peaks.parquet)")
     from orokit.cli.outputs import claim_outputs
 
+    if model_only and model_path is None:
+        raise click.UsageError("--model-only needs --model MODEL.skops (the file to write)")
     claim_outputs(output, model_path)  # locked for the whole run
-    if (output / "README.md").exists() and not overwrite:
+    if (output / "README.md").exists() and not overwrite and not model_only:
         raise click.UsageError(f"{output} already holds a report; pass --overwrite to replace it")
     if model_path is not None and model_path.exists() and not overwrite:
         raise click.UsageError(f"{model_path} exists; pass --overwrite to replace it")
     radii = list(radii) or [10_000.0, 5_000.0, 15_000.0]
+    if model_only:
+        from orokit.reports.classification import build_region_model
+
+        ev = build_region_model(list(inputs), model_path, output / "features", radius_m=radii[0], runs=runs,
+                                min_prominence_m=min_prominence_m, min_peaks=min_peaks, max_disks=max_disks,
+                                n_jobs=n_jobs, progress=progress, seed=seed, z_units=z_units, cell_size_m=cell_size_m,
+                                feature_set=feature_set, classifier=classifier, separation=separation,
+                                max_train=max_train)["spatial"]
+        click.echo(f"R = {radii[0] / 1000:g} km: spatial hold-out {100 * ev.mean_accuracy:.1f} % ({runs} runs); "
+                   f"model -> {model_path}")
+        return
     res = build_classification_report(list(inputs), output, radii_m=radii, runs=runs, feature_runs=feature_runs,
                                       min_prominence_m=min_prominence_m, min_peaks=min_peaks, model_path=model_path,
                                       n_jobs=n_jobs, progress=progress, seed=seed, z_units=z_units,

@@ -337,16 +337,10 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
     default R / 2) with that many runs, without feature-group rows. Returns the tables, the
     evaluations per radius, the feature tables (``features``) and the metadata.
     """
-    import warnings
-
-    from orokit.classify.calibration import Calibration
-    from orokit.classify.features import concat_features
-    from orokit.classify.inputs import default_label, features_for_input
-    from orokit.classify.model import model_metadata, save_model
+    from orokit.classify.inputs import default_label
     from orokit.io.fetch import sha256_file
     from orokit.io.model_io import write_feature_table
-    from orokit.classify.train import evaluate, train_classifier
-    from orokit.errors import OrokitWarning
+    from orokit.classify.train import evaluate
 
     from orokit.sampling.feature_sets import FeatureSet
 
@@ -358,18 +352,9 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
     feats_by_r: dict[float, pd.DataFrame] = {}
     for r in radii_m:
         t0 = time.perf_counter()
-        seeds = np.random.SeedSequence([seed, int(r)]).spawn(len(inputs))
-        tables = []
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", OrokitWarning)
-            for src, lab, s in zip(inputs, labels, seeds):
-                tables.append(features_for_input(src, radius_m=r, label=lab, min_prominence_m=min_prominence_m,
-                                                 min_peaks=min_peaks, max_disks=max_disks, z_units=z_units,
-                                                 cell_size_m=cell_size_m, feature_set=fset, separation=separation,
-                                                 rng=np.random.default_rng(s)))
-        for w in caught:
-            logger.info("%s", w.message)
-        feats = concat_features(tables)
+        feats = _region_features(inputs, labels, radius_m=r, seed=seed, min_prominence_m=min_prominence_m,
+                                 min_peaks=min_peaks, max_disks=max_disks, z_units=z_units, cell_size_m=cell_size_m,
+                                 feature_set=feature_set, separation=separation)
         timings[f"features_{r / 1000:g}km_s"] = time.perf_counter() - t0
         write_feature_table(feats, out / "features" / f"features_{r / 1000:g}km.parquet")
         feats_by_r[r] = feats
@@ -399,21 +384,87 @@ def build_classification_report(inputs: Sequence[PathLike], outdir: PathLike, *,
             "inputs": [str(p) for p in inputs]}
     if model_path is not None:
         rm = model_radius_m or radii_m[0]
-        feats = feats_by_r[rm]
-        model = train_classifier(feats, n_estimators=trees, small_classes="drop", classifier=classifier,
-                                 n_jobs=n_jobs, rng=seed)
-        sp = evals[rm].get("spatial")
-        cal = sp.calibration() if sp is not None else Calibration()
-        fpath = out / "features" / f"features_{rm / 1000:g}km.parquet"
-        summary = {k: {kk: v for kk, v in e.to_dict().items() if kk != "confusion"} for k, e in evals[rm].items()}
-        md = model_metadata(model, feats, evaluation=summary, features_sha256=sha256_file(fpath),
-                            extra={"training_features": f"features_{rm / 1000:g}km.parquet", "seed": seed,
-                                   "training_inputs": labels, "classifier": classifier,
-                                   "calibration": cal.to_dict()})
-        save_model(model, model_path, md)
+        _save_region_model(feats_by_r[rm], evals[rm], model_path, out / "features" / f"features_{rm / 1000:g}km.parquet",
+                           labels=labels, seed=seed, trees=trees, classifier=classifier, n_jobs=n_jobs)
         meta["model"] = {"path": str(model_path), "sha256": sha256_file(model_path), "radius_m": rm}
     _write_text(out / "manifest.json", json.dumps(meta, indent=2, default=float))
     # timings change with the machine's load: kept out of the committed manifest (timings.json is not committed)
     _write_text(out / "timings.json", json.dumps({"timings_s": timings, "load_average": os.getloadavg()}, indent=2))
     _write_text(out / "README.md", _readme(t2, evals, meta))
     return {"table2": t2, "evaluations": evals, "features": feats_by_r, "meta": meta}
+
+
+def _region_features(inputs: Sequence[PathLike], labels: Sequence[str], *, radius_m: float, seed: int,
+                     feature_set: str, **kw: Any) -> pd.DataFrame:
+    """Feature table of all inputs at one radius; input k's disks come from seed ``[seed, R]``'s k-th child,
+    so a radius' disks do not depend on the other radii of the run."""
+    import warnings
+
+    from orokit.classify.features import concat_features
+    from orokit.classify.inputs import features_for_input
+    from orokit.errors import OrokitWarning
+    from orokit.sampling.feature_sets import FeatureSet
+
+    fset = FeatureSet.named(feature_set)
+    seeds = np.random.SeedSequence([seed, int(radius_m)]).spawn(len(inputs))
+    tables = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", OrokitWarning)
+        for src, lab, s in zip(inputs, labels, seeds):
+            tables.append(features_for_input(src, radius_m=radius_m, label=lab, feature_set=fset,
+                                             rng=np.random.default_rng(s), **kw))
+    for w in caught:
+        logger.info("%s", w.message)
+    return concat_features(tables)
+
+
+def _save_region_model(feats: pd.DataFrame, evals: Mapping[str, Any], model_path: PathLike, features_path: Path, *,
+                       labels: Sequence[str], seed: int, trees: int, classifier: ClassifierKind, n_jobs: int) -> None:
+    """Fit the forest on all disks of ``feats`` and save it with the calibration of ``evals['spatial']``
+    (identity without it) and the evaluations' summaries."""
+    from orokit.classify.calibration import Calibration
+    from orokit.classify.model import model_metadata, save_model
+    from orokit.classify.train import train_classifier
+    from orokit.io.fetch import sha256_file
+
+    model = train_classifier(feats, n_estimators=trees, small_classes="drop", classifier=classifier,
+                             n_jobs=n_jobs, rng=seed)
+    sp = evals.get("spatial")
+    cal = sp.calibration() if sp is not None else Calibration()
+    summary = {k: {kk: v for kk, v in e.to_dict().items() if kk != "confusion"} for k, e in evals.items()}
+    md = model_metadata(model, feats, evaluation=summary, features_sha256=sha256_file(features_path),
+                        extra={"training_features": features_path.name, "seed": seed,
+                               "training_inputs": list(labels), "classifier": classifier,
+                               "calibration": cal.to_dict()})
+    save_model(model, model_path, md)
+
+
+def build_region_model(inputs: Sequence[PathLike], model_path: PathLike, features_dir: PathLike, *,
+                       radius_m: float = 10_000.0, runs: int = 30, min_prominence_m: float = 30.0,
+                       min_peaks: int = 20, max_disks: int = 100, trees: int = 100, seed: int = 0,
+                       labels: Sequence[str] | None = None, n_jobs: int = 2, progress: bool = False,
+                       z_units: str | None = None, cell_size_m: float | None = None, feature_set: str = "orometry",
+                       classifier: ClassifierKind = "et", separation: float = 0.5, max_train: int = 80
+                       ) -> dict[str, Any]:
+    """The model :func:`build_classification_report` saves with ``model_path``, without the report.
+
+    The same disks (seed), the spatial hold-out its calibration comes from (``runs`` runs, no
+    feature-group rows, no random split) and the same forest: its predictions equal the
+    report's model's; only the metadata's ``evaluation`` holds the spatial split alone. The
+    feature table goes to ``features_dir/features_<R>km.parquet``. Returns that evaluation.
+    """
+    from orokit.classify.inputs import default_label
+    from orokit.classify.train import evaluate
+    from orokit.io.model_io import write_feature_table
+
+    labels = list(labels) if labels else [default_label(p) for p in inputs]
+    feats = _region_features(inputs, labels, radius_m=radius_m, seed=seed, min_prominence_m=min_prominence_m,
+                             min_peaks=min_peaks, max_disks=max_disks, z_units=z_units, cell_size_m=cell_size_m,
+                             feature_set=feature_set, separation=separation)
+    fpath = write_feature_table(feats, Path(features_dir) / f"features_{radius_m / 1000:g}km.parquet")
+    spatial = evaluate(feats, runs=runs, split="spatial", feature_groups=False, n_estimators=trees,
+                       max_train=max_train, classifier=classifier, small_classes="drop", n_jobs=n_jobs,
+                       progress=progress, rng=seed)
+    _save_region_model(feats, {"spatial": spatial}, model_path, fpath, labels=labels, seed=seed, trees=trees,
+                       classifier=classifier, n_jobs=n_jobs)
+    return {"spatial": spatial}

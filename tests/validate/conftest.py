@@ -1,4 +1,4 @@
-"""Fixtures of the round-trip tests: a small terrain type file to synthesize from."""
+"""Fixtures of the round-trip tests: a small terrain type file to synthesize from, a small region model."""
 from __future__ import annotations
 
 import numpy as np
@@ -24,3 +24,11 @@ def small_type_file(tmp_path_factory):
     peaks.loc[top, "prominence"] = z[top]
     ttype = TerrainType.from_peaks(peaks, area_km2=1600.0, name="test")
     return ttype.save(tmp_path_factory.mktemp("type") / "test.json")
+
+
+@pytest.fixture(scope="session")
+def region_model(tmp_path_factory):
+    """A terrain-feature model of R = 10 km trained on two made-up regions (``helpers.region_model``)."""
+    from helpers.region_model import train_region_model
+
+    return train_region_model(tmp_path_factory.mktemp("model") / "regions-10km.skops")

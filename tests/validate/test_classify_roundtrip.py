@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -15,8 +14,6 @@ from affine import Affine
 
 import orokit
 from orokit.cli.main import cli
-
-MODEL = Path(__file__).resolve().parents[2] / "models" / "regions-10km.skops"
 
 # the small rendered raster leaves some disks with too few peaks: the CLI warns (an expected warning)
 SKIPPED_DISKS = pytest.mark.filterwarnings(r"ignore:\d+ of \d+ disks .*were skipped:orokit.errors.OrokitWarning")
@@ -47,14 +44,14 @@ def rendered_folder(tmp_path_factory):
 
 
 @SKIPPED_DISKS
-def test_validate_classifies_disks_with_the_committed_model(rendered_folder, tmp_path):
+def test_validate_classifies_disks_with_a_trained_model(rendered_folder, region_model, tmp_path):
     from orokit.classify.model import load_model
 
     folder, tree = rendered_folder
-    classes = load_model(MODEL).classes
+    classes = load_model(region_model).classes
     label = classes[0]
     log = tmp_path / "roundtrip.csv"
-    r = CliRunner().invoke(cli, ["validate", str(folder), "--model", str(MODEL), "--label", label,
+    r = CliRunner().invoke(cli, ["validate", str(folder), "--model", str(region_model), "--label", label,
                                  "--append-to", str(log), "--overwrite"])
     assert r.exit_code == 0, r.output
     assert "classified as" in r.output
@@ -78,11 +75,11 @@ def test_validate_classifies_disks_with_the_committed_model(rendered_folder, tmp
 
 
 @SKIPPED_DISKS
-def test_validate_without_label_writes_only_the_folder(rendered_folder, tmp_path, monkeypatch):
+def test_validate_without_label_writes_only_the_folder(rendered_folder, region_model, tmp_path, monkeypatch):
     folder, _ = rendered_folder
     (folder / "validation.json").unlink(missing_ok=True)
     monkeypatch.chdir(tmp_path)
-    r = CliRunner().invoke(cli, ["validate", str(folder), "--model", str(MODEL)])
+    r = CliRunner().invoke(cli, ["validate", str(folder), "--model", str(region_model)])
     assert r.exit_code == 0, r.output
     assert (folder / "validation.json").is_file() and list(tmp_path.iterdir()) == []
     # without --label and without a type there is no expected region, only the vote
@@ -142,7 +139,7 @@ def test_synthesize_like_takes_the_size_and_cell_size_of_a_dem(rendered_folder, 
 
 
 @SKIPPED_DISKS
-def test_classify_reads_rendered_rasters_without_flags(rendered_folder, tmp_path):
+def test_classify_reads_rendered_rasters_without_flags(rendered_folder, region_model, tmp_path):
     """`orokit classify` on a rendered raster, with its CRS and on a local grid, needs no --z-units."""
     from orokit.io.dem import read_dem
     from orokit.io.raster_io import write_cog
@@ -153,7 +150,7 @@ def test_classify_reads_rendered_rasters_without_flags(rendered_folder, tmp_path
                          attrs={"units": "m"}).rio.write_transform(dem.rio.transform())
     write_cog(local, tmp_path / "local.tif")
     for path in (folder / "dem.tif", tmp_path / "local.tif"):
-        r = CliRunner().invoke(cli, ["classify", str(MODEL), str(path), "--json"])
+        r = CliRunner().invoke(cli, ["classify", str(region_model), str(path), "--json"])
         assert r.exit_code == 0, r.output
         doc, _ = json.JSONDecoder().raw_decode(r.output[r.output.index("{"):])  # warnings may follow on stderr
         assert doc["n_disks"] >= 1

@@ -160,15 +160,13 @@ def test_model_zero_options_are_kept(monkeypatch):
         "min_prominence_m": 12.0, "min_peaks": 20, "relative_elevation": "minmax"}
 
 
-def test_validate_says_when_no_disk_fits(twin, tmp_path):
+def test_validate_says_when_no_disk_fits(twin, region_model, tmp_path):
     """A 6 km twin holds no 10 km disk: the message says so instead of 'classified as None'."""
-    from pathlib import Path
-
     from orokit.errors import OrokitWarning
 
-    model = Path(__file__).resolve().parents[2] / "models" / "regions-10km.skops"
     with pytest.warns(OrokitWarning, match="no disk"):
-        r = CliRunner().invoke(cli, ["validate", str(twin), "--model", str(model), "-o", str(tmp_path / "v.json")])
+        r = CliRunner().invoke(cli, ["validate", str(twin), "--model", str(region_model), "-o",
+                                     str(tmp_path / "v.json")])
     assert r.exit_code == 0, r.output
     assert "not classified: no disk of radius 10 km fits" in r.output and "None" not in r.output
     assert json.loads((tmp_path / "v.json").read_text())["summary"]["n_disks"] == 0
