@@ -230,10 +230,12 @@ def _drift_markdown(results: dict) -> str:
 
 def _ridges_markdown(results: dict) -> str:
     """Per region: the real tree's and the twin tree's steepness (:func:`ridge_statistics`)."""
-    cols = ("neighbour_gradient", "half_ridge_slope", "ridge_slope", "higher_end_drop_m", "ridge_length_m")
+    cols = ("neighbour_gradient", "half_ridge_slope", "ridge_slope", "higher_end_drop_m", "ridge_length_m",
+            "forced_prominence_m")
     lines = ["### trees before rendering, real / twin: median and 90th percentile of the elevation gradient "
              "to the nearest peak, of each ridge half's drop to its saddle, and of the ridge's drops over its length "
-             "(m/m), of the drop from each ridge's higher end to its saddle and of the ridge length (m)",
+             "(m/m), of the drop from each ridge's higher end to its saddle, of the ridge length and of the least "
+             "prominence the tree's peak layout allows (m)",
              "", "| region | " + " | ".join(f"{c} median | {c} p90" for c in cols) + " |",
              "|---|" + "---:|" * (2 * len(cols))]
     for name, r in results.items():

@@ -95,3 +95,36 @@ def test_ridge_statistics_by_hand():
     assert r["higher_end_drop_m"] == pytest.approx([400.0, 400.0])
     assert r["lower_end_drop_m"] == pytest.approx([200.0, 300.0])
     assert r["ridge_length_m"] == pytest.approx([1000.0, 2000.0])
+    # saddles raised to the lower ends (800, 800): B 0 m above its key saddle, C 900 - 800 (B on its way to A)
+    assert r["forced_prominence_m"] == pytest.approx([0.0, 100.0])
+
+
+def test_forced_prominence_bounds_every_saddle_assignment():
+    """Whatever the saddles, no peak's prominence is below its forced prominence; with every saddle at its
+    ridge's lower end the two are equal."""
+    import pandas as pd
+
+    from orokit.synthesis.fidelity import forced_prominence
+    from orokit.topology.divide_tree import DivideTree
+
+    rng = np.random.default_rng(3)
+    n = 60
+    z = rng.uniform(100.0, 2000.0, n)
+    b = np.arange(1, n)
+    a = rng.integers(0, b)  # a random tree: every peak joins an earlier one
+    top = np.minimum(z[a], z[b])
+    peaks = pd.DataFrame({"x": rng.uniform(0, 1e4, n), "y": rng.uniform(0, 1e4, n), "elevation": z})
+    edges = pd.DataFrame({"peak_a": a, "peak_b": b, "saddle": np.arange(n - 1)})
+
+    def tree(sz):
+        return DivideTree(peaks, pd.DataFrame({"x": np.zeros(n - 1), "y": np.zeros(n - 1), "elevation": sz}),
+                          edges, None, {})
+
+    forced = forced_prominence(tree(top * rng.uniform(0.2, 1.0, n - 1)))
+    for _ in range(5):
+        prom = tree(top * rng.uniform(0.2, 1.0, n - 1)).prominence_table()["prominence"].to_numpy(float)
+        keyed = np.isfinite(forced)
+        assert (prom[keyed] >= forced[keyed] - 1e-9).all()
+    prom = tree(top).prominence_table()["prominence"].to_numpy(float)
+    assert np.allclose(prom[keyed], forced[keyed])
+    assert np.isnan(forced[np.argmax(z)])
