@@ -8,7 +8,7 @@ from scipy.stats import wasserstein_distance
 from orokit.synthesis.terrain_type import FEATURES, TerrainType
 from orokit.topology.divide_tree import DivideTree
 
-__all__ = ["tree_feature_values", "compare_to_type", "ridge_statistics", "forced_prominence"]
+__all__ = ["tree_feature_values", "compare_to_type", "ridge_statistics"]
 
 
 def tree_feature_values(tree: DivideTree) -> dict[str, np.ndarray]:
@@ -65,24 +65,6 @@ def compare_to_type(tree: DivideTree, terrain_type: TerrainType) -> pd.DataFrame
     return pd.DataFrame(rows).set_index("feature")
 
 
-def forced_prominence(tree: DivideTree) -> np.ndarray:
-    """Least prominence each peak can have with the tree's peaks and ridges (m; NaN for roots).
-
-    Every saddle is raised to its ridge's lower end, the highest it can be; a peak's prominence
-    then only comes from how much lower the peaks on its way to higher ground are. A tree whose
-    high peaks stand among low neighbours has a heavy tail here, whatever its saddles are: no
-    saddle assignment can give it the prominences of a real tree whose high peaks sit on massifs.
-    """
-    from orokit.synthesis.saddles import key_saddles
-
-    z = tree.peaks["elevation"].to_numpy(float)
-    a = tree.edges["peak_a"].to_numpy(np.int64)
-    b = tree.edges["peak_b"].to_numpy(np.int64)
-    top = np.minimum(z[a], z[b])
-    key = key_saddles(z, a, b, top)
-    return np.where(key >= 0, z - top[np.maximum(key, 0)], np.nan)
-
-
 def ridge_statistics(tree: DivideTree, quantiles: tuple[float, ...] = (0.5, 0.9, 0.99)) -> dict[str, list[float]]:
     """How steep a tree's relief is, before any rendering (quantiles, unitless m/m).
 
@@ -92,10 +74,12 @@ def ridge_statistics(tree: DivideTree, quantiles: tuple[float, ...] = (0.5, 0.9,
     flank cones follow); ``ridge_slope``: ``(h_a + h_b - 2 h_saddle) / |AB|``, both drops over
     the ridge's length (the slope at the even split of the ridge); ``higher_end_drop_m`` and
     ``lower_end_drop_m``: each ridge's drop from its higher and its lower end to its saddle (m);
-    ``ridge_length_m``: ``|AB|`` (m); ``forced_prominence_m``: :func:`forced_prominence` of the
-    peaks that have a key saddle (m).
+    ``ridge_length_m``: ``|AB|`` (m); ``forced_prominence_m``:
+    :func:`orokit.synthesis.saddles.forced_prominence` of the peaks that have a key saddle (m).
     """
     from scipy.spatial import cKDTree
+
+    from orokit.synthesis.saddles import forced_prominence
 
     x, y, z = (tree.peaks[c].to_numpy(float) for c in ("x", "y", "elevation"))
     a = tree.edges["peak_a"].to_numpy(np.int64)
@@ -116,7 +100,7 @@ def ridge_statistics(tree: DivideTree, quantiles: tuple[float, ...] = (0.5, 0.9,
     out["higher_end_drop_m"] = np.maximum(z[a], z[b]) - sz
     out["lower_end_drop_m"] = np.minimum(z[a], z[b]) - sz
     out["ridge_length_m"] = length
-    forced = forced_prominence(tree)
+    forced = forced_prominence(z, a, b)
     out["forced_prominence_m"] = forced[np.isfinite(forced)]
     qs = list(quantiles)
     return {k: [float(v) for v in np.quantile(out[k], qs)] if k in out and out[k].size else [float("nan")] * len(qs)

@@ -24,7 +24,7 @@ from orokit.topology import _kernels as _topo
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["key_saddles", "assign_saddle_elevations", "enforce_min_prominence", "place_key_saddles",
+__all__ = ["forced_prominence", "forced_tail", "key_saddles", "assign_saddle_elevations", "enforce_min_prominence", "place_key_saddles",
            "saddle_level", "SaddleTargets"]
 
 
@@ -62,6 +62,26 @@ def key_saddles(pz: np.ndarray, a: np.ndarray, b: np.ndarray, sz: np.ndarray) ->
     has = key_edge >= 0
     out[has] = order[key_edge[has]]
     return out
+
+
+def forced_prominence(pz: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Least prominence each peak can have on ridges ``a``-``b`` (m; NaN for roots).
+
+    Every saddle is raised to its ridge's lower end, the highest it can be; a peak's prominence then
+    only comes from how much lower the peaks on its way to higher ground are. A tree whose high peaks
+    stand among low neighbours has a heavy tail here whatever its saddles are: no saddle assignment
+    gives it the prominences of a real tree whose high peaks sit on massifs.
+    """
+    top = np.minimum(pz[a], pz[b])
+    key = key_saddles(pz, a, b, top)
+    return np.where(key >= 0, pz - top[np.maximum(key, 0)], np.nan)
+
+
+def forced_tail(pz: np.ndarray, a: np.ndarray, b: np.ndarray, threshold_m: float) -> float:
+    """Share of the keyed peaks whose :func:`forced_prominence` reaches ``threshold_m`` (NaN: no keyed peak)."""
+    f = forced_prominence(pz, a, b)
+    f = f[np.isfinite(f)]
+    return float((f >= threshold_m).mean()) if f.size else float("nan")
 
 
 @dataclass

@@ -237,6 +237,12 @@ class TerrainType:
         no higher (issue 11, session 17: the OT's saddles scattered around the peaks' levels, a dome field's
         twin 0.21 against the real 0.08, and the renders sank their low ground). An elevation shift keeps it;
         other edits of a linear histogram, or of the density, drop it.
+    forced_tail : share of the source tree's keyed peaks whose forced prominence
+        (:func:`orokit.synthesis.saddles.forced_prominence`: every saddle at its ridge's lower end) reaches the
+        90th percentile of their prominences: how often a high peak stands among much lower ones whatever its
+        saddles (None: not recorded). With ``follow_forced_tail`` synthesis joins the peaks along higher ground
+        until its tree's share is no larger (issue 11, session 19: twins 2-6 times the real share in every range,
+        which no saddle assignment can undo). Edited like ``saddle_level``.
     """
 
     name: str
@@ -256,6 +262,7 @@ class TerrainType:
     neighbour_gradient: float | None = None
     max_ridge_slope: float | None = None
     saddle_level: float | None = None
+    forced_tail: float | None = None
 
     def __post_init__(self) -> None:
         missing = set(FEATURES) - set(self.histograms)
@@ -310,6 +317,14 @@ class TerrainType:
             if not (np.isfinite(c) and 0 <= c <= 1):
                 raise SchemaError(f"saddle_level must be a number in [0, 1] or None, got {self.saddle_level!r}")
             object.__setattr__(self, "saddle_level", c)
+        if self.forced_tail is not None:
+            try:
+                c = float(self.forced_tail)
+            except (TypeError, ValueError):
+                c = float("nan")
+            if not (np.isfinite(c) and 0 <= c <= 1):
+                raise SchemaError(f"forced_tail must be a number in [0, 1] or None, got {self.forced_tail!r}")
+            object.__setattr__(self, "forced_tail", c)
         if self.disks is not None:
             from orokit.synthesis.disks import check_disk_quantiles
 
@@ -433,6 +448,7 @@ class TerrainType:
         contrast = tree_ridge_contrast(tree, min_prominence_m) if tree is not None else None
         ridge_slope = tree_max_ridge_slope(tree, min_prominence_m) if tree is not None else None
         level = tree_saddle_level(tree, min_prominence_m) if tree is not None else None
+        forced = tree_forced_tail(tree, min_prominence_m) if tree is not None else None
         prov = {
             "area_km2": float(area_km2),
             "n_peaks": int(len(p)),
@@ -446,7 +462,7 @@ class TerrainType:
                    isolation_basis, prov, bands, source_crs=src_crs, source_center=center,
                    disks=_disk_record(x, y, z, prom, crs, extent, min_prominence_m), gradient=gradient,
                    ridge_contrast=contrast, neighbour_gradient=_neighbour_gradient(*planar_xy(x, y, crs), z),
-                   max_ridge_slope=ridge_slope, saddle_level=level)
+                   max_ridge_slope=ridge_slope, saddle_level=level, forced_tail=forced)
 
     @classmethod
     def from_divide_tree(cls, tree: Any, *, area_km2: float, min_prominence_m: float = 30.0,
@@ -580,11 +596,12 @@ class TerrainType:
         return {"gradient": None if drop_gradient else self.gradient,
                 "neighbour_gradient": None if drop_gradient else self.neighbour_gradient,
                 "max_ridge_slope": self.max_ridge_slope if keep_slope else None,
-                "saddle_level": self.saddle_level if keep_slope else None}
+                "saddle_level": self.saddle_level if keep_slope else None,
+                "forced_tail": self.forced_tail if keep_slope else None}
 
     def with_density(self, peak_density_per_km2: float) -> "TerrainType":
         return self._edited(f"density {peak_density_per_km2:g}", peak_density_per_km2=float(peak_density_per_km2),
-                            neighbour_gradient=None, max_ridge_slope=None, saddle_level=None)
+                            neighbour_gradient=None, max_ridge_slope=None, saddle_level=None, forced_tail=None)
 
     def with_rho(self, rho: float) -> "TerrainType":
         return self._edited(f"rho {rho:g}", rho=float(rho))
@@ -612,6 +629,7 @@ class TerrainType:
             "neighbour_gradient": self.neighbour_gradient,
             "max_ridge_slope": self.max_ridge_slope,
             "saddle_level": self.saddle_level,
+            "forced_tail": self.forced_tail,
         }
 
     @classmethod
@@ -639,7 +657,7 @@ class TerrainType:
                            bool(data["gradient"].get("open_last", False))),
                        ridge_contrast=data.get("ridge_contrast"),
                        neighbour_gradient=data.get("neighbour_gradient"), max_ridge_slope=data.get("max_ridge_slope"),
-                       saddle_level=data.get("saddle_level"))
+                       saddle_level=data.get("saddle_level"), forced_tail=data.get("forced_tail"))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, SchemaError):
                 raise
@@ -822,6 +840,23 @@ def tree_saddle_level(tree: Any, min_prominence_m: float = 30.0, k: int = 16) ->
     v = saddle_level(tree.peaks["elevation"].to_numpy(float), x, y, tree.edges["peak_a"].to_numpy(np.int64),
                      tree.edges["peak_b"].to_numpy(np.int64), s, k=k)
     return v if np.isfinite(v) and 0 <= v <= 1 else None
+
+
+def tree_forced_tail(tree: Any, min_prominence_m: float = 30.0, quantile: float = 0.9) -> float | None:
+    """:func:`orokit.synthesis.saddles.forced_tail` of a Divide Tree pruned at ``min_prominence_m``, at the
+    ``quantile`` of its keyed peaks' prominences (None below 4 peaks)."""
+    from orokit.synthesis.saddles import forced_tail
+
+    tree = tree.prune(min_prominence_m) if min_prominence_m > 0 else tree
+    if tree.n_peaks < 4:
+        return None
+    pt = tree.prominence_table()
+    prom = pt["prominence"].to_numpy(float)[pt["key_saddle"].to_numpy() >= 0]
+    if prom.size == 0:
+        return None
+    v = forced_tail(tree.peaks["elevation"].to_numpy(float), tree.edges["peak_a"].to_numpy(np.int64),
+                    tree.edges["peak_b"].to_numpy(np.int64), float(np.quantile(prom, quantile)))
+    return v if np.isfinite(v) else None
 
 
 def _neighbour_gradient(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> float | None:

@@ -204,6 +204,12 @@ class SynthesisParams:
         user C_H or several types). An option, off (issue 11, session 18: a twin disk far lower than every real disk was what
         rockies' and andes-aconcagua's missed disks had in common; see NOTES).
     disk_rank_draws : at most this many C_H draws for ``follow_disk_rank`` (>= 1).
+    follow_forced_tail : the ridges' exponent rho is raised by the steps of :data:`FORCED_TAIL_RHO_STEPS`, each
+        MST fitted to the ridge contrast again, until the tree's :func:`~orokit.synthesis.saddles.forced_tail`
+        at the type's 90th-percentile prominence is no larger than the type's ``forced_tail`` (or the step that
+        came closest), so the high peaks are joined along high ground as in the source (off, with an
+        :class:`~orokit.errors.OrokitWarning`, for a type without the record or with several types). An
+        option, off (issue 11, session 19: see NOTES).
     Measured for ``follow_gradient`` and the 4 km ``auto_elevation_m`` (``benchmarks/realism.py
     --twin-only``, 13 regions, seeds 0-2, session 7, load 6-9): twins' disks classified as their own
     region at least as often as the real disks under the spatial hold-out in 10, 9, 10 of 12 regions
@@ -242,12 +248,14 @@ class SynthesisParams:
     follow_saddle_level: bool = False
     follow_disk_rank: bool = False
     disk_rank_draws: int = 8
+    follow_forced_tail: bool = False
 
     def __post_init__(self) -> None:
         if self.use_bands not in ("auto", True, False):
             raise InputError(f"use_bands must be 'auto', True or False, got {self.use_bands!r}")
         for name in ("border_trend", "border_density", "follow_gradient", "follow_ridge_contrast", "follow_ridge_slope",
-                     "follow_neighbour_gradient", "fine_needs_reach", "follow_saddle_level", "follow_disk_rank"):
+                     "follow_neighbour_gradient", "fine_needs_reach", "follow_saddle_level", "follow_disk_rank",
+                     "follow_forced_tail"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise InputError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.saddle_placement not in ("targeted", "paper"):
@@ -482,7 +490,9 @@ def synthesize_divide_tree(
 
     t1 = time.perf_counter()
     contrast_target = _contrast_target(types, peaks.ptype) if p.follow_ridge_contrast else None
-    a, b, sx, sy, sz, movable, contrast = _ridges(px, py, peaks, fragment, fragment_offset, rng, contrast_target)
+    tail_target = _forced_tail_target(types) if p.follow_forced_tail else None
+    a, b, sx, sy, sz, movable, contrast, tail_fit = _ridges(px, py, peaks, fragment, fragment_offset, rng,
+                                                            contrast_target, tail_target)
     timings["ridges"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
@@ -554,6 +564,7 @@ def synthesize_divide_tree(
             "max_ridge_slope": slope_cap,
             "saddle_level": level_fit,
             "disk_rank": rank_fit,
+            "forced_tail": tail_fit,
         },
     )
     logger.info("synthesized %d peaks, %d ridges in %.2f s (OT rounds %d)", tree.n_peaks, a.size,
@@ -591,6 +602,29 @@ def _fit_disk_rank(place: Any, seed: int, disks: Any, z: np.ndarray, domain: Any
     assert best is not None
     return best[2], {"levels": [float(v) for v in levels], "target": [round(float(v), 4) for v in target],
                      "reached": [round(float(v), 4) for v in best[3]], "draw": best[1], "draws": k + 1}
+
+
+#: additions to the ridges' exponent rho tried, in order, by ``follow_forced_tail``
+FORCED_TAIL_RHO_STEPS: tuple[float, ...] = (0.0, 0.5, 1.0, 2.0, 3.0, 4.0)
+
+
+def _forced_tail_target(types: list[TerrainType]) -> tuple[float, float] | None:
+    """The one type's ``forced_tail`` and its 90th-percentile prominence (m) that ``follow_forced_tail`` follows;
+    None, with a warning saying why, when it cannot."""
+    why = None
+    share = types[0].forced_tail if len(types) == 1 else None
+    if len(types) != 1:
+        why = f"the synthesis mixes {len(types)} types"
+    elif share is None:
+        why = f"terrain type {types[0].name!r} has no forced_tail record (re-create it with `orokit type`)"
+    if why is not None or share is None:
+        warnings.warn(f"follow_forced_tail does nothing here: {why}", OrokitWarning, stacklevel=3)
+        return None
+    h = types[0].histograms["prominence"]
+    p = h.probabilities()
+    cdf = np.concatenate([[0.0], np.cumsum(p)])
+    e = np.asarray(h.edges, float)
+    return float(share), float(np.interp(0.9, cdf / cdf[-1], e))
 
 
 #: weights of the saddle OT's level term tried, in order, by ``follow_saddle_level``
@@ -772,18 +806,35 @@ def _contrast_target(types: list[TerrainType], ptype: np.ndarray) -> float | Non
 
 
 def _ridges(px: np.ndarray, py: np.ndarray, peaks: _PeakSet, fragment: DivideTree | None,
-            offset: tuple[float, float], rng: np.random.Generator, contrast_target: float | None = None):
-    """Delaunay-MST ridges (fitted to the ridge contrast if given), initial saddles at min(h_a, h_b),
-    the fragment's saddles frozen."""
+            offset: tuple[float, float], rng: np.random.Generator, contrast_target: float | None = None,
+            tail_target: tuple[float, float] | None = None):
+    """Delaunay-MST ridges (fitted to the ridge contrast and the forced tail if given), initial saddles at
+    min(h_a, h_b), the fragment's saddles frozen."""
     from orokit.synthesis.ridges import delaunay_mst, fit_ridge_contrast, place_saddles_on_ridges
+    from orokit.synthesis.saddles import forced_tail
 
     z = peaks.z
     contrast: dict[str, float] | None = None
-    if contrast_target is not None and z.size >= 4:
-        a, b, strength, reached = fit_ridge_contrast(px, py, z, contrast_target, rho=peaks.rho, forced=peaks.forced)
-        contrast = {"target": round(contrast_target, 4), "reached": round(reached, 4), "strength": round(strength, 4)}
-    else:
-        a, b = delaunay_mst(px, py, z, rho=peaks.rho, forced=peaks.forced)
+    tail_fit: dict[str, float] | None = None
+    steps = FORCED_TAIL_RHO_STEPS if tail_target is not None and z.size >= 4 else (0.0,)
+    tried = []
+    for step in steps:
+        rho = peaks.rho + step
+        if contrast_target is not None and z.size >= 4:
+            a, b, strength, reached = fit_ridge_contrast(px, py, z, contrast_target, rho=rho, forced=peaks.forced)
+            contrast = {"target": round(contrast_target, 4), "reached": round(reached, 4),
+                        "strength": round(strength, 4)}
+        else:
+            a, b = delaunay_mst(px, py, z, rho=rho, forced=peaks.forced)
+        if tail_target is None:
+            break
+        share = forced_tail(z, a, b, tail_target[1])
+        tried.append((abs(share - tail_target[0]), share, step, a, b, contrast))
+        if share <= tail_target[0]:
+            break
+    if tried and tail_target is not None:  # the closer of the last two steps tried
+        _, share, step, a, b, contrast = min(tried[-2:], key=lambda t: t[0])
+        tail_fit = {"target": round(tail_target[0], 4), "reached": round(share, 4), "rho_added": step}
     sx, sy, _ = place_saddles_on_ridges(px, py, a, b, rng=rng)
     sz = np.minimum(z[a], z[b])
     movable = np.ones(a.size, bool)
@@ -797,7 +848,7 @@ def _ridges(px: np.ndarray, py: np.ndarray, peaks: _PeakSet, fragment: DivideTre
                 sx[e_i] = float(fs["x"].iloc[s]) + offset[0]
                 sy[e_i] = float(fs["y"].iloc[s]) + offset[1]
                 sz[e_i] = float(fs["elevation"].iloc[s])
-    return a, b, sx, sy, sz, movable, contrast
+    return a, b, sx, sy, sz, movable, contrast, tail_fit
 
 
 def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray, py: np.ndarray, a: np.ndarray,

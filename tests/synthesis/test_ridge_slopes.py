@@ -104,7 +104,7 @@ def test_forced_prominence_bounds_every_saddle_assignment():
     ridge's lower end the two are equal."""
     import pandas as pd
 
-    from orokit.synthesis.fidelity import forced_prominence
+    from orokit.synthesis.saddles import forced_prominence
     from orokit.topology.divide_tree import DivideTree
 
     rng = np.random.default_rng(3)
@@ -120,7 +120,7 @@ def test_forced_prominence_bounds_every_saddle_assignment():
         return DivideTree(peaks, pd.DataFrame({"x": np.zeros(n - 1), "y": np.zeros(n - 1), "elevation": sz}),
                           edges, None, {})
 
-    forced = forced_prominence(tree(top * rng.uniform(0.2, 1.0, n - 1)))
+    forced = forced_prominence(z, a, b)
     for _ in range(5):
         prom = tree(top * rng.uniform(0.2, 1.0, n - 1)).prominence_table()["prominence"].to_numpy(float)
         keyed = np.isfinite(forced)
