@@ -183,6 +183,22 @@ def river_elevations(order: np.ndarray, receiver: np.ndarray, length: np.ndarray
 
 
 @njit(cache=True)
+def river_rise_bound(order: np.ndarray, receiver: np.ndarray, rise: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Upstream pass: ``h[d] = min(h[d], h[r] + rise[d])`` from the outlets up (``order`` lists
+    receivers before donors), so no bed stands more than ``rise`` above its receiver's final bed
+    (numba: sequential dependency along the forest)."""
+    out = h.copy()
+    for k in range(order.size):
+        v = order[k]
+        r = receiver[v]
+        if r >= 0:
+            cap = out[r] + rise[v]
+            if out[v] > cap:
+                out[v] = cap
+    return out
+
+
+@njit(cache=True)
 def accumulate(order: np.ndarray, receiver: np.ndarray, local: np.ndarray) -> np.ndarray:
     """Drainage accumulation along the forest (``order`` from outlets upstream)."""
     out = local.copy()

@@ -19,7 +19,7 @@ from orokit.raster import _kernels
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["RidgeSegments", "RiverNetwork", "graded_beds", "local_relief", "ridge_segments", "river_network",
+__all__ = ["RidgeSegments", "RiverNetwork", "bounded_beds", "graded_beds", "local_relief", "ridge_segments", "river_network",
            "saddle_floor"]
 
 
@@ -230,6 +230,26 @@ def graded_beds(receiver: np.ndarray, length: np.ndarray, drop: np.ndarray, star
     return np.where(anchor, swept, np.minimum(swept, head + (low - head) * t))
 
 
+def bounded_beds(receiver: np.ndarray, length: np.ndarray, elevation: np.ndarray, max_slope: np.ndarray
+                 ) -> np.ndarray:
+    """Beds no steeper than ``max_slope`` (m/m, per node) toward their receiver: from the outlets upstream
+    (nodes numbered receivers before donors, as :class:`RiverNetwork`), every bed is lowered to at most its
+    receiver's final bed plus ``max_slope x length``. Beds only fall; a profile that fell downstream still
+    does (each bed stays at or above its receiver's), and a step where a high tributary meets a deep trunk
+    becomes a reach at ``max_slope`` cut back into the tributary.
+
+    >>> bounded_beds(np.array([-1, 0, 1, 1]), np.array([0.0, 100.0, 100.0, 50.0]),
+    ...              np.array([0.0, 500.0, 540.0, 510.0]), np.full(4, 0.5)).tolist()
+    [0.0, 50.0, 100.0, 75.0]
+    """
+    slope = np.asarray(max_slope, float)
+    if not (slope >= 0.0).all():  # NaN too
+        raise ValueError("max_slope must be >= 0 (m/m) at every river node")
+    order = np.arange(elevation.size, dtype=np.int64)
+    return _kernels.river_rise_bound(order, np.asarray(receiver, np.int64), np.asarray(length, float) * slope,
+                                     np.asarray(elevation, float))
+
+
 def _segment_params(p0, p1, q0, q1):
     """Parameter along q of the intersection of segments p and q (rows paired)."""
     r = p1 - p0
@@ -296,6 +316,7 @@ def river_network(
     graded: bool = False,
     base_slope: float | None = None,
     base_cap=None,
+    max_slope=None,
 ) -> RiverNetwork:
     """Rivers of a Divide Tree: dual Voronoi edges not crossing a ridge, oriented to outlets.
 
@@ -327,6 +348,11 @@ def river_network(
         callable ``(k, 2) xy -> (k,)``, e.g. the lowest nearby saddle), then the sweep runs again: a long
         river no longer runs flat at ``base_elevation`` (the sweep's floor) for tens of km, a pool at one level
         at the domain's bottom (None: off).
+    max_slope : optional callable ``(k, 2) xy -> (k,)`` steepest bed slope (m/m) at each node (e.g. the threshold
+        slope of the hillslopes around it): after the sweeps, a pass from the outlets upstream lowers every bed to at
+        most its receiver's bed plus ``max_slope x length`` (:func:`bounded_beds`), so a high tributary descends to
+        the trunk it joins instead of stepping down to it at the junction (beds only fall: no ridge bound is
+        crossed; then ``max_sink_m``, ``sink_relief_ratio`` and ``floor`` as before; None: off).
 
     Returns
     -------
@@ -460,6 +486,8 @@ def river_network(
         if base_cap is not None:
             lift = np.minimum(lift, np.asarray(base_cap(xy), float) - margin_m)
         h = _kernels.river_elevations(order_arr, receiver, drop, np.maximum(h, lift), 1.0, float(base_elevation))
+    if max_slope is not None and h.size:
+        h = bounded_beds(receiver, length, h, np.asarray(max_slope(xy), float))
     if max_sink_m is not None:
         h = np.maximum(h, h0 - float(max_sink_m))
     if sink_relief_ratio is not None and relief is not None:

@@ -405,6 +405,7 @@ def build_skeleton(
         return got
 
     floor_ratio = params.saddle_floor_ratio
+    bed_ratio = params.river_bed_slope_ratio
     floor = None if floor_ratio is None else (
         lambda xy: saddle_floor(xy, p, s, ratio=float(floor_ratio), k=params.saddle_floor_k,
                                 relief_m=params.saddle_floor_relief_m, min_ratio=params.saddle_floor_min_ratio,
@@ -416,7 +417,9 @@ def build_skeleton(
                            sink_relief_ratio=params.river_sink_relief_ratio,
                            floor=floor, graded=params.river_graded, base_slope=params.river_base_slope,
                            base_cap=None if params.river_base_saddle_k is None else
-                           (lambda xy: relief_at(xy, int(params.river_base_saddle_k))[0]))
+                           (lambda xy: relief_at(xy, int(params.river_base_saddle_k))[0]),
+                           max_slope=None if bed_ratio is None else
+                           (lambda xy: float(bed_ratio) * rs[rtree.query(xy, workers=-1)[1]]))
     t["rivers"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
