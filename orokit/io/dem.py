@@ -65,6 +65,22 @@ def _is_virtual(path: str) -> bool:
     return path.startswith("/vsi") or "://" in path
 
 
+def _source_identity(path: str, files: list[str], mosaic_dir: str | None) -> tuple[Any, ...]:
+    """What names a raster's pixels in its dask name (and so in a checkpoint's fingerprint): the real path of
+    the file, or of the folder of tiles (not its temporary VRT, new in every run), and the real path, size
+    and modification time of every file read (a VRT's sources too), however the path was spelled."""
+    if _is_virtual(path):
+        return (path,)
+    own = os.path.realpath(path)
+    read = {own} if mosaic_dir is None else set()
+    read |= {os.path.realpath(f) for f in files if not _is_virtual(f)} - ({own} if mosaic_dir is not None else set())
+    stamps = []
+    for f in sorted(read):
+        st = os.stat(f)
+        stamps.append((f, st.st_mtime_ns, st.st_size))
+    return (own if mosaic_dir is None else os.path.realpath(mosaic_dir), tuple(stamps))
+
+
 @contextlib.contextmanager
 def _open(path: str, *, what: str = "") -> Iterator[rasterio.io.DatasetReader]:
     """Open ``path`` with rasterio, mapping GDAL failures to :class:`InputError`."""
@@ -637,6 +653,7 @@ def _read_dem(
 ) -> xr.DataArray | DemArray:
     """:func:`read_dem` (``as_array``: :func:`read_dem_array`)."""
     path = os.fspath(source)
+    mosaic_dir: str | None = None  # a folder of tiles, read through a temporary VRT
     if not _is_virtual(path):
         p = Path(path)
         if not p.exists():
@@ -659,6 +676,7 @@ def _read_dem(
                     shutil.rmtree(folder, ignore_errors=True)
 
             atexit.register(remove_mosaic)
+            mosaic_dir = path
             path = os.fspath(build_vrt(p, Path(folder) / f"{p.name}.vrt"))
             p = Path(path)
         if p.stat().st_size == 0:
@@ -807,8 +825,8 @@ def _read_dem(
         from dask.base import tokenize
 
         norm = _normalize_chunks(chunks, (height, width))
-        stamp = None if _is_virtual(path) else (os.stat(path).st_mtime_ns, os.stat(path).st_size)
-        name = "read_dem-" + tokenize(path, stamp, band, nd, reader.factor, reader.offset_m, norm)
+        name = "read_dem-" + tokenize(_source_identity(path, files, mosaic_dir), band, nd, reader.factor,
+                                      reader.offset_m, norm)
         data = dsa.from_array(reader, chunks=norm, name=name, lock=False, asarray=False, meta=np.empty((0, 0), np.float32))
         _READERS[name] = reader  # the same name means the same file, band and conversion
         sample = reader.read(out_shape=(min(height, 256), min(width, 256)))

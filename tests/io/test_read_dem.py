@@ -226,6 +226,35 @@ def test_vrt_mosaic_of_two_geotiffs(tmp_path):
         read_dem(vrt)
 
 
+def test_a_lazy_dems_name_follows_its_pixels_not_the_spelling_of_its_path(tmp_path, monkeypatch):
+    """The dask name (a checkpoint's fingerprint): one file reached by a relative, an absolute or a linked path,
+    and a folder of tiles read twice, keep their name (before: a tile folder got a new temporary VRT, hence a new
+    name, in every run, so its checkpoint 'belonged to another run' on every rerun; a relative and an absolute
+    path too). A touched file, or a touched source of a VRT, gets a new one."""
+    import os
+
+    left = np.arange(12, dtype=np.int16).reshape(3, 4)
+    tiles = tmp_path / "tiles"
+    tiles.mkdir()
+    write_tif(tiles / "l.tif", left)
+    write_tif(tiles / "r.tif", left + 100, transform=Affine(30, 0, 500120, 0, -30, 4000000))
+    vrt = _vrt(tmp_path / "m.vrt", [("tiles/l.tif", 0), ("tiles/r.tif", 4)], 8, 3)
+    (tmp_path / "link.tif").symlink_to(tiles / "l.tif")
+    monkeypatch.chdir(tmp_path)
+
+    def name(path):
+        return read_dem(path, chunks=2).data.name
+
+    assert name("tiles/l.tif") == name(tiles / "l.tif") == name(tmp_path / "link.tif")
+    assert name(tiles) == name(tiles) == name("tiles")
+    assert name(vrt) == name("m.vrt")
+    before = {p: name(p) for p in (tiles, vrt, tiles / "l.tif")}
+    st = os.stat(tiles / "r.tif")
+    os.utime(tiles / "r.tif", ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    assert name(tiles) != before[tiles] and name(vrt) != before[vrt]
+    assert name(tiles / "l.tif") == before[tiles / "l.tif"]
+
+
 # --------------------------------------------------------------------------- 16-bit PNG
 def test_png16_feet_local_grid(tmp_path):
     raw = np.array([[0, 1000, 65535], [29029, 7, 12]], dtype=np.uint16)
