@@ -13,7 +13,9 @@ of the high peaks. It does not depend on the elevation scale, so it survives edi
 of the elevation histogram. ``median_rank`` of a disk is the median elevation rank
 ``(i + 0.5) / n`` of the peaks it holds: how low the lowest 10 km neighbourhoods lie among the
 region's peaks (its low quantiles; a twin whose lowest peaks gather in one wide basin has
-disks far lower than any real one, which the classifier reads as another region).
+disks far lower than any real one, which the classifier reads as another region). ``peak_relief_m`` of a
+disk is the spread of its peaks' elevations (90th minus 10th percentile, metres): a twin whose every disk
+reaches down into a valley has more of it than the source's disks.
 """
 from __future__ import annotations
 
@@ -27,7 +29,7 @@ from scipy.spatial import cKDTree
 from orokit.errors import SchemaError
 
 __all__ = ["DISK_RADIUS_M", "DISK_LEVELS", "BORDER_BANDS", "disk_centres", "disk_statistics", "disk_quantiles",
-           "median_rank_quantiles",
+           "level_quantiles",
            "check_disk_quantiles", "coverage_targets", "border_distance", "border_rank", "border_density", "shrink_border_density",
            "band_areas", "interior_share"]
 
@@ -69,10 +71,12 @@ def disk_centres(extent: tuple[float, float, float, float], radius_m: float = DI
 def disk_statistics(x: np.ndarray, y: np.ndarray, elevation: np.ndarray, prominence: np.ndarray,
                     extent: tuple[float, float, float, float], *, radius_m: float = DISK_RADIUS_M,
                     min_prominence_m: float = 30.0, step_m: float | None = None) -> dict[str, np.ndarray]:
-    """Per-disk peak count, maximum prominence, ``top_rank`` and ``median_rank`` (see the module docstring).
+    """Per-disk peak count, maximum prominence, ``top_rank``, ``median_rank`` and ``peak_relief_m`` (see the
+    module docstring).
 
     Only peaks with prominence >= ``min_prominence_m`` count (x, y in metres of a planar
-    frame). Disks with no peak have ``max_prominence_m`` 0, ``top_rank`` 1 and ``median_rank`` NaN.
+    frame). Disks with no peak have ``max_prominence_m`` 0, ``top_rank`` 1 and ``median_rank`` and
+    ``peak_relief_m`` NaN.
 
     Examples
     --------
@@ -81,6 +85,8 @@ def disk_statistics(x: np.ndarray, y: np.ndarray, elevation: np.ndarray, promine
     ...                     np.array([800., 100.]), (0, 0, 50e3, 30e3), step_m=5e3)
     >>> s["peaks"].tolist()[:7], s["top_rank"].tolist()[:7], s["median_rank"].tolist()[:2]
     ([1, 1, 1, 0, 0, 1, 1], [0.0, 0.0, 0.0, 1.0, 1.0, 0.5, 0.5], [0.75, 0.75])
+    >>> s["peak_relief_m"].tolist()[:2]
+    [0.0, 0.0]
     """
     x, y = np.asarray(x, float), np.asarray(y, float)
     z, prom = np.asarray(elevation, float), np.asarray(prominence, float)
@@ -91,6 +97,7 @@ def disk_statistics(x: np.ndarray, y: np.ndarray, elevation: np.ndarray, promine
     mp = np.zeros(cx.size)
     top = np.ones(cx.size)
     med = np.full(cx.size, np.nan)
+    rel = np.full(cx.size, np.nan)
     if x.size and cx.size:
         # rank of every peak: share of the peaks strictly higher than it; mid-point rank in increasing elevation
         zs = np.sort(z)
@@ -102,12 +109,16 @@ def disk_statistics(x: np.ndarray, y: np.ndarray, elevation: np.ndarray, promine
                 mp[i] = prom[members].max()
                 top[i] = higher[members].min()
                 med[i] = np.median(rank[members])
-    return {"x": cx, "y": cy, "peaks": n, "max_prominence_m": mp, "top_rank": top, "median_rank": med}
+                lo, hi = np.quantile(z[members], (0.1, 0.9))
+                rel[i] = hi - lo
+    return {"x": cx, "y": cy, "peaks": n, "max_prominence_m": mp, "top_rank": top, "median_rank": med,
+            "peak_relief_m": rel}
 
 
-def median_rank_quantiles(median_rank: np.ndarray) -> list[float] | None:
-    """Quantiles at :data:`DISK_LEVELS` of the disks' ``median_rank`` (empty disks left out; None without any)."""
-    v = np.asarray(median_rank, float)
+def level_quantiles(values: np.ndarray) -> list[float] | None:
+    """Quantiles at :data:`DISK_LEVELS` of a per-disk quantity (``median_rank``, ``peak_relief_m``; empty disks,
+    NaN, left out; None without any)."""
+    v = np.asarray(values, float)
     v = v[np.isfinite(v)]
     return [float(q) for q in np.quantile(v, np.asarray(DISK_LEVELS))] if v.size else None
 
@@ -293,6 +304,15 @@ def check_disk_quantiles(disks: Mapping[str, Any]) -> dict[str, Any]:
             raise SchemaError(f"terrain type disks record: median_rank needs {lv.size} non-decreasing quantiles "
                               f"in [0, 1] (one per level), got {disks['median_rank']!r}")
         out["median_rank"] = mr
+    if disks.get("peak_relief_m") is not None:  # optional: types made before session 19 lack it
+        try:
+            pr = [float(v) for v in disks["peak_relief_m"]]
+        except (TypeError, ValueError) as exc:
+            raise SchemaError(f"terrain type disks record: peak_relief_m must be a list of numbers ({exc})") from exc
+        if len(pr) != lv.size or not all(0.0 <= v < math.inf for v in pr) or np.any(np.diff(pr) < 0):
+            raise SchemaError(f"terrain type disks record: peak_relief_m needs {lv.size} non-decreasing quantiles "
+                              f">= 0 in metres (one per level), got {disks['peak_relief_m']!r}")
+        out["peak_relief_m"] = pr
     return out
 
 

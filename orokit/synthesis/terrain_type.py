@@ -203,8 +203,9 @@ class TerrainType:
         ``border_rank`` (:func:`orokit.synthesis.disks.border_rank`: mean elevation rank of the
         peaks by distance to the data border) shapes the default C_H, so a twin of a DEM cropped
         around its relief holds its high ground inside as the DEM does; its optional ``median_rank``
-        (quantiles of the disks' median elevation rank; types before session 18 lack it) is what
-        ``follow_disk_rank`` synthesis keeps the lowest disks above.
+        (quantiles of the disks' median elevation rank; types before session 18 lack it) and ``peak_relief_m``
+        (quantiles of the spread of the disks' peak elevations; before session 19 none) are the span of the
+        source's disks that ``follow_disk_rank`` synthesis keeps a twin's disks inside.
     bands : optional joint statistics (orokit): ``{"elevation_bins": [i0, ..., iK],
         "prominence": [[...]] * K, "dominance": [[...]] * K}``: prominence and dominance
         counts (on the marginal histograms' bins) of the peaks whose elevation falls in
@@ -769,7 +770,7 @@ def _disk_record(x: np.ndarray, y: np.ndarray, z: np.ndarray, prom: np.ndarray, 
                  extent: tuple[float, float, float, float] | None, min_prominence_m: float) -> dict[str, Any] | None:
     """The ``disks`` record of a type (None when the data holds no 10 km disk)."""
     from orokit.synthesis.disks import (border_density, border_rank, disk_quantiles, disk_statistics,
-                                        median_rank_quantiles)
+                                        level_quantiles)
     from orokit.synthesis.orometry import planar_xy
 
     if extent is None:
@@ -787,7 +788,8 @@ def _disk_record(x: np.ndarray, y: np.ndarray, z: np.ndarray, prom: np.ndarray, 
     if rec is not None:
         rec["border_rank"] = border_rank(px[:k], py[:k], z, box)
         rec["border_density"] = border_density(px[:k], py[:k], box)
-        rec["median_rank"] = median_rank_quantiles(stats["median_rank"])
+        rec["median_rank"] = level_quantiles(stats["median_rank"])
+        rec["peak_relief_m"] = level_quantiles(stats["peak_relief_m"])
     return rec
 
 

@@ -8,6 +8,7 @@ follow the key-saddle distance and direction histograms.
 """
 from __future__ import annotations
 
+import copy
 import logging
 import time
 import warnings
@@ -196,14 +197,20 @@ class SynthesisParams:
         type's ``saddle_level``, or the one before it if that came closer (off, with an
         :class:`~orokit.errors.OrokitWarning`, for a type without it or with several types). An option, off
         (issue 11, session 17: see NOTES).
-    follow_disk_rank : the automatic C_H is drawn and the peaks thrown up to ``disk_rank_draws`` times (new noises
-        and draws each), and the first placement whose 10 km disks' ``median_rank`` (:mod:`orokit.synthesis.disks`)
-        has its quantiles at :data:`DISK_RANK_LEVELS` no lower than the type's is kept (else the one short by
-        least), so the lowest peaks do not gather in a basin wider than any of the source's lowest 10 km
-        neighbourhoods (off, with an :class:`~orokit.errors.OrokitWarning`, for a type without the record, with a
-        user C_H or several types). An option, off (issue 11, session 18: a twin disk far lower than every real disk was what
-        rockies' and andes-aconcagua's missed disks had in common; see NOTES).
-    disk_rank_draws : at most this many C_H draws for ``follow_disk_rank`` (>= 1).
+    follow_disk_rank : the placement made without the option is judged by its 10 km disks
+        (:func:`disk_rank_margins`: their ``median_rank`` quantiles no lower than the type's at
+        :data:`DISK_RANK_LEVELS` and no higher at :data:`DISK_RANK_HIGH_LEVELS`, their ``peak_relief_m`` no higher
+        at the high levels, when the type records it); when it lies outside by more than ``disk_rank_tolerance``,
+        the automatic C_H is redrawn and the peaks thrown again (new noises and draws each, up to
+        ``disk_rank_draws`` placements in all) and the first inside is kept (else the one outside by least), so
+        the lowest peaks do not gather in a basin wider than any of the source's lowest 10 km neighbourhoods, nor
+        does every disk reach down into a valley (off, with an :class:`~orokit.errors.OrokitWarning`, for a type
+        without the record, with a user C_H or several types). An option, off (issue 11, sessions 18-19: a twin
+        disk far lower than every real disk was what rockies' and andes-aconcagua's missed disks had in common;
+        see NOTES).
+    disk_rank_draws : at most this many placements for ``follow_disk_rank`` (>= 1; 1: never redrawn).
+    disk_rank_tolerance : how far outside the type's span (rank, or share of the type's relief) a placement may
+        lie and still be kept by ``follow_disk_rank`` (>= 0).
     follow_forced_tail : the ridges' exponent rho is raised by the steps of :data:`FORCED_TAIL_RHO_STEPS`, each
         MST fitted to the ridge contrast again, until the tree's :func:`~orokit.synthesis.saddles.forced_tail`
         at the type's 90th-percentile prominence is no larger than the type's ``forced_tail`` (or the step that
@@ -248,6 +255,7 @@ class SynthesisParams:
     follow_saddle_level: bool = False
     follow_disk_rank: bool = False
     disk_rank_draws: int = 8
+    disk_rank_tolerance: float = 0.05
     follow_forced_tail: bool = False
 
     def __post_init__(self) -> None:
@@ -263,6 +271,8 @@ class SynthesisParams:
         for name in ("n_passes", "n_candidates", "max_ot_iterations", "disk_rank_draws"):
             if int(getattr(self, name)) < 1:
                 raise InputError(f"{name} must be >= 1, got {getattr(self, name)!r}")
+        if not (isinstance(self.disk_rank_tolerance, (int, float)) and 0 <= float(self.disk_rank_tolerance) < np.inf):
+            raise InputError(f"disk_rank_tolerance must be a number >= 0, got {self.disk_rank_tolerance!r}")
         if not (isinstance(self.elevation_tolerance, (int, float)) and 0 < float(self.elevation_tolerance) < np.inf):
             raise InputError(f"elevation_tolerance must be a number > 0, got {self.elevation_tolerance!r}")
         r = self.saddle_slope_ratio
@@ -425,7 +435,6 @@ def synthesize_divide_tree(
     fields = None
     rank_fit: dict[str, Any] | None = None
     rank_disks: Any = None
-    rank_seed = 0
     if auto_m is not None:
         from orokit.synthesis.controls import random_elevation_fields
 
@@ -439,10 +448,7 @@ def synthesize_divide_tree(
                 density=None if profile is None else controls.density, valley_weight=float(p.valley_network))
 
         rank_disks = disks if p.follow_disk_rank and disks.get("median_rank") is not None else None
-        if rank_disks is None:
-            fields = draw_fields(rng.integers(2**63) if fit_fine else rng)
-        else:
-            rank_seed = int(rng.integers(2**63))  # the draws of follow_disk_rank come from here
+        fields = draw_fields(rng.integers(2**63) if fit_fine else rng)
         if fields is not None and not fit_fine:
             controls = replace(controls, elevation=next(fields))
     if p.follow_disk_rank and rank_disks is None:
@@ -480,12 +486,16 @@ def synthesize_divide_tree(
         x_, y_, info_ = throw(ctrl, gen)
         return ctrl, x_, y_, info_, None
 
+    first_controls = controls
+    placed = place(fields if fit_fine else None, controls, rng)
     if rank_disks is not None:
-        (controls, px, py, dart_info, fine_fit), rank_fit = _fit_disk_rank(
-            lambda sub: place(draw_fields(sub.integers(2**63)), controls, sub), rank_seed, rank_disks, peaks.z,
-            domain, int(p.disk_rank_draws))
-    else:
-        controls, px, py, dart_info, fine_fit = place(fields if fit_fine else None, controls, rng)
+        # draw 0 is the placement made without the option (the same bytes when it passes); the redraws come
+        # from a copy of the generator, so the ridges and saddles below draw as without the option
+        rank_seed = int(copy.deepcopy(rng).integers(2**63))
+        placed, rank_fit = _fit_disk_rank(
+            placed, lambda sub: place(draw_fields(sub.integers(2**63)), first_controls, sub), rank_seed, rank_disks,
+            peaks.z, domain, int(p.disk_rank_draws), float(p.disk_rank_tolerance))
+    controls, px, py, dart_info, fine_fit = placed
     timings["dart_throwing"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
@@ -575,33 +585,67 @@ def synthesize_divide_tree(
 #: quantile levels of the disks' ``median_rank`` that ``follow_disk_rank`` keeps no lower than the type's
 #: (the lowest disk, and the low tail the classifier's 40-odd disks sample)
 DISK_RANK_LEVELS: tuple[float, ...] = (0.0, 0.05, 0.1)
+#: quantile levels of the disks' ``median_rank`` and ``peak_relief_m`` that ``follow_disk_rank`` keeps no higher
+#: than the type's (the high tail: a redraw must not buy its low disks with a valley in every disk)
+DISK_RANK_HIGH_LEVELS: tuple[float, ...] = (0.9, 0.95, 1.0)
 
 
-def _fit_disk_rank(place: Any, seed: int, disks: Any, z: np.ndarray, domain: Any,
-                   draws: int) -> tuple[Any, dict[str, Any]]:
-    """The placement (what ``place(rng)`` returns: controls, x, y, ...) of the first of ``draws`` C_H draws
-    whose peaks' 10 km disks have their ``median_rank`` at every :data:`DISK_RANK_LEVELS` no lower than the
-    type's (else the one short by least), and a record of the fit. Draw k uses ``default_rng([seed, k])``."""
+def disk_rank_margins(x: np.ndarray, y: np.ndarray, z: np.ndarray, extent: tuple[float, float, float, float],
+                      disks: Any) -> dict[str, Any]:
+    """How far a placement's 10 km disks lie inside the span of the type's (``disks``, a type's record).
+
+    Margins (> 0 inside, < 0 outside): the disks' ``median_rank`` quantiles at :data:`DISK_RANK_LEVELS` minus the
+    type's (``low``), the type's minus the placement's at :data:`DISK_RANK_HIGH_LEVELS` (``high``), and, when the
+    type records ``peak_relief_m``, ``1 - placement / type`` of its quantiles at the high levels (``relief``).
+    ``margin`` is the least of them (0 when all are inside). Disks on a grid of step radius / 4, every peak counted.
+    """
     from orokit.synthesis.disks import disk_statistics
 
-    levels = np.asarray(DISK_RANK_LEVELS)
-    target = np.interp(levels, np.asarray(disks["levels"], float), np.asarray(disks["median_rank"], float))
+    levels = np.asarray(disks["levels"], float)
+    radius = float(disks["radius_m"])
+    st = disk_statistics(x, y, z, np.full(z.size, np.inf), extent, radius_m=radius, step_m=radius / 4.0)
+    lo, hi = np.asarray(DISK_RANK_LEVELS), np.asarray(DISK_RANK_HIGH_LEVELS)
+    target = np.asarray(disks["median_rank"], float)
+    med = st["median_rank"][np.isfinite(st["median_rank"])]
+    out: dict[str, Any] = {}
+    if med.size:
+        got_lo, got_hi = np.quantile(med, lo), np.quantile(med, hi)
+        out["low"] = got_lo - np.interp(lo, levels, target)
+        out["high"] = np.interp(hi, levels, target) - got_hi
+    else:
+        out["low"], out["high"] = np.full(lo.size, -1.0), np.full(hi.size, -1.0)
+    if disks.get("peak_relief_m") is not None:
+        rel = st["peak_relief_m"][np.isfinite(st["peak_relief_m"])]
+        want = np.interp(hi, levels, np.asarray(disks["peak_relief_m"], float))
+        got = np.quantile(rel, hi) if rel.size else np.zeros(hi.size)
+        out["relief"] = np.where(want > 0, 1.0 - got / np.where(want > 0, want, 1.0), 0.0)
+    out["margin"] = float(min(0.0, *(float(np.min(v)) for v in out.values())))
+    return out
+
+
+def _fit_disk_rank(first: Any, place: Any, seed: int, disks: Any, z: np.ndarray, domain: Any,
+                   draws: int, tolerance: float) -> tuple[Any, dict[str, Any]]:
+    """The placement (controls, x, y, ...: what ``place(rng)`` returns) among ``first`` (draw 0) and up to
+    ``draws - 1`` C_H redraws whose disks lie inside the type's span (:func:`disk_rank_margins`, margin
+    >= -``tolerance``), the first such, else the one with the largest margin (the earlier on ties), and a record
+    of the fit. Redraw k uses ``place(default_rng([seed, k]))``."""
     ext = (domain.x0, domain.y0, domain.x0 + domain.width, domain.y0 + domain.height)
     best: tuple[float, int, Any, Any] | None = None
+    k = 0
     for k in range(max(int(draws), 1)):
-        out = place(np.random.default_rng([int(seed), k]))
-        med = disk_statistics(out[1], out[2], z, np.full(z.size, np.inf), ext, radius_m=float(disks["radius_m"]),
-                              step_m=float(disks["radius_m"]) / 4.0)["median_rank"]
-        med = med[np.isfinite(med)]
-        got = np.quantile(med, levels) if med.size else target
-        short = float(np.min(got - target))
-        if best is None or short > best[0]:
-            best = (short, k, out, got)
-        if short >= 0:
+        out = first if k == 0 else place(np.random.default_rng([int(seed), k]))
+        m = disk_rank_margins(out[1], out[2], z, ext, disks)
+        if best is None or m["margin"] > best[0]:
+            best = (m["margin"], k, out, m)
+        if m["margin"] >= -float(tolerance):
             break
     assert best is not None
-    return best[2], {"levels": [float(v) for v in levels], "target": [round(float(v), 4) for v in target],
-                     "reached": [round(float(v), 4) for v in best[3]], "draw": best[1], "draws": k + 1}
+    rec: dict[str, Any] = {"low_levels": [float(v) for v in DISK_RANK_LEVELS],
+                           "high_levels": [float(v) for v in DISK_RANK_HIGH_LEVELS],
+                           "margin": round(best[0], 4), "draw": best[1], "draws": k + 1}
+    rec.update({name: [round(float(v), 4) for v in best[3][name]] for name in ("low", "high", "relief")
+                if name in best[3]})
+    return best[2], rec
 
 
 #: additions to the ridges' exponent rho tried, in order, by ``follow_forced_tail``
