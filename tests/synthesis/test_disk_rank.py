@@ -122,6 +122,23 @@ def test_follow_disk_rank_keeps_the_lowest_disks_up(peak_factory):
     assert np.mean(fitted) > np.mean(plain) + 0.05
 
 
+def test_a_placement_inside_is_the_one_made_without_the_option(small_type):
+    """With a tolerance nothing lies outside of, draw 0 is kept: the tree is the one made without the option,
+    byte for byte (the ridges and saddles draw as without it); with none, the option redraws and differs."""
+    fast = {"follow_neighbour_gradient": False}
+    for seed in (1,):
+        plain = synthesize_divide_tree(small_type, size_m=30_000, rng=seed, params=SynthesisParams(**fast))
+        on = synthesize_divide_tree(small_type, size_m=30_000, rng=seed, params=SynthesisParams(
+            follow_disk_rank=True, disk_rank_tolerance=1e9, **fast))
+        assert on.attrs["disk_rank"]["draw"] == 0 and on.attrs["disk_rank"]["draws"] == 1
+        assert _digest(on) == _digest(plain)
+        strict = synthesize_divide_tree(small_type, size_m=30_000, rng=seed, params=SynthesisParams(
+            follow_disk_rank=True, disk_rank_tolerance=0.0, disk_rank_draws=3, **fast))
+        rec = strict.attrs["disk_rank"]
+        assert (_digest(strict) == _digest(plain)) == (rec["draw"] == 0)
+        assert rec["draws"] == 3 or rec["margin"] >= 0.0
+
+
 def _disk_record(x, y, z, extent) -> dict:
     """A type's ``disks`` record of a peak set (as :meth:`TerrainType.from_peaks` makes it; every peak counted)."""
     stats = disk_statistics(x, y, z, np.full(z.size, 500.0), extent)
