@@ -8,6 +8,7 @@ holds the public function, the result object and its files.
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from pathlib import Path
 from typing import Any, Literal
@@ -442,19 +443,27 @@ def start_numba_target() -> None:
     rtsys.initialize(cpu_target.target_context)  # what the target's refresh does first (once per process)
 
 
-def load_kernels(*, isolation: bool = True) -> None:
+def load_kernels(*, isolation: bool = True, strips_loaded: threading.Event | None = None) -> None:
     """Load the in-memory engine's compiled kernels (numba's cache) for float32 rasters, on tiny ones.
 
     The first call of each kernel loads it (~0.3 s of CPU in all, one thread);
     ``orokit analyze`` calls this while GDAL reads the DEM in other threads, which
     release the GIL. The tiny rasters cover both isolation searches (with and
-    without nodata). Imports no pandas.
+    without nodata). Imports no pandas. The strips' kernels load first, then
+    ``strips_loaded`` is set (on failure too): the saddle graph's strips may start
+    while the other kernels load (numba loads a kernel under its compiler lock: one
+    called meanwhile waits for it or loads it itself).
     """
     from affine import Affine
 
     from orokit.metrics.isolation import KernelMetric, nearest_higher
     from orokit.topology import engine
 
+    try:
+        engine.load_strip_kernels()
+    finally:
+        if strips_loaded is not None:
+            strips_loaded.set()
     z = np.random.default_rng(0).random((8, 8)).astype(np.float32)
     core = engine.orometry(z, min_prominence_m=0.0)
     # the tree's kernels that the tables and the GeoPackage call (parents; the read-only

@@ -4,7 +4,7 @@ from __future__ import annotations
 import threading
 import time
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import click
 
@@ -19,6 +19,9 @@ from orokit.cli.options import (
     seed_option,
     z_units_option,
 )
+
+if TYPE_CHECKING:
+    from concurrent.futures import Future, ThreadPoolExecutor
 
 #: a DEM error or correlation length: 0 allowed
 _ERROR_LENGTH = Length(allow_bare=True, allow_zero=True)
@@ -113,6 +116,7 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         chunks = plan_chunks(str(dem.path))
         if chunks is not None:
             click.echo(f"{dem.path} is too large for memory: analysing in {chunks} x {chunks} chunks", err=True)
+    loader: tuple[ThreadPoolExecutor, Future[None]] | None = None  # the kernels' loader, beside the engine
     if chunks is None and dem.dataset is None:
         from concurrent.futures import ThreadPoolExecutor
 
@@ -128,25 +132,35 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         # the process's peak. numba's implementations (~0.2 CPU s of Python) load beside the read
         # (a raster of more than READ_BESIDE_TARGET_CELLS cells is read beside numba's start as well)
         started = threading.Event() if owns_process() else None
-        with ThreadPoolExecutor(1) as pool:
-            loading = pool.submit(_load_kernels, isolation=not no_isolation, started=started)
-            try:
-                from orokit.io.dem import raster_cell_count, read_dem_array
+        strips_loaded = threading.Event()
+        pool = ThreadPoolExecutor(1)
+        loading = pool.submit(_load_kernels, isolation=not no_isolation, started=started, strips_loaded=strips_loaded)
+        large = False
+        try:
+            from orokit.io.dem import raster_cell_count, read_dem_array
 
-                if started is not None:
-                    limit_gdal_cache(GDAL_WHOLE_READ_CACHE_BYTES)  # a whole read (unless the user set it)
-                    if (raster_cell_count(str(dem.path)) or 0) <= READ_BESIDE_TARGET_CELLS:
-                        started.wait()  # set by the loader in any case
-                        release_library_pages("")
-                da = read_dem_array(str(dem.path), z_units=z_units, cell_size_m=cell_size_m, band=band)
-            finally:
-                loading.result()
-        # the kernels are loaded: LLVM's code (~65 MB resident at 15 M cells) is not needed until a
-        # kernel compiles again, nor the reader's and the imports' code: the pages of every file go
-        # back to the page cache before the engine's peak (what the engine runs comes back). Only in
-        # orokit's own process: a caller's (a CliRunner test, a script) may be compiling meanwhile
-        if owns_process():
-            release_library_pages("")
+            if started is not None:
+                limit_gdal_cache(GDAL_WHOLE_READ_CACHE_BYTES)  # a whole read (unless the user set it)
+                large = (raster_cell_count(str(dem.path)) or 0) > READ_BESIDE_TARGET_CELLS
+                if not large:
+                    started.wait()  # set by the loader in any case
+                    release_library_pages("")
+            da = read_dem_array(str(dem.path), z_units=z_units, cell_size_m=cell_size_m, band=band)
+        except BaseException:
+            pool.shutdown()  # the loader done, the read's error is raised
+            raise
+        if large:  # the strips start once their kernels are loaded, the others load beside them
+            strips_loaded.wait()  # set by the loader in any case
+            loader = (pool, loading)
+        else:
+            pool.shutdown()
+            loading.result()
+            # the kernels are loaded: LLVM's code (~65 MB resident at 15 M cells) is not needed until a
+            # kernel compiles again, nor the reader's and the imports' code: the pages of every file go
+            # back to the page cache before the engine's peak (what the engine runs comes back). Only in
+            # orokit's own process: a caller's (a CliRunner test, a script) may be compiling meanwhile
+            if owns_process():
+                release_library_pages("")
     else:
         from orokit.cli.main import CHUNKED_MMAP_THRESHOLD_BYTES, owns_process
 
@@ -160,11 +174,17 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
         da = dem.read_dem(z_units=z_units, cell_size_m=cell_size_m, chunks=chunks, band=band)
     from orokit.analysis import analyze as run
 
-    result = run(da, min_prominence_m=min_prominence_m, outside=outside, isolation=not no_isolation,
-                 progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint,
-                 depressions=depressions, sea_level_m=sea_level_m, dem_error_m=dem_error_m, error_k=error_k,
-                 error_corr_m=error_corr_m, samples=samples, seed=seed, geometry=False,
-                 blocks=True, release_dem=True)
+    try:
+        result = run(da, min_prominence_m=min_prominence_m, outside=outside, isolation=not no_isolation,
+                     progress=progress, chunks=chunks, scheduler=scheduler, checkpoint=checkpoint,
+                     depressions=depressions, sea_level_m=sea_level_m, dem_error_m=dem_error_m, error_k=error_k,
+                     error_corr_m=error_corr_m, samples=samples, seed=seed, geometry=False,
+                     blocks=True, release_dem=True)
+    finally:
+        if loader is not None:
+            loader[0].shutdown()
+    if loader is not None:
+        loader[1].result()
     from orokit.io.analysis_io import write_analysis
 
     shape = da.shape
@@ -193,11 +213,13 @@ def analyze(ctx: click.Context, dem: InputSource, outdir: Path, min_prominence_m
     )
 
 
-def _load_kernels(*, isolation: bool, started: threading.Event | None = None) -> None:
-    """Import numba and load the engine's kernels. With ``started`` (orokit's own process): first
-    start numba's target as far as LLVM goes (most of LLVM's pages), then set ``started`` (set on
-    failure too), then load numba's implementations and the kernels (beside the read); the pages of
-    files are dropped before the target starts (the imports touched them) and LLVM's after the loading."""
+def _load_kernels(*, isolation: bool, started: threading.Event | None = None,
+                  strips_loaded: threading.Event | None = None) -> None:
+    """Import numba and load the engine's kernels, ``strips_loaded`` set once the strips' are (on failure
+    too). With ``started`` (orokit's own process): first start numba's target as far as LLVM goes (most of
+    LLVM's pages), then set ``started`` (set on failure too), then load numba's implementations and the
+    kernels (beside the read); the pages of files are dropped before the target starts (the imports
+    touched them) and LLVM's after the loading."""
     from orokit.analysis import load_kernels, start_numba_target
 
     from orokit.tiling.memory import release_library_pages
@@ -211,8 +233,12 @@ def _load_kernels(*, isolation: bool, started: threading.Event | None = None) ->
     finally:
         if started is not None:
             started.set()
-    _numba_without_blas_probe()  # before the target's implementations load (with the first kernel)
-    load_kernels(isolation=isolation)
+    try:
+        _numba_without_blas_probe()  # before the target's implementations load (with the first kernel)
+        load_kernels(isolation=isolation, strips_loaded=strips_loaded)  # sets it once the strips' are loaded
+    finally:
+        if strips_loaded is not None:
+            strips_loaded.set()  # on failure too
     if started is not None:
         release_library_pages("libllvmlite")  # what the loading touched (12 MB), if the read is not done
 

@@ -150,11 +150,7 @@ def saddle_graph(z: np.ndarray, *, strips: int | None = None) -> dict[str, Any]:
     ltype = np.int64 if big or z.size >= 2**31 - 2 else np.int32
 
     def strip(b: tuple[int, int]) -> tuple[Any, ...]:
-        r0, r1 = b
-        lab = np.empty((r1 - r0) * W, ltype)
-        m, cells = _strip_kernels.strip_ascent(z, r0, r1, lab)
-        graph = _strip_kernels.strip_graph(z, lab, m + 2 * W, r0, r1)
-        return (int(m), cells, *graph, lab[:W].astype(np.int64), lab[-W:].astype(np.int64))
+        return _strip(z, b[0], b[1], ltype)
 
     if len(bounds) == 1:
         parts = [strip(bounds[0])]
@@ -181,6 +177,22 @@ def saddle_graph(z: np.ndarray, *, strips: int | None = None) -> dict[str, Any]:
         "shape": z.shape,
         "n_maxima": n_max,
     }
+
+
+def _strip(z: np.ndarray, r0: int, r1: int, ltype: type) -> tuple[Any, ...]:
+    """One row strip of :func:`saddle_graph`: ``(m, max_cells, bmax, nmin, ea, eb, ec, first_row, last_row)``."""
+    W = z.shape[1]
+    lab = np.empty((r1 - r0) * W, ltype)
+    m, cells = _strip_kernels.strip_ascent(z, r0, r1, lab)
+    graph = _strip_kernels.strip_graph(z, lab, m + 2 * W, r0, r1)
+    return (int(m), cells, *graph, lab[:W].astype(np.int64), lab[-W:].astype(np.int64))
+
+
+def load_strip_kernels() -> None:
+    """Load the kernels of :func:`saddle_graph`'s strips (numba's cache) for float32 rasters, on a tiny one:
+    what the strips need before they can start (the join's and the finalize's kernels load with
+    :func:`orometry`)."""
+    _strip(np.zeros((2, 2), np.float32), 0, 2, np.int32)
 
 
 def _join_strips(z: np.ndarray, bounds: list[tuple[int, int]], parts: list[tuple[Any, ...]]) -> tuple[Any, ...]:
