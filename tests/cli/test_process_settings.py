@@ -76,9 +76,10 @@ def _console(*args: str, env: dict | None = None, script: str = SCRIPT) -> str:
 ANALYZE_CALLS = ["arenas 2", "mmap 1048576", "drop ", "drop ", "read", "drop ", "drop "]
 
 
-def _analyze_calls(line: str) -> tuple[list[str], str]:
+def _analyze_calls(line: str, after_loader: int = 2) -> tuple[list[str], str]:
     """The recorded calls without the loader's ``drop libllvmlite`` (its thread runs beside the read: it comes
-    once, before the main thread's drop after joining it), and Arrow's pool."""
+    once, before the main thread's last ``after_loader`` drops: its drop after joining the loader and before
+    writing; a large raster's engine starts beside the loader, only the latter), and Arrow's pool."""
     import ast
 
     head, _, pool = line.rpartition("] ")
@@ -87,7 +88,7 @@ def _analyze_calls(line: str) -> tuple[list[str], str]:
     assert (float(read_interval), float(end_interval)) == (SWITCH_INTERVAL_S, WRITING_SWITCH_INTERVAL_S)
     calls = ast.literal_eval(head + "]")
     loader = [i for i, c in enumerate(calls) if c == "drop libllvmlite"]
-    assert len(loader) == 1 and loader[0] < len(calls) - 2, calls
+    assert len(loader) == 1 and loader[0] < len(calls) - after_loader, calls
     return [c for c in calls if c != "drop libllvmlite"], pool
 
 
@@ -191,9 +192,61 @@ def test_a_large_raster_is_read_beside_numbas_start(tmp_path):
     assert ORDER.count("reading.set()") == 1 and ORDER.count("READ_BESIDE_TARGET_CELLS") == 1
     dem = str(_dem(tmp_path / "dem.tif"))
     args = ["-q", "analyze", dem, "--no-progress", "--min-prominence", "5", "-o"]
-    calls = [c for c in _analyze_calls(_console("2999", *args, str(tmp_path / "a"), script=ORDER))[0]
+    calls = [c for c in _analyze_calls(_console("2999", *args, str(tmp_path / "a"), script=ORDER), 1)[0]
              if c in ("target", "read")]
     assert calls == ["read", "target"]
     calls = [c for c in _analyze_calls(_console("3000", *args, str(tmp_path / "b"), script=ORDER))[0]
              if c in ("target", "read")]
     assert calls == ["target", "read"]
+
+
+#: the console script's process with the raster-size bound given as the first argument, recording when the
+#: engine's strips start (the main thread's ``saddle_graph``) and when the loader's other kernels (its tiny
+#: ``orometry``, after the strips' kernels) are loaded; with "hold" second, that loading waits (10 s at most)
+#: for the strips to start
+STRIPS = SCRIPT.replace("import orokit.io.dem as dem\n", """import threading
+import orokit.cli.analyze
+from orokit.topology import engine
+orokit.cli.analyze.READ_BESIDE_TARGET_CELLS = int(sys.argv.pop(1))
+hold = sys.argv.pop(1) == "hold"
+strips = threading.Event()
+_graph, _orometry = engine.saddle_graph, engine.orometry
+def saddle_graph(*a, **k):
+    if threading.current_thread() is threading.main_thread():
+        calls.append("strips")
+        strips.set()
+    return _graph(*a, **k)
+def orometry(*a, **k):
+    if hold:
+        strips.wait(10)
+    out = _orometry(*a, **k)
+    calls.append("kernels")
+    return out
+engine.saddle_graph, engine.orometry = saddle_graph, orometry
+import orokit.io.dem as dem
+""")
+
+
+def _strips_and_kernels(line: str, after_loader: int) -> list[str]:
+    calls = _analyze_calls(line, after_loader)[0]
+    # the pages of files dropped before the engine (after its kernels, or the strips') and before writing;
+    # a smaller raster's before the read too
+    assert calls.count("drop ") == 2 + after_loader and calls.index("drop ", calls.index("read")) < calls.index(
+        "strips"), calls
+    return [c for c in calls if c in ("strips", "kernels")]
+
+
+def test_a_large_rasters_strips_start_beside_the_kernels_loading(tmp_path):
+    """Above ``READ_BESIDE_TARGET_CELLS`` cells the engine's strips start once their own kernels are loaded, the
+    loader's other kernels (the join's, the finalize's, the tables', held here until the strips start) loading
+    beside them (the loader's ~0.1-0.4 CPU s after the read left a core idle); at the bound the engine starts
+    after the loader, as before. The tables are the same. The 3,000-cell DEM stands for either by the bound."""
+    assert STRIPS.count("READ_BESIDE_TARGET_CELLS") == 1 and STRIPS.count("strips.wait(10)") == 1
+    dem = str(_dem(tmp_path / "dem.tif"))
+    args = ["-q", "analyze", dem, "--no-progress", "--min-prominence", "5", "-o"]
+    assert _strips_and_kernels(_console("2999", "hold", *args, str(tmp_path / "a"), script=STRIPS), 1) == [
+        "strips", "kernels"]
+    assert _strips_and_kernels(_console("3000", "free", *args, str(tmp_path / "b"), script=STRIPS), 2) == [
+        "kernels", "strips"]
+    for name in ("peaks.csv", "saddles.parquet"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
