@@ -223,25 +223,24 @@ def _load_kernels(*, isolation: bool, started: threading.Event | None = None,
     LLVM's pages), then set ``started`` (set on failure too), then load numba's implementations and the
     kernels (beside the read); the pages of files are dropped before the target starts (the imports
     touched them) and LLVM's after the loading."""
-    from orokit.analysis import load_kernels, start_numba_target
-
-    from orokit.tiling.memory import release_library_pages
-
     try:
-        if started is not None:
-            import numba  # noqa: F401 - LLVM's library, before its pages are dropped
+        try:
+            from orokit.analysis import load_kernels, start_numba_target
+            from orokit.tiling.memory import release_library_pages
 
-            release_library_pages("")  # the imports' pages (LLVM's first 36 MB): not all touched again
-            start_numba_target()
-    finally:
-        if started is not None:
-            started.set()
-    try:
+            if started is not None:
+                import numba  # noqa: F401 - LLVM's library, before its pages are dropped
+
+                release_library_pages("")  # the imports' pages (LLVM's first 36 MB): not all touched again
+                start_numba_target()
+        finally:
+            if started is not None:
+                started.set()
         _numba_without_blas_probe()  # before the target's implementations load (with the first kernel)
         load_kernels(isolation=isolation, strips_loaded=strips_loaded)  # sets it once the strips' are loaded
     finally:
         if strips_loaded is not None:
-            strips_loaded.set()  # on failure too
+            strips_loaded.set()  # on failure too: the main thread waits for neither event in vain
     if started is not None:
         release_library_pages("libllvmlite")  # what the loading touched (12 MB), if the read is not done
 

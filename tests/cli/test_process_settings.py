@@ -250,3 +250,20 @@ def test_a_large_rasters_strips_start_beside_the_kernels_loading(tmp_path):
         "kernels", "strips"]
     for name in ("peaks.csv", "saddles.parquet"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+
+
+def test_a_failing_kernel_loader_fails_the_command_at_any_size(tmp_path):
+    """A loader that fails (before the strips' kernels) fails ``orokit analyze`` with its error, above the bound
+    (the engine started beside it: it waits for no event in vain) and at it."""
+    script = SCRIPT.replace("import orokit.io.dem as dem\n", """import orokit.analysis, orokit.cli.analyze
+orokit.cli.analyze.READ_BESIDE_TARGET_CELLS = int(sys.argv.pop(1))
+def load_kernels(**kwargs):
+    raise RuntimeError("the loader failed")
+orokit.analysis.load_kernels = load_kernels
+import orokit.io.dem as dem
+""")
+    dem = str(_dem(tmp_path / "dem.tif"))
+    for bound in ("2999", "3000"):
+        res = subprocess.run([sys.executable, "-c", script, bound, "-q", "analyze", dem, "--no-progress", "-o",
+                              str(tmp_path / bound)], capture_output=True, text=True, timeout=120)
+        assert res.returncode != 0 and "the loader failed" in res.stderr, res.stderr
