@@ -7,7 +7,8 @@ meanders) and the median crest width (first offset where the ground lies 25 m be
 :func:`orokit.validate.crest.crest_width`), on the real DEM and on renders of its tree saved by
 ``benchmarks/render_realism.py --save DIR`` (one ``DIR/<region>.npy`` per region, same grid as the DEM). Pieces
 are split into those ``ridge_plateau_spread`` 0.25 / ``ridge_plateau_relief_m`` 300 selects
-(:func:`orokit.raster.skeleton.spread_pieces`: volcanoes on a plateau) and the others. Nothing is recorded.
+(:func:`orokit.raster.skeleton.spread_pieces`: volcanoes on a plateau; with ``--spacing M`` also
+:func:`orokit.raster.skeleton.lone_pieces`, ``ridge_plateau_spacing_m``) and the others. Nothing is recorded.
 
     python benchmarks/crest_sections.py --saved LABEL=DIR [--saved LABEL=DIR ...] [--group all] [--regions a,b]
 """
@@ -28,10 +29,11 @@ from render_realism import _cached  # noqa: E402
 DROP_M = 25.0
 
 
-def region_sections(name: str, grids: dict[str, Path], cache: Path, search_m: float) -> list[str]:
+def region_sections(name: str, grids: dict[str, Path], cache: Path, search_m: float,
+                    spacing_m: float | None = None) -> list[str]:
     from orokit.data import open_dataset_dem
     from orokit.raster.rivers import ridge_segments
-    from orokit.raster.skeleton import _tree_arrays, spread_pieces
+    from orokit.raster.skeleton import _tree_arrays, lone_pieces, spread_pieces
     from orokit.validate.crest import crest_sections, crest_width
 
     d = _cached(name, cache)
@@ -40,6 +42,8 @@ def region_sections(name: str, grids: dict[str, Path], cache: Path, search_m: fl
     nodes = np.concatenate([p, s])
     rs = ridge_segments(p, s, e)
     sel = spread_pieces(nodes[rs.node1], p, s, 0.25, min_relief_m=300.0)
+    if spacing_m is not None:
+        sel &= lone_pieces(nodes[rs.node0], p, spacing_m)
     rasters = {"real": np.asarray(open_dataset_dem(name).values, float)}
     rasters.update({k: np.load(v / f"{name}.npy").astype(float) for k, v in grids.items()
                     if (v / f"{name}.npy").is_file()})
@@ -66,6 +70,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--regions", default=None, help="comma-separated dataset names (default: the group)")
     ap.add_argument("--search", type=float, default=300.0,
                     help="centre each section on the highest ground within this many metres of the line (0: on it)")
+    ap.add_argument("--spacing", type=float, default=None,
+                    help="select only pieces whose peak stands alone too (ridge_plateau_spacing_m, metres)")
     ap.add_argument("--cache", type=Path, default=Path.home() / ".cache" / "orokit" / "render_realism")
     a = ap.parse_args(argv)
     grids = {}
@@ -76,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
         grids[label] = Path(path)
     names = a.regions.split(",") if a.regions else {"tune": TUNE, "hold": HOLD, "all": TUNE + HOLD}[a.group]
     for name in names:
-        print("\n".join(region_sections(name, grids, a.cache, a.search)), flush=True)
+        print("\n".join(region_sections(name, grids, a.cache, a.search, a.spacing)), flush=True)
     print(f"load {os.getloadavg()[0]:.1f}")
     return 0
 

@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 from orokit._typing import SeedLike
 from orokit.raster import _kernels
 
-__all__ = ["dart_seed", "poisson_darts", "poisson_samples", "valley_width", "sample_elevation", "foot_across_jumps",
+__all__ = ["apex_distance", "dart_seed", "poisson_darts", "poisson_samples", "valley_width", "sample_elevation", "foot_across_jumps",
            "flank_envelope", "field_elevation"]
 
 
@@ -83,7 +83,8 @@ def sample_elevation(
     river_foot_band: float | None = None,
     river_foot_slope: float = 0.25,
     river_foot_k: int = 32,
-    apex_m: float | None = None,
+    apex_m: float | np.ndarray | None = None,
+    crest_round: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elevation of ``points`` from the nearest ridge point q and river point r.
 
@@ -117,7 +118,12 @@ def sample_elevation(
     one's by more than ``river_foot_slope`` x their distance apart (another river, not the same bed upstream)
     join within a band of ``river_foot_band`` x that excess beyond the nearest distance; elsewhere the foot
     stays the nearest bed.
-    ``apex_m``: the cones have a rounded apex (:func:`flank_envelope`).
+    ``apex_m``: the cones have a rounded apex (:func:`flank_envelope`; one radius, or one per ridge point).
+    With ``crest_round`` (and ``apex_m``, ``ridge_slope``) the hillslope's crest is as round as its nearest ridge
+    point's cone (curvature ``s / r0``): ``a = f(d(p, T)) / f(L)``, ``L = d(p, R) + d(p, T) - w``, ``f``
+    :func:`apex_distance` of the radius r with ``(h(q) - h(r)) / ((L - r / 2) r) = s / r0``
+    (``r = L - sqrt(L^2 - 2 (h(q) - h(r)) r0 / s)``; at most L, a parabola from crest to river): the same ends, a
+    round crest instead of the line's knife edge, r0 0 the line.
     Returns ``(h, d_ridge, d_river)``.
     """
     tree = tree if tree is not None else cKDTree(ridge_xy)
@@ -158,7 +164,14 @@ def sample_elevation(
     if valley_floor_slope > 0:
         hr = hr + float(valley_floor_slope) * np.minimum(dR, w)
     denom = np.maximum(dR + dT - w, 1e-9)
-    alpha = np.clip(dT / denom, 0.0, 1.0)
+    if crest_round and apex_m is not None and ridge_slope is not None:
+        # the line's crest gets the cone's curvature s / r0: f's radius r with R / ((L - r / 2) r) = s / r0
+        r0 = apex_m if np.ndim(apex_m) == 0 else np.asarray(apex_m, float)[iq]
+        rl = denom - np.sqrt(np.maximum(denom * denom - 2.0 * np.maximum(hq - hr, 0.0) * r0
+                                        / np.maximum(ridge_slope[iq], 1e-9), 0.0))
+        alpha = np.clip(apex_distance(dT, rl) / np.maximum(apex_distance(denom, rl), 1e-9), 0.0, 1.0)
+    else:
+        alpha = np.clip(dT / denom, 0.0, 1.0)
     if profile is None:
         h = np.where(dR < w, hr, (1.0 - alpha) * hq + alpha * hr)
     else:
@@ -180,6 +193,7 @@ def sample_elevation(
             g = np.maximum(floor_slope, floor_relief_ratio * np.maximum(hq - hr, 0.0) / denom)
         floor = np.minimum(hr + g * np.maximum(dR - w, 0.0), h)
         h = np.maximum(np.minimum(h, env), floor)
+
     return h, dT, dR
 
 
@@ -220,7 +234,7 @@ def foot_across_jumps(d0: np.ndarray, xy0: np.ndarray, z0: np.ndarray, dk: np.nd
 
 def flank_envelope(points: np.ndarray, ridge_xy: np.ndarray, ridge_z: np.ndarray, ridge_slope: np.ndarray,
                    *, ridge_floor: np.ndarray | None = None, k_neighbours: int = 16,
-                   tree: cKDTree | None = None, apex_m: float | None = None) -> np.ndarray:
+                   tree: cKDTree | None = None, apex_m: float | np.ndarray | None = None) -> np.ndarray:
     """Upper envelope of cones ``h(q) - s_q |p - q|`` over the nearest ridge points q.
 
     With ``ridge_floor``, the envelope never falls below the lowest ``ridge_floor`` of
@@ -244,6 +258,19 @@ def flank_envelope(points: np.ndarray, ridge_xy: np.ndarray, ridge_z: np.ndarray
     return _cone_envelope(*_nearest_k(tree, points, k_neighbours), ridge_z, ridge_slope, ridge_floor, apex_m)
 
 
+def apex_distance(d: np.ndarray, r0: float | np.ndarray) -> np.ndarray:
+    """The rounded cone's drop per unit slope at distance ``d`` from its apex: ``d^2 / (2 r0)`` within ``r0``,
+    ``d - r0 / 2`` beyond (continuous, slope 1 from ``r0`` on); ``r0`` 0 gives the sharp cone ``d``.
+
+    >>> apex_distance(np.array([0.0, 100.0, 300.0, 1000.0]), np.array([200.0, 200.0, 200.0, 0.0])).tolist()
+    [0.0, 25.0, 200.0, 1000.0]
+    """
+    d = np.asarray(d, float)
+    r0 = np.broadcast_to(np.asarray(r0, float), d.shape)
+    inner = d < r0
+    return np.where(inner, d * d / (2.0 * np.where(inner, r0, 1.0)), d - 0.5 * r0)
+
+
 def _nearest_k(tree: cKDTree, points: np.ndarray, k_neighbours: int) -> tuple[np.ndarray, np.ndarray]:
     """Distances and indices ``(n, k)`` of the ``k_neighbours`` nearest points of ``tree`` (at most all)."""
     k = min(k_neighbours, tree.n)
@@ -252,11 +279,10 @@ def _nearest_k(tree: cKDTree, points: np.ndarray, k_neighbours: int) -> tuple[np
 
 
 def _cone_envelope(dk: np.ndarray, ik: np.ndarray, ridge_z: np.ndarray, ridge_slope: np.ndarray,
-                   ridge_floor: np.ndarray | None, apex_m: float | None = None) -> np.ndarray:
+                   ridge_floor: np.ndarray | None, apex_m: float | np.ndarray | None = None) -> np.ndarray:
     """:func:`flank_envelope` of the nearest ridge points ``ik`` at distances ``dk`` (both ``(n, k)``)."""
     if apex_m is not None:
-        r0 = float(apex_m)
-        dk = np.where(dk < r0, dk * dk / (2.0 * r0), dk - 0.5 * r0)
+        dk = apex_distance(dk, apex_m if np.ndim(apex_m) == 0 else np.asarray(apex_m, float)[ik])
     env = np.max(ridge_z[ik] - ridge_slope[ik] * dk, axis=1)
     if ridge_floor is not None:
         env = np.maximum(env, np.min(ridge_floor[ik], axis=1))

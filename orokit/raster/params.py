@@ -199,6 +199,11 @@ class RenderParams:
         unused when ``ridge_max_slope`` is None.
         Defaults 0.25 and 300 m (session 17: renders of the 13 real trees within all six 5/6 -> 6/6 tune in seeds
         0 and 1, held out unchanged; andes-chile's slope 5.15 -> 3.28 of 4.00).
+    ridge_plateau_spacing_m : ``ridge_max_slope`` applies only to the pieces whose peak stands alone: the mean distance
+        from it to its 4 nearest other peaks is at least this (metres; :func:`orokit.raster.skeleton.lone_pieces`; with
+        the other cuts): a volcano on a plateau stands km from the next summit, a range's summits crowd along its
+        crests (session 19: the spread cut's pieces on the 13 shared trees, median spacing andes-chile 3.5 km,
+        everest, karakoram, alaska 1.8 km); None = no such cut; unused when ``ridge_max_slope`` is None.
     ridge_tail_flank_slope : the flank cones of the ridge points on a cut piece's tail (the crest past its steep part,
         running at most ``RIDGE_TAIL_SLOPE`` above its saddle, :func:`orokit.raster.skeleton.tail_points`; only the
         pieces ``ridge_max_slope`` applies to, and not within ``2 lam`` of a saddle) fall at most this steeply (m/m,
@@ -210,6 +215,11 @@ class RenderParams:
         ``s d^2 / (2 r0)`` below it within r0, ``s (d - r0 / 2)`` beyond (:func:`orokit.raster.interpolate.flank_envelope`):
         every render's crest was a knife edge (session 18, :mod:`orokit.validate.crest`: 100 m beside the crest the
         renders' ground lay 17-51 m down, the real DEMs' 2-36 m); None = sharp cones.
+    crest_relief_m : the samples' hillslopes and flank cones get a rounded crest whose radius follows the tree's local
+        relief gradient G at each ridge point: ``r0 = crest_relief_m x s / G`` (s the cone's slope; the crest's slope
+        reaches G this far from the crest line; :func:`orokit.raster.skeleton.crest_apex`): narrow crests in steep
+        ranges, broad round ones on plateaus and low hills. The rivers keep the sharp cones; takes precedence over
+        ``flank_apex_m`` in the samples; None = off.
     smooth_m : Gaussian sigma (metres) that rounds the skeleton raster's planar facets and creases
         (the TIN carries no information below its meshing distance ``lam``), faded to 0 within
         ``texture_clearance_m`` of peaks and saddles; 0 = off.
@@ -296,8 +306,10 @@ class RenderParams:
     ridge_plateau_drop: float | None = None
     ridge_plateau_spread: float | None = 0.25
     ridge_plateau_relief_m: float = 300.0
+    ridge_plateau_spacing_m: float | None = None
     ridge_tail_flank_slope: float | None = None
     flank_apex_m: float | None = None
+    crest_relief_m: float | None = None
     flank_depth_saddle_k: int = 16
     keep_hill_ratio: float = 0.0
     cut_slope: float = 0.0
@@ -365,6 +377,8 @@ class RenderParams:
         if self.ridge_plateau_spread is not None:
             if not float(self.ridge_plateau_spread) >= 0.0:  # NaN too
                 raise InputError(f"ridge_plateau_spread must be >= 0 or None, got {self.ridge_plateau_spread!r}")
+        if self.ridge_plateau_spacing_m is not None and not float(self.ridge_plateau_spacing_m) >= 0.0:  # NaN too
+            raise InputError(f"ridge_plateau_spacing_m must be >= 0 metres or None, got {self.ridge_plateau_spacing_m!r}")
         if self.ridge_tail_flank_slope is not None:
             if not float(self.ridge_tail_flank_slope) >= RIDGE_TAIL_SLOPE:  # NaN too
                 raise InputError(f"ridge_tail_flank_slope must be >= the crest's tail slope {RIDGE_TAIL_SLOPE} "
@@ -372,6 +386,8 @@ class RenderParams:
                                  f"{self.ridge_tail_flank_slope!r}")
         if self.flank_apex_m is not None and not float(self.flank_apex_m) > 0.0:  # NaN too
             raise InputError(f"flank_apex_m must be > 0 metres or None, got {self.flank_apex_m!r}")
+        if self.crest_relief_m is not None and not float(self.crest_relief_m) > 0.0:  # NaN too
+            raise InputError(f"crest_relief_m must be > 0 metres or None, got {self.crest_relief_m!r}")
         if self.river_blend_k is not None and not self.river_blend_k >= 2:
             raise InputError(f"river_blend_k must be >= 2 or None, got {self.river_blend_k!r}")
         if self.river_foot_band is not None and not float(self.river_foot_band) > 0.0:

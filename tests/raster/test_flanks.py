@@ -132,3 +132,80 @@ def test_rounded_cone_apex_rounds_the_crest_and_keeps_the_orometry():
     for bad in (0.0, -5.0, float("nan")):
         with pytest.raises(InputError, match="flank_apex_m"):
             RenderParams(flank_apex_m=bad)
+
+
+def test_rounded_hillslope_keeps_the_line_ends_and_has_the_cones_curvature():
+    """``sample_elevation`` with per-ridge-point apex radii and ``crest_round``: radius 0 gives the paper's line
+    exactly; a radius r0 gives ``h(q) - R f_r(d_T) / f_r(L)`` (``f_r`` = :func:`apex_distance` of radius r, R the
+    ridge's height above the bed, L the hillslope's length) with r such that the crest's curvature is the cone's,
+    ``s / r0``: the ridge and the valley floor's edge where they were, the crest round (brute force on one ridge point
+    and one river point; a short hillslope becomes the parabola from crest to river)."""
+    from orokit.raster.interpolate import apex_distance, sample_elevation
+
+    ridge_xy, ridge_z = np.array([[0.0, 0.0]]), np.array([1000.0])
+    river_xy, river_z, river_w = np.array([[2000.0, 0.0]]), np.array([0.0]), np.array([100.0])
+    x = np.linspace(0.0, 2000.0, 41)
+    pts = np.column_stack([x, np.zeros_like(x)])
+    kw = dict(ridge_slope=np.array([0.6]), k_neighbours=1, floor_slope=0.0)
+    line, _, _ = sample_elevation(pts, ridge_xy, ridge_z, river_xy, river_z, river_w, **kw)
+    same, _, _ = sample_elevation(pts, ridge_xy, ridge_z, river_xy, river_z, river_w, apex_m=np.array([0.0]),
+                                  crest_round=True, **kw)
+    np.testing.assert_allclose(same, line)
+    L, R = 1900.0, 1000.0
+    for r0 in (300.0, 5000.0):
+        got, _, _ = sample_elevation(pts, ridge_xy, ridge_z, river_xy, river_z, river_w, apex_m=np.array([r0]),
+                                     crest_round=True, **kw)
+        r = min(L - np.sqrt(max(L * L - 2.0 * R * r0 / 0.6, 0.0)), L)
+        want = np.where(x >= L, 0.0, R - R * apex_distance(x, r) / apex_distance(np.array(L), r))
+        env = R - 0.6 * apex_distance(x, r0)  # the cone caps with its own radius
+        np.testing.assert_allclose(got, np.minimum(want, np.maximum(env, 0.0)), atol=1e-9)
+        assert got[0] == R and got[-1] == 0.0
+        assert (got[1:8] > line[1:8] + 5.0).all()
+        if r < L:  # the crest's curvature is the cone's: 50 m out it lies s / r0 x 50^2 / 2 below the ridge
+            assert abs((R - got[1]) - 0.6 / r0 * 50.0 ** 2 / 2.0) < 1e-6
+        else:  # too short a hillslope for that curvature: the parabola
+            np.testing.assert_allclose(got[x < L], R * (1.0 - (x[x < L] / L) ** 2))
+
+
+def test_crest_relief_rounds_the_low_crests_keeps_the_steep_ones_and_the_orometry():
+    """``crest_relief_m``: each ridge point's apex radius is ``crest_relief_m x s / G`` (G the tree's local relief
+    gradient there): on a low-relief copy of the small tree (elevations / 5) the ground 100 m beside the crests
+    lies much nearer the crest than without the option, on the tree itself (5x the gradient) the radius is 5x
+    smaller; peaks and prominences stay the tree's."""
+    import orokit
+    from orokit.raster.render import render_elevation
+    from orokit.raster.skeleton import crest_apex
+    from orokit.validate.crest import crest_sections
+    from orokit.validate.roundtrip import compare_peaks
+    from orokit.topology.divide_tree import DivideTree
+
+    r = crest_apex(np.zeros((2, 2)) + [[0.0, 0.0]], np.array([500.0, 500.0]), np.array([0.6, 0.3]),
+                   np.array([0.2, 0.05]), length_m=80.0, saddle_xyz=np.zeros((0, 3)), clearance_m=400.0)
+    np.testing.assert_allclose(r, [240.0, 480.0])
+    base = small_tree()
+    low = DivideTree.from_arrays(base.peaks[["x", "y", "elevation"]].to_numpy() / [1, 1, 5],
+                                 base.saddles[["x", "y", "elevation"]].to_numpy() / [1, 1, 5],
+                                 base.edges[["peak_a", "peak_b", "saddle"]].to_numpy(), attrs=base.attrs)
+    drops = {}
+    for label, tree in (("low", low), ("tree", base)):
+        for relief in (None, 80.0):
+            z = render_elevation(tree, cell_size_m=50.0, erosion=False, rng=7,
+                                 params=RenderParams(crest_relief_m=relief))
+            p, s = tree.peaks[["x", "y"]].to_numpy(), tree.saddles[["x", "y"]].to_numpy()
+            e = tree.edges[["peak_a", "peak_b", "saddle"]].to_numpy()
+            cs = crest_sections(z.values, (0.0, 8000.0, 50.0), np.concatenate([p[e[:, 0]], p[e[:, 1]]]),
+                                np.concatenate([s[e[:, 2]], s[e[:, 2]]]), offsets_m=(100.0,), skip_peak_m=300.0,
+                                skip_saddle_m=500.0, border_m=300.0, search_m=100.0)
+            assert cs.drop.shape[0] >= 10
+            drops[label, relief] = float(cs.median()[0])
+            res = orokit.analyze(z, min_prominence_m=30.0, isolation=False)
+            comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=100.0)
+            assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+            np.testing.assert_allclose(np.sort(comp.peaks["raster_prominence"].to_numpy()),
+                                       np.sort(comp.peaks["prominence"].to_numpy()), atol=6.0)
+    print(drops)
+    assert drops["low", 80.0] < 0.7 * drops["low", None]
+    assert drops["tree", 80.0] > drops["low", 80.0]
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(InputError, match="crest_relief_m"):
+            RenderParams(crest_relief_m=bad)
