@@ -42,6 +42,10 @@ class TerrainSkeleton:
     edges: np.ndarray | None = None  # (m, 3) peak_a, peak_b, saddle (0..m-1, rows of node_xyz after the peaks)
 
 
+#: with ``crest_relief_m`` the samples lie at least this x lam from the ridges (0.5 x lam otherwise)
+CREST_SAMPLE_RATIO = 0.25
+
+
 def _tree_arrays(tree) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Peaks (n, 3), used saddles (m, 3) and edges (m, 3) with renumbered saddles."""
     if tree.n_peaks == 0:
@@ -516,7 +520,8 @@ def build_skeleton(
                                  apex_m=apex, crest_round=params.crest_relief_m is not None)
     if floor is not None:
         h = np.maximum(h, floor(pts))  # no ground below the tree's own floor (below every nearby saddle)
-    far = (np.minimum(dT, dR) >= 0.5 * lam)
+    # with round crests the samples come nearer the ridges (the TIN's first facet beside a crest spans to them)
+    far = (np.minimum(dT / (CREST_SAMPLE_RATIO if params.crest_relief_m is not None else 0.5), dR / 0.5) >= lam)
     far[samples.shape[0]:] = True  # keep the ring
     pts, h = pts[far], h[far]
     t["samples"] = time.perf_counter() - t0
