@@ -312,3 +312,47 @@ def test_ridge_tail_flank_slope_lays_the_spokes_into_the_plateau_and_keeps_the_o
         RenderParams(ridge_tail_flank_slope=0.01)
     with pytest.raises(InputError, match="ridge_tail_flank_slope"):
         RenderParams(ridge_tail_flank_slope=float("nan"))
+
+
+def test_ridge_plateau_spacing_keeps_the_cut_to_peaks_that_stand_alone():
+    """``ridge_plateau_spacing_m``: the cut (``ridge_max_slope``, its tails' gentle cones) applies only to pieces whose
+    peak lies, on average, at least that far from its 4 nearest other peaks. The lone volcano (its hills 11 km out)
+    keeps its cut and gentle tails; a copy of the tree with a crowd of summits 1-1.5 km around the volcano (a range)
+    loses both: its ground beside the pieces falls as without the option. Prominences stay the tree's."""
+    from orokit.raster.skeleton import lone_pieces
+    from orokit.topology.divide_tree import DivideTree
+    from orokit.validate.crest import crest_sections
+
+    lone = _volcano_tree()
+    p = lone.peaks[["x", "y", "elevation"]].to_numpy()
+    np.testing.assert_array_equal(lone_pieces(p[:1], p, 3000.0), [True])
+    ang = np.arange(6) * np.pi / 3.0
+    crowd = np.column_stack([15000.0 + 1200.0 * np.cos(ang), 15000.0 + 1200.0 * np.sin(ang), np.full(6, 4700.0)])
+    cs_ = np.column_stack([15000.0 + 600.0 * np.cos(ang), 15000.0 + 600.0 * np.sin(ang), np.full(6, 4600.0)])
+    s = lone.saddles[["x", "y", "elevation"]].to_numpy()
+    e = lone.edges[["peak_a", "peak_b", "saddle"]].to_numpy()
+    ranged = DivideTree.from_arrays(np.concatenate([p, crowd]), np.concatenate([s, cs_]),
+                                    np.concatenate([e, np.column_stack([np.zeros(6, int), 7 + np.arange(6),
+                                                                        6 + np.arange(6)])]), attrs=lone.attrs)
+    pr = ranged.peaks[["x", "y", "elevation"]].to_numpy()
+    assert not lone_pieces(pr[:1], pr, 3000.0)[0]
+    kw = dict(lam=200.0, ridge_max_slope=1.0, ridge_plateau_spread=None, flank_slope_relief_m=None,
+              ridge_tail_flank_slope=0.05)
+    drops = {}
+    for label, tree in (("lone", lone), ("ranged", ranged)):
+        for spacing in (None, 3000.0):
+            z = render_elevation(tree, cell_size_m=100.0, erosion=False, rng=5,
+                                 params=RenderParams(**kw, ridge_plateau_spacing_m=spacing))
+            cs = crest_sections(z.values, (0.0, 30000.0, 100.0), np.repeat(p[:1, :2], 6, axis=0), s[:, :2],
+                                offsets_m=(400.0,), skip_peak_m=2500.0, skip_saddle_m=1000.0)
+            drops[label, spacing] = float(cs.median()[0])
+            res = orokit.analyze(z, min_prominence_m=30.0, isolation=False)
+            comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=200.0)
+            assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+            np.testing.assert_allclose(np.sort(comp.peaks["raster_prominence"].to_numpy()),
+                                       np.sort(comp.peaks["prominence"].to_numpy()), atol=1.0)
+    print(drops)
+    assert drops["lone", 3000.0] == pytest.approx(drops["lone", None], abs=1e-6)  # the lone volcano: still cut
+    assert drops["ranged", None] < 25.0 and drops["ranged", 3000.0] > 2.0 * drops["ranged", None]
+    with pytest.raises(InputError, match="ridge_plateau_spacing_m"):
+        RenderParams(ridge_plateau_spacing_m=float("nan"))
