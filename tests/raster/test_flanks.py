@@ -203,8 +203,8 @@ def test_crest_relief_rounds_the_low_crests_keeps_the_steep_ones_and_the_orometr
             assert comp.recovered_share == 1.0 and len(comp.extra) == 0
             np.testing.assert_allclose(np.sort(comp.peaks["raster_prominence"].to_numpy()),
                                        np.sort(comp.peaks["prominence"].to_numpy()), atol=6.0)
-    print(drops)
-    assert drops["low", 80.0] < 0.7 * drops["low", None]
+    # seed 7: low 18.6 -> 7.4 m, the tree 25.6 -> 12.1 m
+    assert drops["low", 80.0] < 0.5 * drops["low", None]
     assert drops["tree", 80.0] > drops["low", 80.0]
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(InputError, match="crest_relief_m"):
