@@ -8,7 +8,7 @@ meanders) and the median crest width (first offset where the ground lies 25 m be
 ``benchmarks/render_realism.py --save DIR`` (one ``DIR/<region>.npy`` per region, same grid as the DEM). Pieces
 are split into those ``ridge_plateau_spread`` 0.25 / ``ridge_plateau_relief_m`` 300 selects
 (:func:`orokit.raster.skeleton.spread_pieces`: volcanoes on a plateau; with ``--spacing M`` also
-:func:`orokit.raster.skeleton.lone_pieces`, ``ridge_plateau_spacing_m``) and the others. Nothing is recorded.
+:func:`orokit.raster.skeleton.lone_pieces`, ``ridge_tail_spacing_m``) and the others. Nothing is recorded.
 
     python benchmarks/crest_sections.py --saved LABEL=DIR [--saved LABEL=DIR ...] [--group all] [--regions a,b]
 """
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--search", type=float, default=300.0,
                     help="centre each section on the highest ground within this many metres of the line (0: on it)")
     ap.add_argument("--spacing", type=float, default=None,
-                    help="select only pieces whose peak stands alone too (ridge_plateau_spacing_m, metres)")
+                    help="select only pieces whose peak stands alone too (ridge_tail_spacing_m, metres)")
     ap.add_argument("--cache", type=Path, default=Path.home() / ".cache" / "orokit" / "render_realism")
     a = ap.parse_args(argv)
     grids = {}

@@ -199,11 +199,6 @@ class RenderParams:
         unused when ``ridge_max_slope`` is None.
         Defaults 0.25 and 300 m (session 17: renders of the 13 real trees within all six 5/6 -> 6/6 tune in seeds
         0 and 1, held out unchanged; andes-chile's slope 5.15 -> 3.28 of 4.00).
-    ridge_plateau_spacing_m : ``ridge_max_slope`` applies only to the pieces whose peak stands alone: the mean distance
-        from it to its 4 nearest other peaks is at least this (metres; :func:`orokit.raster.skeleton.lone_pieces`; with
-        the other cuts): a volcano on a plateau stands km from the next summit, a range's summits crowd along its
-        crests (session 19: the spread cut's pieces on the 13 shared trees, median spacing andes-chile 3.5 km,
-        everest, karakoram, alaska 1.8 km); None = no such cut; unused when ``ridge_max_slope`` is None.
     ridge_tail_flank_slope : the flank cones of the ridge points on a cut piece's tail (the crest past its steep part,
         running at most ``RIDGE_TAIL_SLOPE`` above its saddle, :func:`orokit.raster.skeleton.tail_points`; only the
         pieces ``ridge_max_slope`` applies to, and not within ``2 lam`` of a saddle) fall at most this steeply (m/m,
@@ -211,6 +206,11 @@ class RenderParams:
         plain the crest crosses, and the ground beside it stays near its level instead of falling at the flank slope
         (a thin spoke across the plateau; session 18: andes-chile's render's ground 400 m beside its selected pieces
         lay 172 m below the line, the real DEM's 19 m); None = the flank slope.
+    ridge_tail_spacing_m : ``ridge_tail_flank_slope`` applies only to the pieces whose peak stands alone: the mean
+        distance from it to its 4 nearest other peaks is at least this (metres; :func:`orokit.raster.skeleton.lone_pieces`):
+        a volcano on a plateau stands km from the next summit, a range's summits crowd along its crests, whose real
+        ridges the gentle tails would flatten (session 19: the spread cut's pieces on the 13 shared trees, median
+        spacing andes-chile 3.5 km, everest, karakoram, alaska 1.8 km); None = every cut piece.
     flank_apex_m : the flank cones have a rounded apex of this radius r0 (metres): a ridge point's cone lies
         ``s d^2 / (2 r0)`` below it within r0, ``s (d - r0 / 2)`` beyond (:func:`orokit.raster.interpolate.flank_envelope`):
         every render's crest was a knife edge (session 18, :mod:`orokit.validate.crest`: 100 m beside the crest the
@@ -306,7 +306,7 @@ class RenderParams:
     ridge_plateau_drop: float | None = None
     ridge_plateau_spread: float | None = 0.25
     ridge_plateau_relief_m: float = 300.0
-    ridge_plateau_spacing_m: float | None = None
+    ridge_tail_spacing_m: float | None = None
     ridge_tail_flank_slope: float | None = None
     flank_apex_m: float | None = None
     crest_relief_m: float | None = None
@@ -377,8 +377,8 @@ class RenderParams:
         if self.ridge_plateau_spread is not None:
             if not float(self.ridge_plateau_spread) >= 0.0:  # NaN too
                 raise InputError(f"ridge_plateau_spread must be >= 0 or None, got {self.ridge_plateau_spread!r}")
-        if self.ridge_plateau_spacing_m is not None and not float(self.ridge_plateau_spacing_m) >= 0.0:  # NaN too
-            raise InputError(f"ridge_plateau_spacing_m must be >= 0 metres or None, got {self.ridge_plateau_spacing_m!r}")
+        if self.ridge_tail_spacing_m is not None and not float(self.ridge_tail_spacing_m) >= 0.0:  # NaN too
+            raise InputError(f"ridge_tail_spacing_m must be >= 0 metres or None, got {self.ridge_tail_spacing_m!r}")
         if self.ridge_tail_flank_slope is not None:
             if not float(self.ridge_tail_flank_slope) >= RIDGE_TAIL_SLOPE:  # NaN too
                 raise InputError(f"ridge_tail_flank_slope must be >= the crest's tail slope {RIDGE_TAIL_SLOPE} "

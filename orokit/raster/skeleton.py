@@ -376,8 +376,6 @@ def build_skeleton(
             if params.ridge_plateau_spread is not None:
                 cuts.append(spread_pieces(nodes[ridges.node1], p, s, params.ridge_plateau_spread,
                                            min_relief_m=params.ridge_plateau_relief_m))
-            if params.ridge_plateau_spacing_m is not None:
-                cuts.append(lone_pieces(nodes[ridges.node0], p, params.ridge_plateau_spacing_m))
             if cuts:
                 only = np.logical_and.reduce(cuts)
         seg_profile = steep_ridge_profile(nodes[ridges.node0], nodes[ridges.node1], params.ridge_max_slope,
@@ -423,7 +421,11 @@ def build_skeleton(
         near, _ = cKDTree(nodes[n:, :2]).query(rxy, workers=-1)
         rs = np.where(near > 2.0 * lam, np.minimum(rs, params.flank_max_slope), rs)
     if params.ridge_tail_flank_slope is not None and params.ridge_max_slope is not None and n < nodes.shape[0]:
-        tail = tail_points(ridge_lines, rxy, rz, rorig, nodes[ridges.node1], only=only)
+        tail_only = only
+        if params.ridge_tail_spacing_m is not None:
+            lone = lone_pieces(nodes[ridges.node0], p, params.ridge_tail_spacing_m)
+            tail_only = lone if only is None else only & lone
+        tail = tail_points(ridge_lines, rxy, rz, rorig, nodes[ridges.node1], only=tail_only)
         near, _ = cKDTree(nodes[n:, :2]).query(rxy, workers=-1)
         tail &= near > 2.0 * lam  # beside a saddle the cones stay steep: the saddle stays the highest pass
         rs = np.where(tail, np.minimum(rs, params.ridge_tail_flank_slope), rs)

@@ -314,11 +314,12 @@ def test_ridge_tail_flank_slope_lays_the_spokes_into_the_plateau_and_keeps_the_o
         RenderParams(ridge_tail_flank_slope=float("nan"))
 
 
-def test_ridge_plateau_spacing_keeps_the_cut_to_peaks_that_stand_alone():
-    """``ridge_plateau_spacing_m``: the cut (``ridge_max_slope``, its tails' gentle cones) applies only to pieces whose
+def test_ridge_tail_spacing_keeps_the_gentle_tails_to_peaks_that_stand_alone():
+    """``ridge_tail_spacing_m``: ``ridge_tail_flank_slope``'s gentle cones apply only to the tails of pieces whose
     peak lies, on average, at least that far from its 4 nearest other peaks. The lone volcano (its hills 11 km out)
-    keeps its cut and gentle tails; a copy of the tree with a crowd of summits 1-1.5 km around the volcano (a range)
-    loses both: its ground beside the pieces falls as without the option. Prominences stay the tree's."""
+    keeps its gentle tails; a copy of the tree with a crowd of summits 1.2 km around the volcano (a range) keeps the
+    cut but its tails keep the flank slope's cones: the ground beside them falls as without the option. Prominences
+    stay the tree's."""
     from orokit.raster.skeleton import lone_pieces
     from orokit.topology.divide_tree import DivideTree
     from orokit.validate.crest import crest_sections
@@ -342,7 +343,7 @@ def test_ridge_plateau_spacing_keeps_the_cut_to_peaks_that_stand_alone():
     for label, tree in (("lone", lone), ("ranged", ranged)):
         for spacing in (None, 3000.0):
             z = render_elevation(tree, cell_size_m=100.0, erosion=False, rng=5,
-                                 params=RenderParams(**kw, ridge_plateau_spacing_m=spacing))
+                                 params=RenderParams(**kw, ridge_tail_spacing_m=spacing))
             cs = crest_sections(z.values, (0.0, 30000.0, 100.0), np.repeat(p[:1, :2], 6, axis=0), s[:, :2],
                                 offsets_m=(400.0,), skip_peak_m=2500.0, skip_saddle_m=1000.0)
             drops[label, spacing] = float(cs.median()[0])
@@ -351,8 +352,8 @@ def test_ridge_plateau_spacing_keeps_the_cut_to_peaks_that_stand_alone():
             assert comp.recovered_share == 1.0 and len(comp.extra) == 0
             np.testing.assert_allclose(np.sort(comp.peaks["raster_prominence"].to_numpy()),
                                        np.sort(comp.peaks["prominence"].to_numpy()), atol=1.0)
-    # lone 17.9 m either way; ranged 18.1 m cut, 208.9 m with the spacing (the straight crest keeps its 0.6 cones)
+    # lone 17.9 m either way; ranged 18.1 m with every tail gentle, 67.5 m with the spacing (its tails' 0.6 cones)
     assert drops["lone", 3000.0] == pytest.approx(drops["lone", None], abs=1e-6)  # the lone volcano: still cut
     assert drops["ranged", None] < 25.0 and drops["ranged", 3000.0] > 2.0 * drops["ranged", None]
-    with pytest.raises(InputError, match="ridge_plateau_spacing_m"):
-        RenderParams(ridge_plateau_spacing_m=float("nan"))
+    with pytest.raises(InputError, match="ridge_tail_spacing_m"):
+        RenderParams(ridge_tail_spacing_m=float("nan"))
