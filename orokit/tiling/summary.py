@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from orokit.tiling.memory import release_free_heap
 from orokit.topology import _kernels as _k
 from orokit.topology.engine import Orometry, finalize_graph, saddle_order
 
@@ -38,6 +39,9 @@ __all__ = ["ChunkSummary", "chunk_summary", "merge_summaries", "finalize_summary
 
 _FIELDS = ("key", "z", "ismax", "bmax", "nmin", "nexit", "ea", "eb", "ez", "ekey")
 _NO_EDGES = np.empty(0, np.int64)
+#: a consuming merge hands the heap's free pages back after each merged field of this size or more
+#: (:func:`merge_summaries`): the top merges' parts would otherwise stay resident beside the merged summary
+_TRIM_BYTES = 8 << 20
 _OFFSETS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 
 
@@ -285,6 +289,10 @@ def merge_summaries(a: ChunkSummary, b: ChunkSummary, min_prominence_m: float, *
         if consume:
             setattr(a, f, _NO_EDGES)
             setattr(b, f, _NO_EDGES)
+            if merged[f].nbytes >= _TRIM_BYTES:
+                # the parts' arrays (under the mmap threshold) leave holes in the heap that the merged ones (over
+                # it, or larger than any hole) do not reuse: handed back now, or the root merge holds both
+                release_free_heap()
     if consume:
         a.release()
         b.release()

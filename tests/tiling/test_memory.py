@@ -198,3 +198,34 @@ print(heap()[0] - before, int(in_heap))
     # block from the heap and keeps its pages (what the fix is for)
     assert not in_heap["fix"] and grown["fix"] < 1 << 10
     assert in_heap["default"] and grown["default"] >= 20 << 10
+
+
+def test_a_consuming_merge_hands_the_free_heap_back_after_each_large_field(monkeypatch):
+    """The top merges' parts are freed field by field into the heap, whose pages stay resident beside the
+    merged summary unless handed back: a consuming merge trims after every field of ``_TRIM_BYTES`` or more
+    (here every field), and merges to the same summary as one that keeps its inputs."""
+    import numpy as np
+
+    import orokit.tiling.summary as ts
+
+    rng = np.random.default_rng(3)
+    z = np.pad(rng.normal(size=(40, 60)).cumsum(1), 1, constant_values=np.nan)
+    shape = (40, 60)
+
+    def halves():
+        return (ts.chunk_summary(z[:, :32], 0, 0, shape, 0.5), ts.chunk_summary(z[:, 30:], 0, 30, shape, 0.5))
+
+    kept = ts.merge_summaries(*halves(), 0.5, reduce=False)
+    calls = []
+    monkeypatch.setattr(ts, "release_free_heap", lambda: calls.append(1) or True)
+    monkeypatch.setattr(ts, "_TRIM_BYTES", 0)
+    a, b = halves()
+    got = ts.merge_summaries(a, b, 0.5, consume=True, reduce=False)
+    assert a.consumed and b.consumed and len(calls) == len(ts._FIELDS)
+    assert got.n_nodes > 20
+    for f in ts._FIELDS:
+        np.testing.assert_array_equal(getattr(got, f), getattr(kept, f), err_msg=f)
+    calls.clear()
+    monkeypatch.setattr(ts, "_TRIM_BYTES", 1 << 40)
+    ts.merge_summaries(*halves(), 0.5, consume=True, reduce=False)
+    assert calls == []  # small fields: no trim
