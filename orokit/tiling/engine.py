@@ -408,6 +408,10 @@ def _tiled_orometry(data, *, min_prominence_m: float, outside: str, scheduler: A
     if reused:
         logger.info("reusing %d chunk summaries from %s", reused, ckpt)
 
+    # the folder's path, not the folder: ``reduce`` below is recursive, a cycle that would keep the folder (removed
+    # when let go) alive until the garbage collector runs
+    spill_dir = None if spill is None else spill.path
+
     # one tree: every chunk's output is consumed by exactly one merge, so the scheduler
     # frees each pair as soon as it is merged (a depth-first order holds about log2(chunks)
     # summaries); settled isolation and chunk statistics travel up with the summaries
@@ -426,7 +430,7 @@ def _tiled_orometry(data, *, min_prominence_m: float, outside: str, scheduler: A
         big = not root and 8 * (rb[i1] - rb[i0]) * (cb[j1] - cb[j0]) >= H * W
         return dask.delayed(_merge_task)(
             a, b, float(min_prominence_m), reduce=not root,
-            spill=str(spill.path / f"summary_{i0}_{i1}_{j0}_{j1}.npz") if big and spill is not None else None,
+            spill=str(spill_dir / f"summary_{i0}_{i1}_{j0}_{j1}.npz") if big and spill_dir is not None else None,
             dask_key_name=f"orokit-merge-{i0}-{i1}-{j0}-{j1}-{data.name}"
         )
 
