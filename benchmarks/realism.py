@@ -110,10 +110,36 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
                      "contrast": {"real": ttype.ridge_contrast, "twin": ttree.attrs.get("ridge_contrast")},
                      "neighbour_gradient_fit": ttree.attrs.get("neighbour_gradient"),
                      "max_ridge_slope": ttree.attrs.get("max_ridge_slope")}
+    out["tree_fidelity"] = tree_fidelity(tree, ttree)
     if figures is not None:
         panels = {"real DEM": dem, "render of its real tree": ren, "free twin": twin}
         _figure(figures / f"{name}.png", name, {k: v for k, v in panels.items() if v is not None})
     return out
+
+
+def tree_fidelity(real_tree, twin_tree) -> dict:
+    """How far the twin tree's orometry lies from the real tree's, before rendering: W1 of log prominence and
+    of :func:`orokit.synthesis.saddles.plain_dominance` (both trees pruned at ``EPS``), and their medians."""
+    from scipy.stats import wasserstein_distance
+
+    from orokit.synthesis.orometry import planar_xy, tree_orometry
+    from orokit.synthesis.saddles import plain_dominance
+
+    vals = []
+    for t in (real_tree.prune(EPS), twin_tree.prune(EPS)):
+        x, y = planar_xy(t.peaks["x"].to_numpy(float), t.peaks["y"].to_numpy(float), t.crs)
+        z = t.peaks["elevation"].to_numpy(float)
+        s = t.saddles["elevation"].to_numpy(float)[t.edges["saddle"].to_numpy(np.int64)]
+        q = plain_dominance(z, x, y, t.edges["peak_a"].to_numpy(np.int64), t.edges["peak_b"].to_numpy(np.int64), s)
+        prom = tree_orometry(t)["prominence"].to_numpy(float)
+        keyed = np.isfinite(q)
+        vals.append((np.log(prom[keyed]), q[keyed]))
+    (lp_r, q_r), (lp_t, q_t) = vals
+    return {"log_prominence_w1": float(wasserstein_distance(lp_r, lp_t)),
+            "plain_dominance_w1": float(wasserstein_distance(q_r, q_t)),
+            "plain_dominance_median": [float(np.median(q_r)), float(np.median(q_t))],
+            "prominence_q10_q50_q90_m": [[float(v) for v in np.exp(np.quantile(lp, [0.1, 0.5, 0.9]))]
+                                         for lp in (lp_r, lp_t)]}
 
 
 def disk_drift(real_dem, real_analysis, twin, twin_analysis, radius_m: float = 10_000.0) -> dict:

@@ -244,6 +244,11 @@ class TerrainType:
         saddles (None: not recorded). With ``follow_forced_tail`` synthesis joins the peaks along higher ground
         until its tree's share is no larger (issue 11, session 19: twins 2-6 times the real share in every range,
         which no saddle assignment can undo). Edited like ``saddle_level``.
+    plain_dominance : histogram on [0, 1] of :func:`orokit.synthesis.saddles.plain_dominance` over the source
+        tree's peaks: each peak's prominence over its height above the lowest saddle of the 16 nearest ridges
+        (None: not recorded, types before session 19). With ``follow_plain_dominance`` the saddle OT matches it
+        as a third feature (issue 11, session 19: a dune field's real dunes stand with 90 % of their height
+        above the local plain (median), its twins' 74 %). Edits as for ``saddle_level``.
     """
 
     name: str
@@ -264,6 +269,7 @@ class TerrainType:
     max_ridge_slope: float | None = None
     saddle_level: float | None = None
     forced_tail: float | None = None
+    plain_dominance: FeatureHistogram | None = None
 
     def __post_init__(self) -> None:
         missing = set(FEATURES) - set(self.histograms)
@@ -326,6 +332,13 @@ class TerrainType:
             if not (np.isfinite(c) and 0 <= c <= 1):
                 raise SchemaError(f"forced_tail must be a number in [0, 1] or None, got {self.forced_tail!r}")
             object.__setattr__(self, "forced_tail", c)
+        if self.plain_dominance is not None:
+            h = self.plain_dominance
+            if not isinstance(h, FeatureHistogram):
+                raise SchemaError(f"plain_dominance must be a FeatureHistogram or None, got {type(h).__name__}")
+            if h.edges[0] < 0 or h.edges[-1] > 1:
+                raise SchemaError(f"plain_dominance histogram must lie in [0, 1], got edges {h.edges[0]:g}.."
+                                  f"{h.edges[-1]:g}; re-create the type with `orokit type`")
         if self.disks is not None:
             from orokit.synthesis.disks import check_disk_quantiles
 
@@ -450,6 +463,7 @@ class TerrainType:
         ridge_slope = tree_max_ridge_slope(tree, min_prominence_m) if tree is not None else None
         level = tree_saddle_level(tree, min_prominence_m) if tree is not None else None
         forced = tree_forced_tail(tree, min_prominence_m) if tree is not None else None
+        plain = tree_plain_dominance(tree, min_prominence_m) if tree is not None else None
         prov = {
             "area_km2": float(area_km2),
             "n_peaks": int(len(p)),
@@ -463,7 +477,8 @@ class TerrainType:
                    isolation_basis, prov, bands, source_crs=src_crs, source_center=center,
                    disks=_disk_record(x, y, z, prom, crs, extent, min_prominence_m), gradient=gradient,
                    ridge_contrast=contrast, neighbour_gradient=_neighbour_gradient(*planar_xy(x, y, crs), z),
-                   max_ridge_slope=ridge_slope, saddle_level=level, forced_tail=forced)
+                   max_ridge_slope=ridge_slope, saddle_level=level, forced_tail=forced,
+                   plain_dominance=plain)
 
     @classmethod
     def from_divide_tree(cls, tree: Any, *, area_km2: float, min_prominence_m: float = 30.0,
@@ -598,11 +613,13 @@ class TerrainType:
                 "neighbour_gradient": None if drop_gradient else self.neighbour_gradient,
                 "max_ridge_slope": self.max_ridge_slope if keep_slope else None,
                 "saddle_level": self.saddle_level if keep_slope else None,
-                "forced_tail": self.forced_tail if keep_slope else None}
+                "forced_tail": self.forced_tail if keep_slope else None,
+                "plain_dominance": self.plain_dominance if keep_slope else None}
 
     def with_density(self, peak_density_per_km2: float) -> "TerrainType":
         return self._edited(f"density {peak_density_per_km2:g}", peak_density_per_km2=float(peak_density_per_km2),
-                            neighbour_gradient=None, max_ridge_slope=None, saddle_level=None, forced_tail=None)
+                            neighbour_gradient=None, max_ridge_slope=None, saddle_level=None, forced_tail=None,
+                            plain_dominance=None)
 
     def with_rho(self, rho: float) -> "TerrainType":
         return self._edited(f"rho {rho:g}", rho=float(rho))
@@ -631,6 +648,7 @@ class TerrainType:
             "max_ridge_slope": self.max_ridge_slope,
             "saddle_level": self.saddle_level,
             "forced_tail": self.forced_tail,
+            "plain_dominance": None if self.plain_dominance is None else self.plain_dominance.to_dict(),
         }
 
     @classmethod
@@ -653,12 +671,11 @@ class TerrainType:
                        source_crs=data.get("source_crs"),
                        source_center=None if data.get("source_center") is None else tuple(data["source_center"]),
                        texture=data.get("texture"), disks=data.get("disks"),
-                       gradient=None if data.get("gradient") is None else FeatureHistogram(
-                           tuple(float(e) for e in data["gradient"]["edges"]), tuple(data["gradient"]["counts"]),
-                           bool(data["gradient"].get("open_last", False))),
+                       gradient=_optional_histogram(data.get("gradient")),
                        ridge_contrast=data.get("ridge_contrast"),
                        neighbour_gradient=data.get("neighbour_gradient"), max_ridge_slope=data.get("max_ridge_slope"),
-                       saddle_level=data.get("saddle_level"), forced_tail=data.get("forced_tail"))
+                       saddle_level=data.get("saddle_level"), forced_tail=data.get("forced_tail"),
+                       plain_dominance=_optional_histogram(data.get("plain_dominance")))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, SchemaError):
                 raise
@@ -859,6 +876,33 @@ def tree_forced_tail(tree: Any, min_prominence_m: float = 30.0, quantile: float 
     v = forced_tail(tree.peaks["elevation"].to_numpy(float), tree.edges["peak_a"].to_numpy(np.int64),
                     tree.edges["peak_b"].to_numpy(np.int64), float(np.quantile(prom, quantile)))
     return v if np.isfinite(v) else None
+
+
+def tree_plain_dominance(tree: Any, min_prominence_m: float = 30.0, k: int = 16) -> FeatureHistogram | None:
+    """Histogram (40 bins on [0, 1]) of :func:`orokit.synthesis.saddles.plain_dominance` over the peaks of a
+    Divide Tree pruned at ``min_prominence_m`` (planar metres; None below 4 peaks)."""
+    from orokit.synthesis.orometry import planar_xy
+    from orokit.synthesis.saddles import plain_dominance
+
+    tree = tree.prune(min_prominence_m) if min_prominence_m > 0 else tree
+    if tree.n_peaks < 4:
+        return None
+    x, y = planar_xy(tree.peaks["x"].to_numpy(float), tree.peaks["y"].to_numpy(float), tree.crs)
+    s = tree.saddles["elevation"].to_numpy(float)[tree.edges["saddle"].to_numpy(np.int64)]
+    v = plain_dominance(tree.peaks["elevation"].to_numpy(float), x, y, tree.edges["peak_a"].to_numpy(np.int64),
+                        tree.edges["peak_b"].to_numpy(np.int64), s, k=k)
+    v = v[np.isfinite(v)]
+    if v.size < 2:
+        return None
+    return FeatureHistogram.from_values(v, np.linspace(0.0, 1.0, N_LINEAR_BINS + 1))
+
+
+def _optional_histogram(data: Any) -> FeatureHistogram | None:
+    """A :class:`FeatureHistogram` from its ``to_dict`` form (None stays None)."""
+    if data is None:
+        return None
+    return FeatureHistogram(tuple(float(e) for e in data["edges"]), tuple(data["counts"]),
+                            bool(data.get("open_last", False)))
 
 
 def _neighbour_gradient(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> float | None:

@@ -217,6 +217,14 @@ class SynthesisParams:
         came closest), so the high peaks are joined along high ground as in the source (off, with an
         :class:`~orokit.errors.OrokitWarning`, for a type without the record or with several types). An
         option, off (issue 11, session 19: see NOTES).
+    follow_plain_dominance : the saddle OT matches the type's ``plain_dominance`` histogram as a third feature
+        beside dominance and prominence (:func:`orokit.synthesis.saddles.assign_saddle_elevations`): each
+        peak's prominence over its height above the lowest saddle of the 16 nearest ridges, so a dune's key
+        saddle lies on the plain as often as in the source (off, with an :class:`~orokit.errors.OrokitWarning`,
+        for a type without the record). The plain step runs only in rounds where its max-bin error exceeds
+        :data:`~orokit.synthesis.saddles.PLAIN_GATE` times the other two's, and keeps the saddles of peaks whose
+        value already lies in its target's bin. An option, off (issue 11, session 19: sahara's twin tree 0.13 ->
+        0.07-0.08 in W1 of the real tree's values, at a cost in prominence fidelity; see NOTES).
     Measured for ``follow_gradient`` and the 4 km ``auto_elevation_m`` (``benchmarks/realism.py
     --twin-only``, 13 regions, seeds 0-2, session 7, load 6-9): twins' disks classified as their own
     region at least as often as the real disks under the spatial hold-out in 10, 9, 10 of 12 regions
@@ -257,13 +265,14 @@ class SynthesisParams:
     disk_rank_draws: int = 8
     disk_rank_tolerance: float = 0.05
     follow_forced_tail: bool = False
+    follow_plain_dominance: bool = False
 
     def __post_init__(self) -> None:
         if self.use_bands not in ("auto", True, False):
             raise InputError(f"use_bands must be 'auto', True or False, got {self.use_bands!r}")
         for name in ("border_trend", "border_density", "follow_gradient", "follow_ridge_contrast", "follow_ridge_slope",
                      "follow_neighbour_gradient", "fine_needs_reach", "follow_saddle_level", "follow_disk_rank",
-                     "follow_forced_tail"):
+                     "follow_forced_tail", "follow_plain_dominance"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise InputError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.saddle_placement not in ("targeted", "paper"):
@@ -514,11 +523,12 @@ def synthesize_divide_tree(
     if level_target is not None:
         weights += [w for w in SADDLE_LEVEL_WEIGHTS if w > weights[0]]
     level_fit: dict[str, Any] | None = None
+    plain = p.follow_plain_dominance and _plain_targets_recorded(types)
     state = rng.bit_generator.state
     tried: list[tuple[float, float, Any, Any]] = []
     for w in weights:
         rng.bit_generator.state = state  # every weight tried from the same draws
-        out = _saddle_elevations(types, peaks, px, py, a, b, sz, movable, eps, p, rng, slope_cap, w)
+        out = _saddle_elevations(types, peaks, px, py, a, b, sz, movable, eps, p, rng, slope_cap, w, plain)
         if level_target is None:
             break
         from orokit.synthesis.saddles import saddle_level
@@ -575,6 +585,7 @@ def synthesize_divide_tree(
             "saddle_level": level_fit,
             "disk_rank": rank_fit,
             "forced_tail": tail_fit,
+            "plain_dominance": bool(plain),
         },
     )
     logger.info("synthesized %d peaks, %d ridges in %.2f s (OT rounds %d)", tree.n_peaks, a.size,
@@ -723,6 +734,16 @@ def _saddle_level_target(types: list[TerrainType]) -> float | None:
                       OrokitWarning, stacklevel=3)
         return None
     return float(types[0].saddle_level)
+
+
+def _plain_targets_recorded(types: list[TerrainType]) -> bool:
+    """Whether every type records ``plain_dominance`` (else a warning: ``follow_plain_dominance`` does nothing)."""
+    missing = [t.name for t in types if t.plain_dominance is None]
+    if missing:
+        warnings.warn(f"follow_plain_dominance does nothing here: terrain type {missing[0]!r} records no "
+                      "plain_dominance (a type made before session 19); remake it with `orokit type` to follow it",
+                      OrokitWarning, stacklevel=3)
+    return not missing
 
 
 def _ridge_slope_target(types: list[TerrainType]) -> float | None:
@@ -897,8 +918,10 @@ def _ridges(px: np.ndarray, py: np.ndarray, peaks: _PeakSet, fragment: DivideTre
 
 def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray, py: np.ndarray, a: np.ndarray,
                        b: np.ndarray, sz0: np.ndarray, movable: np.ndarray, eps: float, p: SynthesisParams,
-                       rng: np.random.Generator, max_ridge_slope: float | None = None, level_weight: float = 0.0):
-    """OT saddle elevations; with use_bands="auto", the target set that matches the type's marginals better."""
+                       rng: np.random.Generator, max_ridge_slope: float | None = None, level_weight: float = 0.0,
+                       plain: bool = False):
+    """OT saddle elevations; with use_bands="auto", the target set that matches the type's marginals better
+    (with ``plain``, the types' ``plain_dominance`` is a third feature of the OT)."""
     from orokit.synthesis.saddles import assign_saddle_elevations, enforce_min_prominence, max_bin_errors
 
     z, ptype = peaks.z, peaks.ptype
@@ -907,12 +930,18 @@ def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray
     modes = {"auto": [False, True] if has_bands else [False], True: [True], False: [False]}[p.use_bands]
     best: tuple[float, np.ndarray, dict, int, bool] | None = None
     for mode in modes:
-        cand, info = assign_saddle_elevations(z, px, py, a, b, sz0, _saddle_targets(types, ptype, z, mode),
+        cand, info = assign_saddle_elevations(z, px, py, a, b, sz0, _saddle_targets(types, ptype, z, mode, plain),
                                               movable=movable, max_iterations=p.max_ot_iterations,
                                               max_ridge_slope=max_ridge_slope,
                                               level_weight=level_weight, rng=rng)
         cand, below_c = enforce_min_prominence(z, a, b, cand, eps)
         score = max(max_bin_errors(z, a, b, cand, marginal))
+        if plain:  # judged as the OT's rounds are: the plain dominance too, over PLAIN_GATE
+            from orokit.synthesis.saddles import PLAIN_GATE, plain_dominance
+
+            pe = max_bin_errors(z, a, b, cand, _saddle_targets(types, ptype, z, False, True),
+                                plain_dominance(z, px, py, a, b, cand))[2]
+            score = max(score, pe / PLAIN_GATE)
         logger.debug("saddle targets %s: worst max-bin error %.4f", "per band" if mode else "marginal", score)
         if best is None or score < best[0]:
             best = (score, cand, info, below_c, mode)
@@ -921,8 +950,8 @@ def _saddle_elevations(types: list[TerrainType], peaks: _PeakSet, px: np.ndarray
     return sz, ot_info, below, band_mode
 
 
-def _saddle_targets(types, ptype: np.ndarray, z: np.ndarray, use_bands: bool):
-    """Target histograms per (type, elevation band) group."""
+def _saddle_targets(types, ptype: np.ndarray, z: np.ndarray, use_bands: bool, plain: bool = False):
+    """Target histograms per (type, elevation band) group (with ``plain``, each type's ``plain_dominance``)."""
     from orokit.synthesis.saddles import SaddleTargets
     from orokit.synthesis.terrain_type import band_histograms
 
@@ -942,7 +971,7 @@ def _saddle_targets(types, ptype: np.ndarray, z: np.ndarray, use_bands: bool):
         prom.extend(ph)
         dom.extend(dh)
         owner.extend([t] * len(ph))
-    return SaddleTargets(group, dom, prom, owner)
+    return SaddleTargets(group, dom, prom, owner, [types[t].plain_dominance for t in owner] if plain else None)
 
 
 def peaks_table(tree: DivideTree):
