@@ -43,6 +43,20 @@ def assert_keeps_small_tree(dem, *, atol: float = 6.0):
     return comp
 
 
+def assert_keeps_tree(tree: DivideTree, dem, *, distance_tol_m: float = 100.0, atol: float = 6.0):
+    """A render of ``tree`` analysed at 30 m: every tree peak found within ``distance_tol_m``, no other one, and the
+    raster's prominences the tree's within ``atol`` (sorted). Returns the comparison."""
+    import orokit
+    from orokit.validate.roundtrip import compare_peaks
+
+    res = orokit.analyze(dem, min_prominence_m=30.0, isolation=False)
+    comp = compare_peaks(tree, res.peaks, min_prominence_m=30.0, distance_tol_m=distance_tol_m)
+    assert comp.recovered_share == 1.0 and len(comp.extra) == 0
+    np.testing.assert_allclose(np.sort(comp.peaks["raster_prominence"].to_numpy()),
+                               np.sort(comp.peaks["prominence"].to_numpy()), atol=atol)
+    return comp
+
+
 def one_peak() -> DivideTree:
     return DivideTree.from_arrays([[4000.0, 4000.0, 900.0]], np.empty((0, 3)), np.empty((0, 3)),
                                   attrs={"extent": [0.0, 0.0, 8000.0, 8000.0]})

@@ -9,10 +9,11 @@ import hashlib
 import numpy as np
 import pytest
 
-from orokit.errors import InputError, OrokitWarning, SchemaError
+from orokit.errors import InputError, OrokitWarning
 from orokit.synthesis.saddles import forced_tail
-from orokit.synthesis.terrain_type import TerrainType
 from orokit.synthesis.tree import SynthesisParams, synthesize_divide_tree
+
+from helpers.type_records import check_optional_record
 
 FAST = {"follow_neighbour_gradient": False}
 
@@ -60,12 +61,7 @@ def test_type_records_the_forced_tail_by_brute_force(synthesized_type):
     assert keyed.sum() == prom.size
     assert t.forced_tail == pytest.approx(float((forced[keyed] >= np.quantile(prom, 0.9)).mean()))
     assert 0 < t.forced_tail < 1
-    assert TerrainType.from_dict(t.to_dict()).forced_tail == t.forced_tail
-    bad = t.to_dict()
-    bad["forced_tail"] = 1.5
-    with pytest.raises(SchemaError, match="forced_tail"):
-        TerrainType.from_dict(bad)
-    assert t.shifted("elevation", 100.0).forced_tail == t.forced_tail
+    check_optional_record(t, "forced_tail", 1.5)
     assert t.scaled("prominence", 1.5).forced_tail is None
     assert t.with_density(t.peak_density_per_km2 * 2).forced_tail is None
 

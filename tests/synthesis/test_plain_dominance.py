@@ -11,12 +11,14 @@ import pandas as pd
 import pytest
 from scipy.stats import wasserstein_distance
 
-from orokit.errors import InputError, OrokitWarning, SchemaError
+from orokit.errors import InputError, OrokitWarning
 from orokit.synthesis.ridges import delaunay_mst
 from orokit.synthesis.saddles import plain_dominance
 from orokit.synthesis.terrain_type import FeatureHistogram, TerrainType
 from orokit.synthesis.tree import SynthesisParams, synthesize_divide_tree
 from orokit.topology.divide_tree import DivideTree
+
+from helpers.type_records import check_optional_record
 
 
 def _plain_by_hand(tree: DivideTree, k: int = 16) -> np.ndarray:
@@ -83,14 +85,7 @@ def test_type_records_plain_dominance(dune_type):
     want = FeatureHistogram.from_values(_plain_by_hand(tree.prune(30.0)), np.linspace(0.0, 1.0, 41))
     assert t.plain_dominance is not None
     np.testing.assert_allclose(t.plain_dominance.counts, want.counts)
-    back = TerrainType.from_dict(t.to_dict())
-    assert back.plain_dominance == t.plain_dominance
-    old = t.to_dict()
-    del old["plain_dominance"]  # a type written before session 19
-    assert TerrainType.from_dict(old).plain_dominance is None
-    with pytest.raises(SchemaError, match="plain_dominance"):
-        dataclasses.replace(t, plain_dominance=FeatureHistogram((0.0, 0.5, 1.5), (1.0, 1.0)))
-    assert t.shifted("elevation", 300.0).plain_dominance == t.plain_dominance
+    check_optional_record(t, "plain_dominance", FeatureHistogram((0.0, 0.5, 1.5), (1.0, 1.0)))
     assert t.scaled("prominence", 1.5).plain_dominance is None and t.with_density(0.5).plain_dominance is None
 
 

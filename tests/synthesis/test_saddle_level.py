@@ -8,11 +8,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from orokit.errors import InputError, OrokitWarning, SchemaError
+from orokit.errors import InputError, OrokitWarning
 from orokit.synthesis.ridges import delaunay_mst
 from orokit.synthesis.saddles import SaddleTargets, assign_saddle_elevations, max_bin_errors
-from orokit.synthesis.terrain_type import TerrainType
 from orokit.synthesis.tree import SynthesisParams, synthesize_divide_tree
+
+from helpers.type_records import check_optional_record
 
 
 def _off_level_by_hand(x, y, a, b, sz, k: int = 16) -> float:
@@ -84,14 +85,7 @@ def _level_by_hand(tree, k: int = 16) -> float:
 def test_type_records_saddle_level(synthesized_type):
     tree, t = synthesized_type
     assert t.saddle_level == pytest.approx(_level_by_hand(tree.prune(30.0)))
-    back = TerrainType.from_dict(t.to_dict())
-    assert back.saddle_level == t.saddle_level
-    old = t.to_dict()
-    del old["saddle_level"]  # a type written before session 17
-    assert TerrainType.from_dict(old).saddle_level is None
-    with pytest.raises(SchemaError, match="saddle_level"):
-        dataclasses.replace(t, saddle_level=1.5)
-    assert t.shifted("elevation", 300.0).saddle_level == t.saddle_level
+    check_optional_record(t, "saddle_level", 1.5)
     assert t.scaled("prominence", 1.5).saddle_level is None and t.with_density(0.5).saddle_level is None
 
 
