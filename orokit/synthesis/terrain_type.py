@@ -306,32 +306,18 @@ class TerrainType:
             if not (np.isfinite(c) and c >= 0):
                 raise SchemaError(f"ridge_contrast must be a finite number >= 0 or None, got {self.ridge_contrast!r}")
             object.__setattr__(self, "ridge_contrast", c)
-        for name in ("neighbour_gradient", "max_ridge_slope"):
+        for name, hi, what in (("neighbour_gradient", np.inf, "a finite number >= 0 (m/m)"),
+                               ("max_ridge_slope", np.inf, "a finite number >= 0 (m/m)"),
+                               ("saddle_level", 1.0, "a number in [0, 1]"), ("forced_tail", 1.0, "a number in [0, 1]")):
             v = getattr(self, name)
             if v is not None:
                 try:
                     c = float(v)
                 except (TypeError, ValueError):
                     c = float("nan")
-                if not (np.isfinite(c) and c >= 0):
-                    raise SchemaError(f"{name} must be a finite number >= 0 (m/m) or None, got {v!r}")
+                if not (np.isfinite(c) and 0 <= c <= hi):
+                    raise SchemaError(f"{name} must be {what} or None, got {v!r}")
                 object.__setattr__(self, name, c)
-        if self.saddle_level is not None:
-            try:
-                c = float(self.saddle_level)
-            except (TypeError, ValueError):
-                c = float("nan")
-            if not (np.isfinite(c) and 0 <= c <= 1):
-                raise SchemaError(f"saddle_level must be a number in [0, 1] or None, got {self.saddle_level!r}")
-            object.__setattr__(self, "saddle_level", c)
-        if self.forced_tail is not None:
-            try:
-                c = float(self.forced_tail)
-            except (TypeError, ValueError):
-                c = float("nan")
-            if not (np.isfinite(c) and 0 <= c <= 1):
-                raise SchemaError(f"forced_tail must be a number in [0, 1] or None, got {self.forced_tail!r}")
-            object.__setattr__(self, "forced_tail", c)
         if self.plain_dominance is not None:
             h = self.plain_dominance
             if not isinstance(h, FeatureHistogram):
@@ -848,17 +834,28 @@ def tree_max_ridge_slope(tree: Any, min_prominence_m: float = 30.0, quantile: fl
 def tree_saddle_level(tree: Any, min_prominence_m: float = 30.0, k: int = 16) -> float | None:
     """:func:`orokit.synthesis.saddles.saddle_level` of a Divide Tree pruned at ``min_prominence_m`` (planar
     metres; None below 4 peaks or when undefined)."""
-    from orokit.synthesis.orometry import planar_xy
     from orokit.synthesis.saddles import saddle_level
+
+    arrays = _planar_tree(tree, min_prominence_m)
+    if arrays is None:
+        return None
+    v = saddle_level(*arrays, k=k)
+    return v if np.isfinite(v) and 0 <= v <= 1 else None
+
+
+def _planar_tree(tree: Any, min_prominence_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                                               np.ndarray] | None:
+    """A Divide Tree pruned at ``min_prominence_m`` as arrays ``z, x, y, a, b, s`` (planar metres; saddle elevation
+    per ridge), or None below 4 peaks."""
+    from orokit.synthesis.orometry import planar_xy
 
     tree = tree.prune(min_prominence_m) if min_prominence_m > 0 else tree
     if tree.n_peaks < 4:
         return None
     x, y = planar_xy(tree.peaks["x"].to_numpy(float), tree.peaks["y"].to_numpy(float), tree.crs)
     s = tree.saddles["elevation"].to_numpy(float)[tree.edges["saddle"].to_numpy(np.int64)]
-    v = saddle_level(tree.peaks["elevation"].to_numpy(float), x, y, tree.edges["peak_a"].to_numpy(np.int64),
-                     tree.edges["peak_b"].to_numpy(np.int64), s, k=k)
-    return v if np.isfinite(v) and 0 <= v <= 1 else None
+    return (tree.peaks["elevation"].to_numpy(float), x, y, tree.edges["peak_a"].to_numpy(np.int64),
+            tree.edges["peak_b"].to_numpy(np.int64), s)
 
 
 def tree_forced_tail(tree: Any, min_prominence_m: float = 30.0, quantile: float = 0.9) -> float | None:
@@ -881,16 +878,12 @@ def tree_forced_tail(tree: Any, min_prominence_m: float = 30.0, quantile: float 
 def tree_plain_dominance(tree: Any, min_prominence_m: float = 30.0, k: int = 16) -> FeatureHistogram | None:
     """Histogram (40 bins on [0, 1]) of :func:`orokit.synthesis.saddles.plain_dominance` over the peaks of a
     Divide Tree pruned at ``min_prominence_m`` (planar metres; None below 4 peaks)."""
-    from orokit.synthesis.orometry import planar_xy
     from orokit.synthesis.saddles import plain_dominance
 
-    tree = tree.prune(min_prominence_m) if min_prominence_m > 0 else tree
-    if tree.n_peaks < 4:
+    arrays = _planar_tree(tree, min_prominence_m)
+    if arrays is None:
         return None
-    x, y = planar_xy(tree.peaks["x"].to_numpy(float), tree.peaks["y"].to_numpy(float), tree.crs)
-    s = tree.saddles["elevation"].to_numpy(float)[tree.edges["saddle"].to_numpy(np.int64)]
-    v = plain_dominance(tree.peaks["elevation"].to_numpy(float), x, y, tree.edges["peak_a"].to_numpy(np.int64),
-                        tree.edges["peak_b"].to_numpy(np.int64), s, k=k)
+    v = plain_dominance(*arrays, k=k)
     v = v[np.isfinite(v)]
     if v.size < 2:
         return None
