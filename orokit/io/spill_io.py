@@ -24,7 +24,7 @@ from orokit.io.atomic import atomic_path, hold_run_path, is_no_space_error, remo
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["spill_folder", "SpillFolder", "remove_folder", "remove_stale_folders", "run_tag", "run_ended", "on_this_host", "may_remove",
+__all__ = ["take_spill", "spill_folder", "SpillFolder", "remove_folder", "remove_stale_folders", "run_tag", "run_ended", "on_this_host", "may_remove",
            "write_spill", "read_spill", "SpilledColumns"]
 
 #: name prefixes of the temporary folders of a run (spills of the chunk tasks, the peak table's columns)
@@ -213,6 +213,13 @@ def read_spill(path: PathLike, names: tuple[str, ...] | None = None) -> dict[str
     """The arrays written by :func:`write_spill` (never unpickled): all, or only ``names``."""
     with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
         return {k: data[k] for k in (data.files if names is None else names)}
+
+
+def take_spill(path: PathLike) -> dict[str, np.ndarray]:
+    """:func:`read_spill` of every array, then the file removed (a spill read once, by its one consumer)."""
+    data = read_spill(path)
+    Path(path).unlink()
+    return data
 
 
 class SpilledColumns:

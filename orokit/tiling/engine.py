@@ -21,7 +21,7 @@ import numpy as np
 
 from orokit.errors import TilingError
 from orokit.io.checkpoint_io import chunk_path, discard_chunk, open_checkpoint, read_chunk, write_chunk
-from orokit.io.spill_io import SpillFolder, read_spill, remove_stale_folders, write_spill
+from orokit.io.spill_io import SpillFolder, read_spill, remove_stale_folders, take_spill, write_spill
 from orokit.tiling.isolation import SettledIsolation, block_stats, chunk_isolation
 from orokit.tiling.memory import release_free_heap
 from orokit.tiling.summary import ChunkSummary, chunk_summary, finalize_summary, merge_summaries
@@ -225,8 +225,7 @@ def _summary_of(part: _Part) -> ChunkSummary:
     s = part[0]
     if not isinstance(s, _SpilledSummary):
         return s
-    data = read_spill(s.path)
-    Path(s.path).unlink()
+    data = take_spill(s.path)
     out = ChunkSummary.from_npz(data)
     del data
     return out
