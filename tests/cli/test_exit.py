@@ -72,7 +72,7 @@ from orokit.cli import main
 done = []
 class SlowStart(threading.Thread):  # Thread.start waits for the thread to begin
     def _bootstrap_inner(self):
-        time.sleep(1.5)
+        time.sleep(4.0)  # long beside the signals at 0.3 / 0.6 s, so a loaded machine cannot blur them
         done.append(1)
         super()._bootstrap_inner()
 main._catch_signals()
@@ -80,7 +80,7 @@ for at in (0.3, 0.6)[:int(sys.argv[3])]:  # a second signal: at once
     threading.Timer(at, os.kill, (os.getpid(), getattr(signal, sys.argv[1]))).start()
 try:
     if sys.argv[2] == "join":
-        worker = threading.Thread(target=lambda: (time.sleep(1.5), done.append(1)), daemon=True)
+        worker = threading.Thread(target=lambda: (time.sleep(4.0), done.append(1)), daemon=True)
         worker.start()
         worker.join()
     else:
