@@ -211,7 +211,7 @@ def _figure(path: Path, name: str, panels: dict) -> None:
 def _markdown(results: dict) -> str:
     from orokit.validate.landform import FLOORS
 
-    stats = list(FLOORS) + ["relief_5km", "drainage_share", "drainage_density"]
+    stats = list(FLOORS) + ["relief_5km", "low_slope_deg", "drainage_share", "drainage_density"]
     lines = []
     for kind in ("render", "twin"):
         if not any(kind in r for r in results.values()):

@@ -27,7 +27,7 @@ if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
 
 __all__ = [
-    "CHANNEL_AREA_M2", "FLAT_SLOPE_DEG", "N_QUANTILES", "POWER_BANDS_M", "LandformStatistics", "band_power",
+    "CHANNEL_AREA_M2", "FLAT_SLOPE_DEG", "LOW_GROUND_SHARE", "N_QUANTILES", "POWER_BANDS_M", "LandformStatistics", "band_power",
     "drainage_area", "landform_statistics", "laplacian", "slope_and_relief", "spectral_slope",
 ]
 
@@ -37,6 +37,9 @@ N_QUANTILES = 512
 FLAT_SLOPE_DEG = 2.0
 #: drainage area above which a cell counts as a channel (m^2)
 CHANNEL_AREA_M2 = 1.0e6
+#: share of the cells, lowest first, whose slopes make the low-ground distribution (valley floors,
+#: basins and the gorges near the base level)
+LOW_GROUND_SHARE = 0.1
 #: wavelength bands (metres) of :func:`band_power`: below 0.5 km (texture, curvature), the
 #: spectral-slope range 0.5-10 km in four bands
 POWER_BANDS_M: tuple[tuple[float, float], ...] = ((0.0, 300.0), (300.0, 500.0), (500.0, 1000.0),
@@ -61,6 +64,7 @@ class LandformStatistics:
     drainage_share: float
     drainage_density: float
     relief_window_m: tuple[float, float]
+    low_slope_deg: NDArray[np.float64]
 
     @property
     def summary(self) -> dict[str, float]:
@@ -75,6 +79,7 @@ class LandformStatistics:
             "curvature_iqr_per_km": float(np.quantile(self.curvature_per_km, 0.75)
                                           - np.quantile(self.curvature_per_km, 0.25)),
             "spectral_slope": self.spectral_slope,
+            "median_low_slope_deg": float(np.median(self.low_slope_deg)),
             "drainage_share": self.drainage_share,
             "drainage_density_km_per_km2": self.drainage_density,
         }
@@ -224,6 +229,15 @@ def _drainage(z: NDArray[np.float64], dx: float, dy: float) -> tuple[float, floa
     return float(chan.mean()), length_km / total_km2
 
 
+def _low_ground(z: NDArray[np.float64], slope: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Slopes of the lowest :data:`LOW_GROUND_SHARE` of the valid cells (ties at the cut included)."""
+    ok = np.isfinite(z) & np.isfinite(slope)
+    if not ok.any():
+        return np.empty(0)
+    cut = float(np.quantile(z[ok], LOW_GROUND_SHARE))
+    return slope[ok & (z <= cut)]
+
+
 def _window_cells(window_m: float, dx: float, dy: float) -> tuple[int, int]:
     """Odd window size in cells (rows, cols) closest to ``window_m``, at least 3."""
     def odd(n: float) -> int:
@@ -259,6 +273,8 @@ def landform_statistics(dem: xr.DataArray, *, relief_windows_m: tuple[float, flo
     5. Spectral slope beta over wavelengths 0.5-10 km (:func:`spectral_slope`).
     6. Drainage (fastscapelib flow routing): share of cells draining > 1 km2 and the
        drainage density of those channels (km/km2).
+    7. Low ground: the slopes of the lowest :data:`LOW_GROUND_SHARE` of the cells by elevation (a
+       mountain range's lowest ground is its gorges; a flat basin at the base level is not).
     NaN cells are left out of every distribution.
     """
     z = np.asarray(dem.values, dtype=np.float64)
@@ -290,6 +306,7 @@ def landform_statistics(dem: xr.DataArray, *, relief_windows_m: tuple[float, flo
         drainage_share=dshare,
         drainage_density=ddens,
         relief_window_m=(float(relief_windows_m[0]), float(relief_windows_m[1])),
+        low_slope_deg=_quantiles(_low_ground(z, slope)),
     )
 
 

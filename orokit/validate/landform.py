@@ -51,6 +51,7 @@ DISTANCES: dict[str, str] = {
     "hypsometry": "elevation normalised to [0, 1] by min/max, W1",
     "curvature_per_km": "Laplacian curvature distribution, W1 (1/km)",
     "spectral_slope": "spectral slope beta over 0.5-10 km wavelengths, |difference|",
+    "low_slope_deg": "slope of the lowest tenth of the cells (valley floors, gorges), W1 (degrees)",
     "drainage_share": "share of cells draining > 1 km2, |difference|",
     "drainage_density": "drainage density of channels > 1 km2, |difference| (km/km2)",
 }
@@ -79,6 +80,7 @@ def landform_distances(a: LandformStatistics, b: LandformStatistics, *, relief_s
         "hypsometry": wasserstein(a.hypsometry, b.hypsometry),
         "curvature_per_km": wasserstein(a.curvature_per_km, b.curvature_per_km),
         "spectral_slope": abs(a.spectral_slope - b.spectral_slope),
+        "low_slope_deg": wasserstein(a.low_slope_deg, b.low_slope_deg),
         "drainage_share": abs(a.drainage_share - b.drainage_share),
         "drainage_density": abs(a.drainage_density - b.drainage_density),
     }

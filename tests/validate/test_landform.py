@@ -102,6 +102,23 @@ def test_valley_drainage(make_dem):
     assert st.drainage_density == pytest.approx(dens, rel=0.05)
 
 
+def test_low_ground_sees_a_flat_basin_where_the_real_valley_is_a_gorge(make_dem):
+    """Low ground = the slopes of the lowest tenth of the cells: a V valley's are its flanks' slope;
+    the same valley filled to a flat floor at its base level has a flat lowest tenth, while the
+    slope distribution over the whole grid barely moves."""
+    res, ny, nx = 30.0, 100, 101
+    y, x = np.mgrid[0:ny, 0:nx]
+    v = 0.5 * np.abs(x - 50) * res + 0.01 * (ny - y) * res
+    st = landform_statistics(make_dem(v, res=res))
+    flank = math.degrees(math.atan(math.hypot(0.5, 0.01)))
+    assert np.median(st.low_slope_deg) == pytest.approx(flank, abs=0.5)
+    basin = np.maximum(v, np.quantile(v, 0.12))  # the lowest 12 % of the cells flat at one level
+    t = compare_landforms(make_dem(v, res=res), make_dem(basin, res=res))
+    assert np.median(landform_statistics(make_dem(basin, res=res)).low_slope_deg) < 2.0
+    assert t.loc["low_slope_deg", "distance"] > 15.0 and not t.loc["low_slope_deg", "ok"]
+    assert t.loc["slope_deg", "distance"] < 5.0  # the whole-grid slope distribution hardly sees it
+
+
 def test_halves_yardstick_is_symmetric_and_zero_against_itself(make_dem):
     res = 30.0
     z = _fbm((200, 160), res, 2.6, seed=5)
