@@ -162,6 +162,15 @@ def _count_add(qx, qy, cx0, cy0, cstep, cnx, cny, have, radius):
 
 
 @njit(cache=True)
+def _dip_bin(h, qx, qy, grid, gx0, gytop, gcx, gcy, thr):
+    """1 when ``grid`` at (qx, qy) (rows from the north edge ``gytop``) stands ``thr`` or more above ``h``, else 0."""
+    ny, nx = grid.shape
+    col = min(max(int((qx - gx0) / gcx), 0), nx - 1)
+    row = min(max(int((gytop - qy) / gcy), 0), ny - 1)
+    v = grid[row, col]
+    return 1 if np.isfinite(v) and v - h >= thr else 0
+
+@njit(cache=True)
 def throw_darts(
     px, py, z, n_start, n_end,
     fixed, fx, fy,
@@ -174,6 +183,7 @@ def throw_darts(
     cx0, cy0, cstep, cnx, cny, covered, n_covered, cover_target, radius, disk_w,
     grad_edges, grad_ne, grad_open, grad_target, grad_have, grad_on,
     kx0, ky0, kstep, knx, kny, count_target, count_have, count_w,
+    dip_grid, dip_x0, dip_ytop, dip_cx, dip_cy, dip_thr, dip_target, dip_have, dip_on,
 ):
     """Place peaks ``n_start..n_end-1`` (sorted by decreasing elevation) by dart throwing.
 
@@ -202,6 +212,12 @@ def throw_darts(
     ``f = (k + 1) / n`` of them. A candidate's weight is multiplied by ``exp(count_w D)``, D the
     mean of ``(f T - have) / sqrt(f T + 1)`` over the centres within ``radius`` of it (clipped to
     [-3, 3]); ``count_have`` is updated in place.
+
+    Forced-tail target (``dip_on[t]``): a candidate on a ridge of the earlier passes splits it, and the lower
+    peaks placed there force a prominence of ``dip_grid`` (the ridge's lower end, rows from the north edge
+    ``dip_ytop``) minus ``z`` on that end. Dips from ``dip_thr[t]`` up fill bin 1, the others bin 0; the
+    candidate's weight is multiplied by the remaining demand of its bin (``dip_target[t]`` minus
+    ``dip_have[t]``, updated in place, plus ``floor_w`` times the target).
     Returns per placed peak the isolation distance (NaN for the first).
     """
     m = cand_x.shape[1]
@@ -255,6 +271,9 @@ def throw_darts(
                                        + floor_w * grad_target[t, b3])
                         else:
                             wc = wc * floor_w * 0.1
+                    if dip_on[t]:
+                        b4 = _dip_bin(z[k], qx, qy, dip_grid, dip_x0, dip_ytop, dip_cx, dip_cy, dip_thr[t])
+                        wc = wc * (max(dip_target[t, b4] - dip_have[t, b4], 0.0) + floor_w * dip_target[t, b4])
                 if use_disks:
                     gain = _disk_gain(qx, qy, cx0, cy0, cstep, cnx, cny, covered, radius, False)
                     wc = wc * math.exp(-disk_w * abs(gain - demand) / per_disk)
@@ -297,6 +316,9 @@ def throw_darts(
                 b3 = _bin((z[choice_nb] - z[k]) / max(choice_d, 1e-9), grad_edges[t, : grad_ne[t]], grad_open[t])
                 if b3 >= 0:
                     grad_have[t, b3] += 1.0
+            if dip_on[t]:
+                b4 = _dip_bin(z[k], qx, qy, dip_grid, dip_x0, dip_ytop, dip_cx, dip_cy, dip_thr[t])
+                dip_have[t, b4] += 1.0
         if n_covered[0] < n_centres:
             n_covered[0] += _disk_gain(qx, qy, cx0, cy0, cstep, cnx, cny, covered, radius, True)
         if use_count:

@@ -20,7 +20,7 @@ from orokit.synthesis.disks import disk_centres
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["pass_bounds", "draw_candidates", "ridge_density", "void_density", "place_peaks", "disk_count_targets"]
+__all__ = ["pass_bounds", "draw_candidates", "ridge_density", "ridge_end_grid", "void_density", "place_peaks", "disk_count_targets"]
 
 
 def pass_bounds(n: int, n_passes: int) -> list[tuple[int, int]]:
@@ -56,24 +56,54 @@ def draw_candidates(
     return x, y, row, col
 
 
+def _ridge_cells(x: np.ndarray, y: np.ndarray, a: np.ndarray, b: np.ndarray,
+                 domain: Domain) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Grid row, col of points every half cell along each ridge ``a``-``b``, and the ridge of each point."""
+    cx, cy = domain.cell
+    step = 0.5 * min(cx, cy)
+    length = np.hypot(x[b] - x[a], y[b] - y[a])
+    k = np.maximum(2, np.ceil(length / step).astype(np.int64) + 1)
+    e = np.repeat(np.arange(a.size), k)
+    t = np.concatenate([np.linspace(0, 1, kk) for kk in k]) if a.size < 64 else _ramp(k)
+    sx = x[a][e] + t * (x[b] - x[a])[e]
+    sy = y[a][e] + t * (y[b] - y[a])[e]
+    row, col = domain.cell_index(sx, sy)
+    return row, col, e
+
+
 def ridge_density(x: np.ndarray, y: np.ndarray, a: np.ndarray, b: np.ndarray, domain: Domain,
                   sigma_m: float) -> np.ndarray:
     """Ridges rasterised on the domain grid and blurred (Gaussian of ``sigma_m``), max 1."""
     grid = np.zeros(domain.shape)
     if a.size:
         cx, cy = domain.cell
-        step = 0.5 * min(cx, cy)
-        length = np.hypot(x[b] - x[a], y[b] - y[a])
-        k = np.maximum(2, np.ceil(length / step).astype(np.int64) + 1)
-        e = np.repeat(np.arange(a.size), k)
-        t = np.concatenate([np.linspace(0, 1, kk) for kk in k]) if a.size < 64 else _ramp(k)
-        sx = x[a][e] + t * (x[b] - x[a])[e]
-        sy = y[a][e] + t * (y[b] - y[a])[e]
-        row, col = domain.cell_index(sx, sy)
+        row, col, _ = _ridge_cells(x, y, a, b, domain)
         np.add.at(grid, (row, col), 1.0)
         grid = gaussian_filter(grid, sigma=max(sigma_m / min(cx, cy), 0.5))
     m = grid.max()
     return grid / m if m > 0 else grid
+
+
+def ridge_end_grid(x: np.ndarray, y: np.ndarray, z: np.ndarray, a: np.ndarray, b: np.ndarray, domain: Domain,
+                reach_m: float) -> np.ndarray:
+    """Per grid cell, the highest lower end (elevation, m) of the ridges passing within ``reach_m`` (NaN: none).
+
+    A lower peak placed there splits that ridge: the tree's path from its lower end to higher ground then
+    dips to the new peak, which forces the end a prominence of at least this minus the new peak's elevation
+    (:func:`orokit.synthesis.saddles.forced_prominence`).
+    """
+    from scipy.ndimage import maximum_filter
+
+    grid = np.full(domain.shape, -np.inf)
+    if a.size:
+        row, col, e = _ridge_cells(x, y, a, b, domain)
+        np.maximum.at(grid, (row, col), np.minimum(z[a], z[b])[e])
+        cx, cy = domain.cell
+        ry, rx = max(int(reach_m // cy), 0), max(int(reach_m // cx), 0)
+        oy, ox = np.ogrid[-ry: ry + 1, -rx: rx + 1]
+        disk = (ox * cx) ** 2 + (oy * cy) ** 2 <= max(reach_m, 0.5 * min(cx, cy)) ** 2
+        grid = maximum_filter(grid, footprint=disk, mode="constant", cval=-np.inf)
+    return np.where(np.isfinite(grid), grid, np.nan)
 
 
 def void_density(x: np.ndarray, y: np.ndarray, domain: Domain, sigma_m: float) -> np.ndarray:
@@ -127,6 +157,7 @@ def place_peaks(
     elevation_tolerance: float = 0.05,
     gradients: list | None = None,
     gradient_tail: float | None = None,
+    forced_tails: list | None = None,
     rng: SeedLike = None,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Positions of peaks sorted by decreasing elevation ``z``.
@@ -154,6 +185,12 @@ def place_peaks(
     gradient_tail : the open last bin of each gradient histogram (values from the real tree's 99th
         percentile up) ends at this times its lower edge: a steeper candidate counts as out of range
         (None: open, any steepness fills that bin).
+    forced_tails : per type, None or ``(share, threshold_m)``: the type's ``forced_tail`` and the prominence it
+        is counted at (its 90th percentile). A candidate within half the pass's spacing of a ridge of the earlier
+        passes whose lower end stands ``threshold_m`` or more above the peak (:func:`ridge_end_grid`) would split
+        it and force that prominence on the end; the share of the type's peaks placed so is followed like the
+        isolation histograms, so once that share is used the passes' lower peaks go beside the higher ones, on
+        their flanks, rather than into the low gaps on the ridges between them (None: off).
 
     Returns
     -------
@@ -205,6 +242,19 @@ def place_peaks(
                 ge[t, ne_g[t] - 1] = max(float(gradient_tail), 1.0) * h.edges[-1]
                 gopen[t] = False
     gh = np.zeros_like(gt)
+    dip_thr = np.full(n_types, np.inf)
+    dip_target = np.zeros((n_types, 2))
+    dip_on = np.zeros(n_types, np.bool_)
+    dip_grid = np.full((1, 1), np.nan)
+    if forced_tails is not None:
+        for t, rec in enumerate(forced_tails):
+            if rec is not None:
+                share, threshold = float(rec[0]), float(rec[1])
+                dip_thr[t] = threshold
+                dip_target[t] = np.array([1.0 - share, share]) * max(counts_t[t] - 1, 0)
+                dip_on[t] = True
+    dip_have = np.zeros_like(dip_target)
+    dip_cx, dip_cy = domain.cell
     # grid hash of placed peaks: cells about the final mean spacing
     spacing = np.sqrt(domain.width * domain.height / max(n, 1))
     gcell = max(spacing, 1e-6)
@@ -250,6 +300,7 @@ def place_peaks(
             de, ne_d, dopen, dt, dh, ae, ne_a, at, ah, head, nxt,
             domain.x0, domain.y0, gcell, gnx, gny, floor_w, *cover, ge, ne_g, gopen, gt, gh, gon,
             *count_grid, count_have, float(disk_count_weight),
+            dip_grid, domain.x0, domain.y0 + domain.height, dip_cx, dip_cy, dip_thr, dip_target, dip_have, dip_on,
         )
         if p_i + 1 < len(passes):
             fa = fb = None
@@ -264,8 +315,12 @@ def place_peaks(
                 dens_r = dens_r + void_weight * void_density(px[:e], py[:e], domain, sigma_m)
                 dens_r /= max(1.0, float(dens_r.max()))
             density = controls.density * (ridge_floor + (1 - ridge_floor) * dens_r)
+            if dip_on.any():
+                dip_grid = ridge_end_grid(px[:e], py[:e], z[:e], a, b, domain, sigma_m)
         logger.debug("pass %d: placed peaks %d..%d", p_i, s, e)
     info = {"passes": passes, "disk_centres": int(cover[3] * cover[4]) if cover[-1] > 0 else 0}
+    if dip_on.any():
+        info["forced_tail"] = {"target": dip_target, "placed": dip_have}
     if count_grid[5].size:
         info["disk_count"] = {"target": count_grid[5], "placed": count_have}
     return px, py, info

@@ -217,6 +217,13 @@ class SynthesisParams:
         came closest), so the high peaks are joined along high ground as in the source (off, with an
         :class:`~orokit.errors.OrokitWarning`, for a type without the record or with several types). An
         option, off (issue 11, session 19: see NOTES).
+    forced_tail_placement : the dart throwing follows the type's ``forced_tail``: a candidate on a ridge of the
+        earlier passes whose lower end stands the type's 90th-percentile prominence or more above the peak (it would
+        split the ridge and force that prominence on the end) fills a tail whose share of the peaks is the type's,
+        so once it is used each pass's lower peaks go beside the higher ones, on their flanks, rather than into the
+        low gaps between them (:func:`orokit.synthesis.darts.place_peaks`; off, with an
+        :class:`~orokit.errors.OrokitWarning`, for types without the record). An option, off (issue 11, session
+        20: see NOTES).
     follow_plain_dominance : the saddle OT matches the type's ``plain_dominance`` histogram as a third feature
         beside dominance and prominence (:func:`orokit.synthesis.saddles.assign_saddle_elevations`): each
         peak's prominence over its height above the lowest saddle of the 16 nearest ridges, so a dune's key
@@ -265,6 +272,7 @@ class SynthesisParams:
     disk_rank_draws: int = 8
     disk_rank_tolerance: float = 0.05
     follow_forced_tail: bool = False
+    forced_tail_placement: bool = False
     follow_plain_dominance: bool = False
 
     def __post_init__(self) -> None:
@@ -272,7 +280,7 @@ class SynthesisParams:
             raise InputError(f"use_bands must be 'auto', True or False, got {self.use_bands!r}")
         for name in ("border_trend", "border_density", "follow_gradient", "follow_ridge_contrast", "follow_ridge_slope",
                      "follow_neighbour_gradient", "fine_needs_reach", "follow_saddle_level", "follow_disk_rank",
-                     "follow_forced_tail", "follow_plain_dominance"):
+                     "follow_forced_tail", "forced_tail_placement", "follow_plain_dominance"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise InputError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.saddle_placement not in ("targeted", "paper"):
@@ -471,6 +479,8 @@ def synthesize_divide_tree(
     t1 = time.perf_counter()
     from orokit.synthesis.darts import place_peaks
 
+    dip_tails = _forced_tail_placement(types) if p.forced_tail_placement else None
+
     def throw(ctrl, gen):
         return place_peaks(
             peaks.z, peaks.ptype, peaks.fixed, peaks.fxy, ctrl, domain,
@@ -480,7 +490,8 @@ def synthesize_divide_tree(
             disk_count_weight=float(p.disk_count_weight),
             elevation_tolerance=float(p.elevation_tolerance),
             gradients=[t.gradient for t in types] if p.follow_gradient else None,
-            gradient_tail=None if p.gradient_tail is None else float(p.gradient_tail), rng=gen,
+            gradient_tail=None if p.gradient_tail is None else float(p.gradient_tail), forced_tails=dip_tails,
+            rng=gen,
         )
 
     def place(fields: Any, ctrl: Any, gen: Any) -> tuple[Any, np.ndarray, np.ndarray, Any, Any]:
@@ -588,6 +599,9 @@ def synthesize_divide_tree(
             "plain_dominance": bool(plain),
         },
     )
+    if "forced_tail" in dart_info:  # only with forced_tail_placement: trees made without it keep their bytes
+        tree.attrs["forced_tail_placement"] = {k: [[round(float(v), 2) for v in row] for row in dart_info["forced_tail"][k]]
+                                               for k in ("target", "placed")}
     logger.info("synthesized %d peaks, %d ridges in %.2f s (OT rounds %d)", tree.n_peaks, a.size,
                 timings["total"], ot_info["iterations"])
     return tree
@@ -675,11 +689,27 @@ def _forced_tail_target(types: list[TerrainType]) -> tuple[float, float] | None:
     if why is not None or share is None:
         warnings.warn(f"follow_forced_tail does nothing here: {why}", OrokitWarning, stacklevel=3)
         return None
-    h = types[0].histograms["prominence"]
+    return float(share), _prominence_q90(types[0])
+
+
+def _prominence_q90(ttype: TerrainType) -> float:
+    """The 90th percentile of a type's prominence histogram (m), where ``forced_tail`` is counted."""
+    h = ttype.histograms["prominence"]
     p = h.probabilities()
     cdf = np.concatenate([[0.0], np.cumsum(p)])
     e = np.asarray(h.edges, float)
-    return float(share), float(np.interp(0.9, cdf / cdf[-1], e))
+    return float(np.interp(0.9, cdf / cdf[-1], e))
+
+
+def _forced_tail_placement(types: list[TerrainType]) -> list[tuple[float, float] | None] | None:
+    """Per type, its ``forced_tail`` and 90th-percentile prominence for ``forced_tail_placement`` (None for a type
+    without the record); None, with a warning, when no type has the record."""
+    tails = [None if t.forced_tail is None else (float(t.forced_tail), _prominence_q90(t)) for t in types]
+    if all(v is None for v in tails):
+        warnings.warn("forced_tail_placement does nothing here: no terrain type has a forced_tail record "
+                      "(re-create it with `orokit type`)", OrokitWarning, stacklevel=3)
+        return None
+    return tails
 
 
 #: weights of the saddle OT's level term tried, in order, by ``follow_saddle_level``
