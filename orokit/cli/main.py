@@ -88,10 +88,9 @@ class LazyGroup(click.Group):
 
     def resolve_command(self, ctx: click.Context,  # noqa: D102 - the process's settings
                         args: list[str]) -> tuple[str | None, click.Command | None, list[str]]:
-        name, cmd, rest = super().resolve_command(ctx, args)
-        if _CONSOLE["process"] and name is not None:
-            apply_process_settings(name)
-        return name, cmd, rest
+        if _CONSOLE["process"] and args and args[0] in COMMANDS:
+            apply_process_settings(args[0])  # before the command's module imports numpy (and its BLAS threads)
+        return super().resolve_command(ctx, args)
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return list(COMMANDS)
@@ -213,11 +212,16 @@ def apply_process_settings(command: str) -> None:
     while a Python-bound thread (numba's loader, an import) held it, at each call (measured, session 16:
     the read's conversion of 60.5 M cells beside a Python thread 0.15-0.23 s of such waits per stripe
     thread against 0.03-0.09 at 0.5 ms; the finalize beside the tables' imports, median of 6, 0.21 s
-    against 0.07). Other commands run with the defaults (not measured).
+    against 0.07); one OpenBLAS thread unless the user set ``OPENBLAS_NUM_THREADS`` (before numpy is
+    imported: with two cores or more numpy's OpenBLAS starts a worker thread that spins 2^28 TSC cycles,
+    ~0.1 s, beside the imports; analyze makes no BLAS call). Other commands run with the defaults (not
+    measured).
     """
     if command != "analyze":
         return
     import os
+
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
     from orokit.tiling.memory import fix_mmap_threshold, limit_gdal_cache, limit_malloc_arenas
 

@@ -21,10 +21,12 @@ import shutil
 import uuid
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
-from orokit._typing import PathLike
 from orokit.errors import OrokitError, OutputError
+
+if TYPE_CHECKING:  # orokit._typing imports numpy: not before the CLI's process settings (numpy's BLAS threads)
+    from orokit._typing import PathLike
 
 logger = logging.getLogger(__name__)
 

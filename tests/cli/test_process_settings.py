@@ -65,7 +65,8 @@ main()
 
 
 def _console(*args: str, env: dict | None = None, script: str = SCRIPT) -> str:
-    base = {k: v for k, v in os.environ.items() if k not in ("ARROW_DEFAULT_MEMORY_POOL", "GDAL_CACHEMAX")}
+    base = {k: v for k, v in os.environ.items()
+            if k not in ("ARROW_DEFAULT_MEMORY_POOL", "GDAL_CACHEMAX", "OPENBLAS_NUM_THREADS")}
     res = subprocess.run([sys.executable, "-c", script, *args], capture_output=True, text=True, timeout=300,
                          env={**base, **(env or {})})
     assert res.returncode == 0, res.stderr
@@ -147,6 +148,33 @@ def test_console_script_bounds_gdals_cache_for_analyze(tmp_path):
     assert _console(*args, str(tmp_path / "b"), "--chunks", "32", script=GDAL_CACHE) == str(32 * 2**20)
     assert _console(*args, str(tmp_path / "c"), env={"GDAL_CACHEMAX": "123456789"}, script=GDAL_CACHE) == "123456789"
     assert _console("data", "list", script=GDAL_CACHE) != str(32 * 2**20)
+
+
+#: the console script's process (numpy not imported before it starts), printing at its end the
+#: ``OPENBLAS_NUM_THREADS`` of its environment and the threads of numpy's OpenBLAS (threadpoolctl, a
+#: dependency of scikit-learn)
+BLAS = """
+import atexit, os, sys
+def report():
+    from threadpoolctl import threadpool_info
+    print(os.environ.get("OPENBLAS_NUM_THREADS"), [i["num_threads"] for i in threadpool_info()
+                                                  if i["internal_api"] == "openblas" and "numpy" in i["filepath"]])
+atexit.register(report)
+from orokit.cli.main import main
+sys.argv = ["orokit", *sys.argv[1:]]
+main()
+"""
+
+
+def test_console_script_runs_analyze_with_one_blas_thread(tmp_path):
+    """``orokit analyze`` sets ``OPENBLAS_NUM_THREADS=1`` before numpy loads (with two cores or more numpy's
+    OpenBLAS started a worker thread that spun ~0.1 s beside the imports; analyze makes no BLAS call); a user's
+    value stays; another command keeps OpenBLAS's default."""
+    dem = str(_dem(tmp_path / "dem.tif"))
+    args = ["-q", "analyze", dem, "--no-progress", "--min-prominence", "5", "-o"]
+    assert _console(*args, str(tmp_path / "a"), script=BLAS) == "1 [1]"
+    assert _console(*args, str(tmp_path / "b"), script=BLAS, env={"OPENBLAS_NUM_THREADS": "2"}).startswith("2 [")
+    assert _console("data", "list", script=BLAS).startswith("None ")
 
 
 @pytest.mark.parametrize("args", [["--version"], ["data", "list"]])
