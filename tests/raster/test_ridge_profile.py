@@ -353,3 +353,25 @@ def test_ridge_tail_spacing_keeps_the_gentle_tails_to_peaks_that_stand_alone():
     assert drops["ranged", None] < 25.0 and drops["ranged", 3000.0] > 2.0 * drops["ranged", None]
     with pytest.raises(InputError, match="ridge_tail_spacing_m"):
         RenderParams(ridge_tail_spacing_m=float("nan"))
+
+
+def test_ridge_tail_defaults_lay_the_lone_volcanos_tails_into_the_plateau():
+    """The defaults (session 20): ``ridge_tail_flank_slope`` 0.1 on the tails of pieces whose peak stands alone
+    (``ridge_tail_spacing_m`` 3000). The lone volcano's six crests pass the default spread cut; with the defaults the
+    ground 400 m beside their tails falls no faster than the tails' 0.1 cones (34 m), with the option off at the
+    flank slope (64 m). Peaks and prominences stay the tree's."""
+    from orokit.validate.crest import crest_sections
+
+    assert (RenderParams().ridge_tail_spacing_m, RenderParams().ridge_tail_flank_slope) == (3000.0, 0.1)
+    tree = _volcano_tree()
+    p = tree.peaks[["x", "y"]].to_numpy()
+    drops = {}
+    for label, kw in (("defaults", {}), ("off", {"ridge_tail_flank_slope": None})):
+        z = render_elevation(tree, cell_size_m=100.0, erosion=False, rng=5, params=RenderParams(lam=200.0, **kw))
+        cs = crest_sections(z.values, (0.0, 30000.0, 100.0), np.repeat(p[:1], 6, axis=0),
+                            tree.saddles[["x", "y"]].to_numpy(), offsets_m=(400.0,), skip_peak_m=2500.0,
+                            skip_saddle_m=1000.0)
+        assert cs.drop.shape[0] >= 6 * 25
+        drops[label] = float(cs.median()[0])
+        assert_keeps_tree(tree, z, distance_tol_m=200.0, atol=1.0)
+    assert drops["off"] > 50.0 and drops["defaults"] <= 0.1 * 400.0 + 1.0 and drops["defaults"] < 0.6 * drops["off"]
