@@ -47,10 +47,10 @@ def test_bounded_beds_against_brute_force(seed):
 
 
 def _network(**kw):
-    # constant cones (no relief scaling, no steeper cones below steep ridges) and no saddle floor: the rule is
-    # exactly ratio x 0.6 m/m on every edge
+    # constant cones (no relief scaling, no steeper cones below steep ridges, no gentle crest tails of lone
+    # peaks) and no saddle floor: the rule is exactly ratio x 0.6 m/m on every edge
     params = RenderParams(lam=200.0, flank_slope=0.6, flank_ratio=0.0, flank_slope_relief_m=None,
-                          saddle_floor_ratio=None, **kw)
+                          ridge_tail_flank_slope=None, saddle_floor_ratio=None, **kw)
     return build_skeleton(small_tree(), extent=(0.0, 0.0, 8000.0, 8000.0), params=params, rng=3).river_network
 
 
