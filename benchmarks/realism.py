@@ -111,10 +111,21 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
                      "neighbour_gradient_fit": ttree.attrs.get("neighbour_gradient"),
                      "max_ridge_slope": ttree.attrs.get("max_ridge_slope")}
     out["tree_fidelity"] = tree_fidelity(tree, ttree)
+    # the channels' slope by drainage area and the > 60 deg cells (not among the six; issue 11's trunks and walls)
+    out["channels"] = {k: channels(v) for k, v in (("real", dem), ("render", ren), ("twin", twin)) if v is not None}
     if figures is not None:
         panels = {"real DEM": dem, "render of its real tree": ren, "free twin": twin}
         _figure(figures / f"{name}.png", name, {k: v for k, v in panels.items() if v is not None})
     return out
+
+
+def channels(dem) -> dict:
+    """Channel slope by drainage area (:func:`orokit.metrics.landform.channel_slopes`) and the share of cells
+    steeper than 60 degrees."""
+    from orokit.metrics.landform import channel_slopes, slope_and_relief
+
+    slope, _ = slope_and_relief(dem)
+    return {"slope_by_area": channel_slopes(dem), "steep_60_share": float(np.nanmean(slope > 60.0))}
 
 
 def tree_fidelity(real_tree, twin_tree) -> dict:

@@ -27,8 +27,9 @@ if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
 
 __all__ = [
-    "CHANNEL_AREA_M2", "FLAT_SLOPE_DEG", "LOW_GROUND_SHARE", "N_QUANTILES", "POWER_BANDS_M", "LandformStatistics", "band_power",
-    "drainage_area", "landform_statistics", "laplacian", "slope_and_relief", "spectral_slope",
+    "CHANNEL_AREA_M2", "CHANNEL_BANDS_KM2", "FLAT_SLOPE_DEG", "LOW_GROUND_SHARE", "N_QUANTILES", "POWER_BANDS_M",
+    "LandformStatistics", "band_power", "channel_slopes", "drainage_area", "landform_statistics", "laplacian",
+    "slope_and_relief", "spectral_slope",
 ]
 
 #: number of mid-point quantiles kept per distribution
@@ -207,6 +208,14 @@ def drainage_area(z: NDArray[np.float64], dx: float, dy: float) -> tuple[NDArray
     (fastscapelib ``SingleFlowRouter`` + ``PFloodSinkResolver``), outlets on the whole
     border; nodata cells are routed at the DEM's minimum.
     """
+    area, _, dist = _routes(z, dx, dy)
+    return area, dist.reshape(z.shape)
+
+
+def _routes(z: NDArray[np.float64], dx: float, dy: float
+            ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
+    """:func:`drainage_area`'s routing: area (shaped like ``z``), each cell's receiver and the distance to it
+    (flat indices)."""
     import fastscapelib as fs
 
     ny, nx = z.shape
@@ -215,8 +224,46 @@ def drainage_area(z: NDArray[np.float64], dx: float, dy: float) -> tuple[NDArray
     filled = np.where(np.isfinite(z), z, np.nanmin(z) if np.isfinite(z).any() else 0.0)
     graph.update_routes(np.ascontiguousarray(filled))
     area = np.asarray(graph.accumulate(1.0)).reshape(z.shape)
-    dist = np.asarray(graph.impl().receivers_distance)[:, 0].reshape(z.shape)
-    return area, dist
+    impl = graph.impl()
+    receiver = np.asarray(impl.receivers)[:, 0].astype(np.int64)
+    dist = np.asarray(impl.receivers_distance)[:, 0].astype(np.float64)
+    return area, receiver, dist
+
+
+#: drainage-area bands (km^2) of :func:`channel_slopes`
+CHANNEL_BANDS_KM2: tuple[tuple[float, float], ...] = ((0.1, 1.0), (1.0, 10.0), (10.0, 100.0), (100.0, 1000.0))
+
+
+def channel_slopes(dem: xr.DataArray, *, bands_km2: tuple[tuple[float, float], ...] = CHANNEL_BANDS_KM2,
+                   reach_cells: int = 8, steep: float = 1.0) -> dict[str, dict[str, float]]:
+    """Channel slope by drainage area (the slope-area relation, Flint's law ``S ~ A^-theta`` in real ranges).
+
+    The cells are routed as :func:`drainage_area` does; a cell's channel slope is its drop to the cell
+    ``reach_cells`` steps downstream over the flow distance between them (m/m; fewer steps where the path
+    reaches an outlet; flat and rising reaches count as 0). Per band ``"lo-hi"`` of drainage area (km^2, ``lo <=
+    A < hi``): the cells' count ``n``, the 10th / 50th / 90th / 99th percentiles ``p10 ... p99`` and the share
+    steeper than ``steep`` m/m (NaN without cells). Nodata cells are left out.
+    """
+    z = np.asarray(dem.values, dtype=np.float64)
+    dxr, dy = row_cell_sizes_m(dem)
+    area, receiver, dist = _routes(z, float(np.mean(dxr)), float(dy))
+    zf = z.ravel()
+    down = np.arange(zf.size)
+    flow = np.zeros(zf.size)
+    for _ in range(int(reach_cells)):
+        flow += dist[down]
+        down = receiver[down]
+    ok = np.isfinite(zf) & np.isfinite(zf[down]) & (flow > 0)
+    slope = np.where(ok, np.maximum(zf - np.where(ok, zf[down], 0.0), 0.0) / np.where(flow > 0, flow, 1.0), np.nan)
+    a = area.ravel() / 1.0e6
+    out: dict[str, dict[str, float]] = {}
+    for lo, hi in bands_km2:
+        v = slope[ok & (a >= lo) & (a < hi)]
+        q = np.quantile(v, (0.1, 0.5, 0.9, 0.99)) if v.size else np.full(4, np.nan)
+        out[f"{lo:g}-{hi:g}"] = {"n": int(v.size), "p10": float(q[0]), "p50": float(q[1]), "p90": float(q[2]),
+                                 "p99": float(q[3]),
+                                 "steep_share": float(np.mean(v > steep)) if v.size else float("nan")}
+    return out
 
 
 def _drainage(z: NDArray[np.float64], dx: float, dy: float) -> tuple[float, float]:

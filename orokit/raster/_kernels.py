@@ -199,6 +199,21 @@ def river_rise_bound(order: np.ndarray, receiver: np.ndarray, rise: np.ndarray, 
 
 
 @njit(cache=True)
+def chi_and_basin(receiver: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """From the outlets upstream (nodes numbered receivers before donors): ``chi[v] = chi[receiver] +
+    step[v]`` (0 at an outlet) and the outlet each node drains to (numba: sequential along the forest)."""
+    n = receiver.size
+    chi = np.zeros(n)
+    basin = np.arange(n)
+    for v in range(n):
+        r = receiver[v]
+        if r >= 0:
+            chi[v] = chi[r] + step[v]
+            basin[v] = basin[r]
+    return chi, basin
+
+
+@njit(cache=True)
 def accumulate(order: np.ndarray, receiver: np.ndarray, local: np.ndarray) -> np.ndarray:
     """Drainage accumulation along the forest (``order`` from outlets upstream)."""
     out = local.copy()

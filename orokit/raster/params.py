@@ -99,6 +99,17 @@ class RenderParams:
         lowers the beds (:func:`orokit.raster.rivers.bounded_beds`), so a high tributary cuts down to the trunk it
         joins instead of stepping to it at the junction (session 18: 74 % of annapurna's river edges steeper than
         1 m/m end in a junction); None = off.
+    river_concavity : river beds lie no lower than a concave profile from their outlet to their basin's heads,
+        Flint's law ``S = k_s min(1, A_c / A)^river_concavity`` (A the drainage area, A_c ``river_concave_area_m2``,
+        one steepness k_s per basin: the median over its heads of their bound over their distance in chi;
+        :func:`orokit.raster.rivers.concave_lift`), capped by each bed's bound and the lowest nearby saddle
+        (``river_base_saddle_k``): the trunks rise from the outlet (real ranges: theta ~0.45) instead of running
+        at ``river_slope`` from far away, so the tributaries cut less to reach them; None = off.
+    river_concave_area_m2 : the drainage area (m^2) below which the profile's slope stays k_s (the channels'
+        heads, where hillslopes and debris flows, not rivers, set the slope).
+    river_concave_wall_slope : the profile stays above the ridges' cones at this slope (m/m; at their own slope where
+        steeper): the walls between a ridge and a bed below its cap stand at most about this steep (1: 45 deg, the
+        threshold of rock walls over a hillslope's length; None: no bound).
     min_prominence_m : eps of the orometry to keep; noise amplitude is ``noise_ratio * eps``.
     noise_ratio : amplitude of the paper's multi-fractal value noise as a fraction of eps (< 0.5 so no new
         peak reaches eps); 0 (off) since session 8: it changed no landform statistic (<= 6 % band power,
@@ -280,6 +291,9 @@ class RenderParams:
     river_foot_slope: float = 0.25
     river_foot_k: int = 32
     river_bed_slope_ratio: float | None = None
+    river_concavity: float | None = None
+    river_concave_area_m2: float = 1.0e6
+    river_concave_wall_slope: float | None = 1.0
     min_prominence_m: float = 30.0
     noise_ratio: float = 0.0
     uplift_radius: float = 1500.0
@@ -398,6 +412,12 @@ class RenderParams:
             raise InputError(f"river_foot_slope must be >= 0 (m/m), got {self.river_foot_slope!r}")
         if self.river_bed_slope_ratio is not None and not float(self.river_bed_slope_ratio) > 0.0:  # NaN too
             raise InputError(f"river_bed_slope_ratio must be > 0 or None, got {self.river_bed_slope_ratio!r}")
+        if self.river_concavity is not None and not float(self.river_concavity) >= 0.0:  # NaN too
+            raise InputError(f"river_concavity must be >= 0 or None, got {self.river_concavity!r}")
+        if self.river_concave_wall_slope is not None and not float(self.river_concave_wall_slope) > 0.0:  # NaN too
+            raise InputError(f"river_concave_wall_slope must be > 0 (m/m) or None, got {self.river_concave_wall_slope!r}")
+        if not float(self.river_concave_area_m2) > 0.0:
+            raise InputError(f"river_concave_area_m2 must be > 0 (m^2), got {self.river_concave_area_m2!r}")
         if not int(self.river_foot_k) >= 2:
             raise InputError(f"river_foot_k must be >= 2, got {self.river_foot_k!r}")
         if not float(self.ridge_plateau_relief_m) >= 0.0:

@@ -19,8 +19,8 @@ from orokit.raster import _kernels
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["RidgeSegments", "RiverNetwork", "bounded_beds", "graded_beds", "local_relief", "ridge_segments", "river_network",
-           "saddle_floor"]
+__all__ = ["RidgeSegments", "RiverNetwork", "bounded_beds", "concave_lift", "graded_beds", "local_relief", "ridge_segments",
+           "river_network", "saddle_floor"]
 
 
 @dataclass(frozen=True)
@@ -250,6 +250,54 @@ def bounded_beds(receiver: np.ndarray, length: np.ndarray, elevation: np.ndarray
                                      np.asarray(elevation, float))
 
 
+def concave_lift(receiver: np.ndarray, length: np.ndarray, area: np.ndarray, top: np.ndarray, bed: np.ndarray, *,
+                 concavity: float, area_m2: float = 1.0e6) -> np.ndarray:
+    """Concave river profiles (Flint's law ``S = k_s min(1, A_c / A)^theta``) from each outlet to its heads.
+
+    Nodes numbered receivers before donors (as :class:`RiverNetwork`); ``area`` the drainage area (m^2) of each
+    node, ``top`` the highest bed each may have (its bound), ``bed`` the current beds (an outlet's is its base).
+    Along the flow, ``chi(v) = chi(receiver) + length x min(1, A_c / A(v))^theta`` (0 at the outlets), and a
+    profile ``bed(outlet) + k_s chi`` with one steepness ``k_s`` per outlet's basin joins the outlet to its heads
+    (nodes without donors): ``k_s`` is the median over the basin's heads of ``(top - bed(outlet)) / chi``, the relief
+    the tree gives the basin over its channels' length in chi. Below ``area_m2`` (A_c, the channels' heads) the
+    slope stays ``k_s``; downstream it falls as ``A^-theta`` (theta ~0.45 in real ranges). Returns the profile
+    (``(n,)``; ``-inf`` where a basin has no head with ``chi > 0``): a lower bound for the beds, which the caller
+    caps by ``top`` and sweeps downstream again.
+
+    >>> lift = concave_lift(np.array([-1, 0, 1]), np.array([0.0, 1000.0, 1000.0]), np.array([4e6, 2e6, 1e6]),
+    ...                     np.array([0.0, 500.0, 1000.0]), np.zeros(3), concavity=1.0)
+    >>> lift.round(1).tolist()
+    [0.0, 333.3, 1000.0]
+    """
+    if not float(concavity) >= 0.0:
+        raise ValueError(f"concavity must be >= 0, got {concavity!r}")
+    if not float(area_m2) > 0.0:
+        raise ValueError(f"area_m2 must be > 0 (m^2), got {area_m2!r}")
+    n = receiver.size
+    if n == 0:
+        return np.zeros(0)
+    rec = np.asarray(receiver, np.int64)
+    w = np.minimum(1.0, float(area_m2) / np.maximum(np.asarray(area, float), 1e-9)) ** float(concavity)
+    step = np.asarray(length, float) * w
+    chi, basin = _kernels.chi_and_basin(rec, step)
+    head = np.ones(n, bool)
+    head[rec[rec >= 0]] = False
+    base = np.asarray(bed, float)[basin]
+    ok = head & (chi > 0) & np.isfinite(top)
+    ks_head = (np.asarray(top, float)[ok] - base[ok]) / chi[ok]
+    ks = np.full(n, -np.inf)
+    if ok.any():
+        b = basin[ok]
+        order = np.lexsort((ks_head, b))
+        b, kv = b[order], ks_head[order]
+        first = np.flatnonzero(np.r_[True, b[1:] != b[:-1]])
+        count = np.diff(np.r_[first, b.size])
+        med = 0.5 * (kv[first + (count - 1) // 2] + kv[first + count // 2])
+        ks[b[first]] = np.maximum(med, 0.0)
+    kb = ks[basin]
+    return np.where(np.isfinite(kb), base + np.where(np.isfinite(kb), kb, 0.0) * chi, -np.inf)
+
+
 def _segment_params(p0, p1, q0, q1):
     """Parameter along q of the intersection of segments p and q (rows paired)."""
     r = p1 - p0
@@ -317,6 +365,10 @@ def river_network(
     base_slope: float | None = None,
     base_cap=None,
     max_slope=None,
+    concavity: float | None = None,
+    local_area=None,
+    concave_area_m2: float = 1.0e6,
+    concave_floor=None,
 ) -> RiverNetwork:
     """Rivers of a Divide Tree: dual Voronoi edges not crossing a ridge, oriented to outlets.
 
@@ -353,6 +405,14 @@ def river_network(
         most its receiver's bed plus ``max_slope x length`` (:func:`bounded_beds`), so a high tributary descends to
         the trunk it joins instead of stepping down to it at the junction (beds only fall: no ridge bound is
         crossed; then ``max_sink_m``, ``sink_relief_ratio`` and ``floor`` as before; None: off).
+    concavity : after the sweeps (and ``base_slope``), a bed lies no lower than a concave profile from its outlet
+        to the heads of its basin (:func:`concave_lift`: Flint's law ``S ~ A^-concavity`` below ``concave_area_m2``,
+        one steepness per basin from its heads' bounds) nor above its own bound (``cap`` and the ridges it faces
+        less ``margin_m``; not ``base_cap``), then the sweep runs again (before ``max_slope``): the trunks rise from
+        the outlet as real ones do instead of running at ``slope``, and the tributaries meet them higher. Needs
+        ``local_area``, a callable ``(k, 2) xy -> (k,)`` area (m^2) draining straight to each node (None: off).
+        ``concave_floor`` (optional callable ``(k, 2) xy -> (k,)``, e.g. the ridges' cones at a steeper slope) keeps
+        the profile above it: a bed far below its bound makes walls as steep as the drop over their width.
 
     Returns
     -------
@@ -486,6 +546,19 @@ def river_network(
         if base_cap is not None:
             lift = np.minimum(lift, np.asarray(base_cap(xy), float) - margin_m)
         h = _kernels.river_elevations(order_arr, receiver, drop, np.maximum(h, lift), 1.0, float(base_elevation))
+    else:
+        lift = np.full(h.size, -np.inf)
+    if concavity is not None and h.size:
+        if local_area is None:
+            raise ValueError("concavity needs local_area (the area draining straight to each river node)")
+        area = _kernels.accumulate(order_arr, receiver, np.asarray(local_area(xy), float))
+        profile = concave_lift(receiver, length, area, h0, h, concavity=float(concavity), area_m2=concave_area_m2)
+        if concave_floor is not None:
+            profile = np.maximum(profile, np.asarray(concave_floor(xy), float))
+        # the profile where it lies under the bed's bound, never under the base_slope lift (which alone may stand
+        # above a cap that reaches below the base level)
+        h = _kernels.river_elevations(order_arr, receiver, drop, np.where(np.isfinite(profile), np.maximum(
+            np.minimum(profile, h0), lift), h), 1.0, float(base_elevation))
     if max_slope is not None and h.size:
         h = bounded_beds(receiver, length, h, np.asarray(max_slope(xy), float))
     if max_sink_m is not None:

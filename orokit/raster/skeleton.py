@@ -331,6 +331,19 @@ def _hillslope(params: RenderParams):
     return None
 
 
+def _sample_area(samples: Callable[[], np.ndarray], extent: tuple[float, float, float, float]
+                 ) -> Callable[[np.ndarray], np.ndarray]:
+    """``xy -> (k,)`` area (m^2) draining straight to each river node ``xy``: each of the ``samples()`` (Poisson
+    darts over ``extent``) gives its share of the extent to its nearest node."""
+    def local(xy: np.ndarray) -> np.ndarray:
+        pts = samples()
+        cell_area = (extent[2] - extent[0]) * (extent[3] - extent[1]) / max(pts.shape[0], 1)
+        _, near = cKDTree(xy).query(pts, workers=-1)
+        return np.bincount(near, minlength=xy.shape[0]) * cell_area
+
+    return local
+
+
 def build_skeleton(
     tree, *, extent: tuple[float, float, float, float], params: RenderParams = RenderParams(),
     saddle_clearance_m: float = 0.0, rng: SeedLike = None, on_nodes: Callable[[np.ndarray], object] | None = None
@@ -470,7 +483,12 @@ def build_skeleton(
                            base_cap=None if params.river_base_saddle_k is None else
                            (lambda xy: relief_at(xy, int(params.river_base_saddle_k))[0]),
                            max_slope=None if bed_ratio is None else
-                           (lambda xy: float(bed_ratio) * rs[rtree.query(xy, workers=-1)[1]]))
+                           (lambda xy: float(bed_ratio) * rs[rtree.query(xy, workers=-1)[1]]),
+                           concavity=params.river_concavity, local_area=_sample_area(darts.result, pext),
+                           concave_area_m2=params.river_concave_area_m2,
+                           concave_floor=None if params.river_concave_wall_slope is None else
+                           (lambda xy: flank_envelope(xy, rxy, rz, np.maximum(rs, float(params.river_concave_wall_slope)),
+                                                      tree=rtree, k_neighbours=params.flank_neighbours)))
     t["rivers"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -484,10 +502,7 @@ def build_skeleton(
         np.column_stack([np.full_like(by[1:-1], pext[2]), by[1:-1]]),
     ])
     # drainage area: each sample's area goes to its nearest river node
-    cell_area = (pext[2] - pext[0]) * (pext[3] - pext[1]) / max(samples.shape[0], 1)
-    _, near = cKDTree(rivers.xy).query(samples, workers=-1)
-    local = np.bincount(near, minlength=rivers.n_nodes) * cell_area
-    area = rivers.drainage_area(local)
+    area = rivers.drainage_area(_sample_area(lambda: samples, pext)(rivers.xy))
     river_seg = rivers.edges()
     river_lines = refine_segments(rivers.xy, rivers.elevation, river_seg, lam=lam, jitter=params.jitter,
                                   node_a=area, rng=rng)

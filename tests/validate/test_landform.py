@@ -225,3 +225,21 @@ def test_band_power_puts_a_wave_in_its_band_and_scales_with_amplitude():
     p = band_power(np.random.default_rng(0).standard_normal((64, 80)), (res, res))  # 3.2 x 4 km
     assert np.isfinite(p[:-1]).all() and np.isnan(p[-1])
     assert np.isnan(band_power(np.full((8, 8), np.nan), (res, res))).all()
+
+
+@pytest.mark.parametrize("tan", [0.1, 2.0])
+def test_channel_slopes_of_a_tilted_plane(make_dem, tan):
+    """A plane falling west at ``tan`` m/m: every interior cell drains west along its row (the border cells are
+    outlets: column j of 400 drains 399 - j cells), so every channel's slope is ``tan`` and the bands hold the cells of
+    their areas; steeper than 1 m/m: all or none."""
+    from orokit.metrics.landform import channel_slopes
+
+    res = 30.0
+    y, x = np.mgrid[0:12, 0:400]
+    got = channel_slopes(make_dem(tan * x * res + 500.0, res=res), bands_km2=((0.1, 1.0), (1.0, 10.0)))
+    band = got["0.1-1"]
+    area = (399 - np.arange(1, 399)) * res**2
+    assert band["n"] == 10 * int(np.sum((area >= 0.1e6) & (area < 1.0e6)))
+    assert band["p10"] == pytest.approx(tan) and band["p99"] == pytest.approx(tan)
+    assert band["steep_share"] == (1.0 if tan > 1.0 else 0.0)
+    assert got["1-10"]["n"] == 0 and math.isnan(got["1-10"]["p50"])
