@@ -8,6 +8,7 @@ from scipy.spatial import cKDTree
 
 from orokit._typing import SeedLike
 from orokit.raster import _kernels
+from orokit.raster.spatial import query
 
 __all__ = ["apex_distance", "dart_seed", "poisson_darts", "poisson_samples", "valley_width", "sample_elevation", "foot_across_jumps",
            "flank_envelope", "field_elevation"]
@@ -136,26 +137,26 @@ def sample_elevation(
         if near[0].shape[1] > 1:
             tie = np.flatnonzero(near[0][:, 1] == near[0][:, 0])
             if tie.size:
-                dT[tie], iq[tie] = tree.query(points[tie], workers=-1)
+                dT[tie], iq[tie] = query(tree, points[tie])
     else:
-        dT, iq = tree.query(points, workers=-1)  # both cores; same answers
+        dT, iq = query(tree, points)  # both cores; same answers
     if river_foot_band is not None and river_xy.shape[0] >= 2:
-        dR, ir = cKDTree(river_xy).query(points, workers=-1)
+        dR, ir = query(cKDTree(river_xy), points)
         # the other beds from every 4th river point (lambda apart as the skeleton densifies): k of them reach
         # 4x farther along a river than k of all, so a trunk's many points do not hide the tributary beside it
         cxy, cz = river_xy[::4], river_z[::4]
-        dk, jk = cKDTree(cxy).query(points, k=min(int(river_foot_k), cxy.shape[0]), workers=-1)
+        dk, jk = query(cKDTree(cxy), points, k=min(int(river_foot_k), cxy.shape[0]))
         dk, jk = dk.reshape(points.shape[0], -1), jk.reshape(points.shape[0], -1)
         hr_blend = foot_across_jumps(dR, river_xy[ir], river_z[ir], dk, cxy[jk], cz[jk],
                                      band=float(river_foot_band), slope=float(river_foot_slope), w0=river_w[ir])
     elif river_blend_k is not None and int(river_blend_k) >= 2 and river_xy.shape[0] >= 2:
         kb = min(int(river_blend_k), river_xy.shape[0])
-        dk, jk = cKDTree(river_xy).query(points, k=kb, workers=-1)
+        dk, jk = query(cKDTree(river_xy), points, k=kb)
         dR, ir = dk[:, 0].copy(), jk[:, 0].copy()
         wk = 1.0 / np.maximum(dk, 1.0) ** 2
         hr_blend = np.sum(wk * river_z[jk], axis=1) / np.sum(wk, axis=1)
     else:
-        dR, ir = cKDTree(river_xy).query(points, workers=-1)
+        dR, ir = query(cKDTree(river_xy), points)
         hr_blend = None
     w = river_w[ir]
     hq, hr = ridge_z[iq], river_z[ir]
@@ -274,7 +275,7 @@ def apex_distance(d: np.ndarray, r0: float | np.ndarray) -> np.ndarray:
 def _nearest_k(tree: cKDTree, points: np.ndarray, k_neighbours: int) -> tuple[np.ndarray, np.ndarray]:
     """Distances and indices ``(n, k)`` of the ``k_neighbours`` nearest points of ``tree`` (at most all)."""
     k = min(k_neighbours, tree.n)
-    dk, ik = tree.query(points, k=k, workers=-1)
+    dk, ik = query(tree, points, k=k)
     return dk.reshape(points.shape[0], -1), ik.reshape(points.shape[0], -1)
 
 

@@ -16,6 +16,7 @@ import shapely
 from scipy.spatial import Voronoi
 
 from orokit.raster import _kernels
+from orokit.raster.spatial import query
 
 logger = logging.getLogger(__name__)
 
@@ -100,8 +101,8 @@ def local_relief(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
         return np.full(n, -np.inf), np.full(n, np.inf), np.full(n, np.inf)
     from scipy.spatial import cKDTree
 
-    _, js = cKDTree(saddle_xyz[:, :2]).query(xy, k=min(int(k), saddle_xyz.shape[0]), workers=-1)
-    dp, jp = cKDTree(peak_xyz[:, :2]).query(xy, k=min(int(k), peak_xyz.shape[0]), workers=-1)
+    _, js = query(cKDTree(saddle_xyz[:, :2]), xy, k=min(int(k), saddle_xyz.shape[0]))
+    dp, jp = query(cKDTree(peak_xyz[:, :2]), xy, k=min(int(k), peak_xyz.shape[0]))
     s = saddle_xyz[js.reshape(n, -1), 2].min(axis=1)
     p = peak_xyz[jp.reshape(n, -1), 2].max(axis=1)
     return s, p, dp.reshape(n, -1)[:, -1]
@@ -163,8 +164,8 @@ def saddle_floor(xy: np.ndarray, peak_xyz: np.ndarray, saddle_xyz: np.ndarray, *
         from scipy.spatial import cKDTree
 
         n = xy.shape[0]
-        _, js = cKDTree(saddle_xyz[:, :2]).query(xy, k=min(int(k), saddle_xyz.shape[0]), workers=-1)
-        _, jp = cKDTree(peak_xyz[:, :2]).query(xy, k=min(int(k), peak_xyz.shape[0]), workers=-1)
+        _, js = query(cKDTree(saddle_xyz[:, :2]), xy, k=min(int(k), saddle_xyz.shape[0]))
+        _, jp = query(cKDTree(peak_xyz[:, :2]), xy, k=min(int(k), peak_xyz.shape[0]))
         sz = saddle_xyz[js.reshape(n, -1), 2]
         s, p = sz.min(axis=1), peak_xyz[jp.reshape(n, -1), 2].max(axis=1)
         spread = np.median(sz, axis=1) - s
@@ -521,7 +522,7 @@ def river_network(
 
         rxy = np.concatenate([ridges.p0, ridges.p1])
         rzz = np.concatenate([ridges.z0, ridges.z1])
-        dq, iq = cKDTree(rxy).query(xy, workers=-1)
+        dq, iq = query(cKDTree(rxy), xy)
         ref = np.where(np.isfinite(bound_all), bound_all, rzz[iq])
         relief = np.maximum(rzz[iq] - ref, 0.0)  # how far the nearest ridge point rises above the bound
     if relief_ratio > 0 and relief is not None and dq is not None:

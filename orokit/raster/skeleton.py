@@ -19,6 +19,7 @@ from orokit.raster.profiles import hillslope_profile, ridge_profile, threshold_p
 from orokit.raster.refine import Polylines, densify, refine_segments
 from orokit.raster.rivers import (RidgeSegments, RiverNetwork, local_relief, ridge_segments, river_network,
                                   saddle_floor)
+from orokit.raster.spatial import query
 from orokit.raster.tin import TIN, constrained_tin
 
 logger = logging.getLogger(__name__)
@@ -130,7 +131,7 @@ def tree_gradient(xy: np.ndarray, z: np.ndarray, nodes: np.ndarray, *, k: int = 
     if nodes.shape[0] == 0 or xy.shape[0] == 0:
         return np.zeros(xy.shape[0])
     kk = min(int(k), nodes.shape[0])
-    d, j = cKDTree(nodes[:, :2]).query(xy, k=kk, workers=-1)
+    d, j = query(cKDTree(nodes[:, :2]), xy, k=kk)
     d, j = d.reshape(xy.shape[0], -1), j.reshape(xy.shape[0], -1)
     drop = np.maximum(z[:, None] - nodes[j, 2], 0.0)
     return np.max(drop / np.maximum(d, max(float(min_distance_m), 1e-9)), axis=1)
@@ -315,7 +316,7 @@ def crest_apex(xy: np.ndarray, z: np.ndarray, slope: np.ndarray, gradient: np.nd
     s = np.maximum(np.asarray(slope, float), 1e-9)
     r0 = float(length_m) * s / np.maximum(np.asarray(gradient, float), 1e-6)
     if saddle_xyz.shape[0]:
-        ds, js = cKDTree(saddle_xyz[:, :2]).query(xy, workers=-1)
+        ds, js = query(cKDTree(saddle_xyz[:, :2]), xy)
         r0 = np.minimum(r0, np.maximum(2.0 * (ds - np.maximum(z - saddle_xyz[js, 2], 0.0) / s) - float(clearance_m),
                                        0.0))
     return np.asarray(r0)
@@ -338,7 +339,7 @@ def _sample_area(samples: Callable[[], np.ndarray], extent: tuple[float, float, 
     def local(xy: np.ndarray) -> np.ndarray:
         pts = samples()
         cell_area = (extent[2] - extent[0]) * (extent[3] - extent[1]) / max(pts.shape[0], 1)
-        _, near = cKDTree(xy).query(pts, workers=-1)
+        _, near = query(cKDTree(xy), pts)
         return np.bincount(near, minlength=xy.shape[0]) * cell_area
 
     return local
@@ -431,7 +432,7 @@ def build_skeleton(
     if params.flank_max_slope is not None and n < nodes.shape[0]:
         # steep cones dig valley walls that follow them (> 60 deg tails); beside a saddle
         # (within 2 lambda) they stay steep so the saddle stays the highest pass
-        near, _ = cKDTree(nodes[n:, :2]).query(rxy, workers=-1)
+        near, _ = query(cKDTree(nodes[n:, :2]), rxy)
         rs = np.where(near > 2.0 * lam, np.minimum(rs, params.flank_max_slope), rs)
     if params.ridge_tail_flank_slope is not None and params.ridge_max_slope is not None and n < nodes.shape[0]:
         tail_only = only
@@ -439,7 +440,7 @@ def build_skeleton(
             lone = lone_pieces(nodes[ridges.node0], p, params.ridge_tail_spacing_m)
             tail_only = lone if only is None else only & lone
         tail = tail_points(ridge_lines, rxy, rz, rorig, nodes[ridges.node1], only=tail_only)
-        near, _ = cKDTree(nodes[n:, :2]).query(rxy, workers=-1)
+        near, _ = query(cKDTree(nodes[n:, :2]), rxy)
         tail &= near > 2.0 * lam  # beside a saddle the cones stay steep: the saddle stays the highest pass
         rs = np.where(tail, np.minimum(rs, params.ridge_tail_flank_slope), rs)
     drop = None
@@ -483,7 +484,7 @@ def build_skeleton(
                            base_cap=None if params.river_base_saddle_k is None else
                            (lambda xy: relief_at(xy, int(params.river_base_saddle_k))[0]),
                            max_slope=None if bed_ratio is None else
-                           (lambda xy: float(bed_ratio) * rs[rtree.query(xy, workers=-1)[1]]),
+                           (lambda xy: float(bed_ratio) * rs[query(rtree, xy)[1]]),
                            concavity=params.river_concavity, local_area=_sample_area(darts.result, pext),
                            concave_area_m2=params.river_concave_area_m2,
                            concave_floor=None if params.river_concave_wall_slope is None else
