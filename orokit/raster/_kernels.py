@@ -11,7 +11,7 @@ import heapq
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, njit, prange
 
 from orokit.topology._kernels import ascent_pointer
 
@@ -490,7 +490,38 @@ def _flood_component(z: np.ndarray, comp: np.ndarray, best: np.ndarray, base: np
     return count
 
 
-@njit(cache=True, nogil=True, parallel=True)
+@njit(cache=True, nogil=True)
+def _component_lanes(offsets: np.ndarray, seed_offsets: np.ndarray, n_lanes: int) -> tuple[np.ndarray, np.ndarray]:
+    """The mask components shared among ``n_lanes`` threads: largest first (cells + seeds), each to the lane
+    with the least work so far (``lane_items[lane_offsets[l]:lane_offsets[l + 1]]``); a static split of
+    the raster-ordered components gave one thread 58 % of the 90 km render's first cut."""
+    nc = offsets.size - 1
+    size = (offsets[1:] - offsets[:-1]) + (seed_offsets[1:] - seed_offsets[:-1])
+    order = np.argsort(-size, kind="mergesort")
+    load = np.zeros(n_lanes, np.int64)
+    lane = np.empty(nc, np.int64)
+    for t in range(nc):
+        k = order[t]
+        best = 0
+        for m in range(1, n_lanes):
+            if load[m] < load[best]:
+                best = m
+        lane[k] = best
+        load[best] += size[k]
+    lane_offsets = np.zeros(n_lanes + 1, np.int64)
+    for k in range(nc):
+        lane_offsets[lane[k] + 1] += 1
+    for m in range(n_lanes):
+        lane_offsets[m + 1] += lane_offsets[m]
+    fill = lane_offsets[:-1].copy()
+    lane_items = np.empty(nc, np.int64)
+    for t in range(nc):
+        k = order[t]
+        lane_items[fill[lane[k]]] = k
+        fill[lane[k]] += 1
+    return lane_items, lane_offsets
+
+
 def reconstruct_masked(z: np.ndarray, mask: np.ndarray, step: float, grade: float = 0.0,
                        max_depth: float = 0.0) -> int:
     """Lower the hills inside ``mask`` that hold no marker (peak cutting, in place).
@@ -503,19 +534,31 @@ def reconstruct_masked(z: np.ndarray, mask: np.ndarray, step: float, grade: floa
     the pass it hangs from, then ``step`` per cell again. Used with ``mask`` = basins of
     spurious maxima, whose outside already ascends to a marker. Returns the number of
     lowered cells (numba: a priority queue per 8-connected component of the mask
-    (:func:`mask_components`), the components on all threads; a component's cells take
-    offers only from each other and the unmasked cells beside them, so this is the one
-    flood of the whole mask).
+    (:func:`mask_components`), the components on all threads, largest first
+    (:func:`_component_lanes`); a component's cells take offers only from each other and the unmasked
+    cells beside them, so this is the one flood of the whole mask, whichever thread floods a component).
     """
+    return int(_reconstruct_lanes(z, mask, step, grade, max_depth, get_num_threads()))
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _reconstruct_lanes(z: np.ndarray, mask: np.ndarray, step: float, grade: float, max_depth: float,
+                       n_lanes: int) -> int:
+    """:func:`reconstruct_masked` with the components shared among ``n_lanes`` threads."""
     ny, nx = z.shape
     comp, _, offsets, seeds, seed_offsets = mask_components(mask, z)
     best = np.full((ny, nx), -np.inf, np.float32)  # the best offer so far; +inf once final
     base = np.zeros((ny, nx) if grade > 0.0 else (1, 1), np.float32)  # the pass a cut cell hangs from
-    count = 0
-    for k in prange(offsets.size - 1):
-        count += _flood_component(z, comp, best, base, seeds[seed_offsets[k]:seed_offsets[k + 1]], k, step, grade,
+    lane_items, lane_offsets = _component_lanes(offsets, seed_offsets, n_lanes)
+    counts = np.zeros(n_lanes, np.int64)
+    for m in prange(n_lanes):
+        c = 0
+        for t in range(lane_offsets[m], lane_offsets[m + 1]):
+            k = lane_items[t]
+            c += _flood_component(z, comp, best, base, seeds[seed_offsets[k]:seed_offsets[k + 1]], k, step, grade,
                                   max_depth)
-    return count
+        counts[m] = c
+    return counts.sum()
 
 
 @njit(cache=True)

@@ -352,6 +352,22 @@ def test_reconstruct_masked_by_components_equals_the_global_flood(seed, grade):
     assert n_want > 0
 
 
+@pytest.mark.parametrize("n_lanes", [1, 2, 3, 5])
+def test_component_lanes_share_every_component_once_largest_first(n_lanes):
+    """Each component goes to one lane; every lane's work is within the largest component of the least."""
+    rng = np.random.default_rng(n_lanes)
+    sizes = rng.integers(1, 200, 40)
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    seed_offsets = np.concatenate([[0], np.cumsum(rng.integers(1, 30, 40))]).astype(np.int64)
+    items, lane_offsets = _kernels._component_lanes(offsets, seed_offsets, n_lanes)
+    assert np.array_equal(np.sort(items), np.arange(40)) and lane_offsets[-1] == 40
+    work = np.diff(offsets) + np.diff(seed_offsets)
+    load = np.array([work[items[a:b]].sum() for a, b in zip(lane_offsets[:-1], lane_offsets[1:])])
+    assert load.max() - load.min() <= work.max()
+    for a, b in zip(lane_offsets[:-1], lane_offsets[1:]):
+        assert np.all(np.diff(work[items[a:b]]) <= 0)  # largest first within each lane
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_mask_components_are_scipy_labels(seed):
     rng = np.random.default_rng(seed + 3)
