@@ -5,7 +5,10 @@ For every shared DEM (the manifest's 13 region crops), at the DEM's own cell siz
 - *render*: the real DEM's own Divide Tree (``orokit.analyze``, eps 30 m) rendered on the
   DEM's extent (what ``orokit render TREE --like DEM`` does, default parameters);
 - *twin*: a tree synthesized from the region's terrain type on a domain of the DEM's size
-  (what ``orokit synthesize --type T --like DEM`` does), rendered with the defaults.
+  (what ``orokit synthesize --type T --like DEM`` does), rendered with the defaults;
+  with ``--control-elevation like`` the *relief twin* instead, the real DEM's elevation as C_H
+  (``orokit synthesize --type T --like DEM --control-elevation like``, the relief pages of
+  ``make roundtrip``): twins only, never recorded (``--json`` keeps the run).
 
 Each is compared with the real DEM by :func:`orokit.validate.landform.compare_landforms`
 (distance, real north/south halves yardstick, target = max(2 x halves, floor)), and
@@ -14,7 +17,7 @@ two fixed groups: ``tune`` (used while choosing renderer defaults) and ``hold`` 
 checked), reported apart. Results: ``reports/benchmarks/realism.json``.
 
     python benchmarks/realism.py [--regions a,b] [--group tune|hold|all] [--figures DIR] [--no-erosion]
-        [--seed N] [--twin-only] [--synthesis NAME=VALUE ...] [--render NAME=VALUE ...]
+        [--seed N] [--twin-only] [--control-elevation like] [--synthesis NAME=VALUE ...] [--render NAME=VALUE ...]
 """
 from __future__ import annotations
 
@@ -52,7 +55,7 @@ def _table(df) -> dict:
 
 
 def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, params=None, model=None,
-               synthesis=None, render_real: bool = True) -> dict:
+               synthesis=None, render_real: bool = True, relief: bool = False) -> dict:
     import orokit
     from orokit.data import open_dataset_dem
     from orokit.raster.params import RenderParams
@@ -90,7 +93,9 @@ def run_region(name: str, *, seed: int, erosion: bool, figures: Path | None, par
     # the type as `orokit type` makes it from the DEM: orometry + the DEM's texture
     ttype = TerrainType.from_analysis(result, name=name).with_texture(*texture_spectrum(dem.values, res))
     t0 = time.perf_counter()
-    ttree = synthesize_divide_tree(ttype, size_m=(nx * res, ny * res), params=synthesis, rng=seed)
+    c_h = np.asarray(dem.values, dtype=float) if relief else None  # row 0 north, as the CLI's 'like'
+    ttree = synthesize_divide_tree(ttype, size_m=(nx * res, ny * res), control_elevation=c_h, params=synthesis,
+                                   rng=seed)
     twin = render_elevation(ttree, cell_size_m=res, extent=tree_extent(ttree), erosion=erosion,
                             params=dataclasses.replace(params, **texture_params(ttype)), rng=seed)
     t_twin = time.perf_counter() - t0
@@ -343,6 +348,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-erosion", dest="erosion", action="store_false")
     ap.add_argument("--twin-only", dest="render_real", action="store_false",
                     help="skip the render of the real tree (synthesis experiments); never recorded")
+    ap.add_argument("--control-elevation", choices=("like",), default=None,
+                    help="'like': relief twins, the real DEM's elevation as C_H (twins only; never recorded)")
     ap.add_argument("--synthesis", action="append", default=[], metavar="NAME=VALUE",
                     help="a SynthesisParams field for the twins (repeatable), e.g. void_weight=1.0")
     ap.add_argument("--render", action="append", default=[], metavar="NAME=VALUE",
@@ -379,10 +386,10 @@ def main(argv: list[str] | None = None) -> int:
     synthesis = _synthesis_params(a.synthesis)
     if a.combine:
         docs = [json.loads(p.read_text()) for p in a.combine]
-        keys = ("seed", "erosion", "synthesis", "render", "model")
+        keys = ("seed", "erosion", "synthesis", "render", "model", "control_elevation")
         if any(tuple(d.get(k) for k in keys) != tuple(docs[0].get(k) for k in keys) for d in docs):
             raise SystemExit(f"--combine: the runs differ in {', '.join(keys)}; combine only runs of one setting")
-        a.seed, a.erosion = docs[0]["seed"], docs[0]["erosion"]
+        a.seed, a.erosion, a.control_elevation = docs[0]["seed"], docs[0]["erosion"], docs[0].get("control_elevation")
         synthesis = _synthesis_params([f"{k}={json.dumps(v)}" for k, v in docs[0]["synthesis"].items()])
         a.render = [f"{k}={json.dumps(v)}" for k, v in (docs[0].get("render") or {}).items()]
         for d in docs:
@@ -390,10 +397,13 @@ def main(argv: list[str] | None = None) -> int:
         names = []
         a.render_real = all("render" in r for r in results.values())
     render = _render_params(a.render)
+    relief = a.control_elevation == "like"
+    if relief:
+        a.render_real = False  # the render of the real tree does not depend on C_H
     for name in names:
         t0 = time.perf_counter()
         r = run_region(name, seed=a.seed, erosion=a.erosion, figures=a.figures, model=model, synthesis=synthesis,
-                       render_real=a.render_real, params=render)
+                       render_real=a.render_real, params=render, relief=relief)
         r["group"] = "tune" if name in TUNE else "hold" if name in HOLD else "other"
         r["load_average_1_5_15"] = list(os.getloadavg())
         results[name] = r
@@ -403,7 +413,8 @@ def main(argv: list[str] | None = None) -> int:
     if recl:
         md += "\n\n" + recl["markdown"]
     print(md)
-    doc = {"seed": a.seed, "erosion": a.erosion, "eps_m": EPS, "synthesis": synthesis.to_dict(),
+    doc = {"seed": a.seed, "erosion": a.erosion, "eps_m": EPS, "control_elevation": a.control_elevation,
+           "synthesis": synthesis.to_dict(),
            "render": _pairs(a.render), "tune": list(TUNE), "hold": list(HOLD),
            "model": None if model is None else str(a.model.name), "regions": results,
            "reclassification": recl, "table_markdown": md}
