@@ -321,6 +321,14 @@ def finalize_summary(s: ChunkSummary, *, min_prominence_m: float, outside: str,
     arrays = {f: getattr(s, f) for f in ("key", "z", "bmax", "nmin", "ismax", "ea", "eb", "ez", "ekey")}
     if consume:
         s.release()
+    if arrays["ez"].dtype == np.float32:
+        # node values are raster values too (or infinite): float32 when every one is exact in it (12 bytes
+        # per node less through the sort and the sweep; finalize_graph widens them before any arithmetic)
+        for f in ("z", "bmax", "nmin"):
+            narrow = arrays[f].astype(np.float32)
+            if np.array_equal(narrow, arrays[f], equal_nan=True):
+                arrays[f] = narrow
+            del narrow
     # the edges in the finalize's order once, here, one array at a time (with ``consume`` each unsorted
     # one is freed as its sorted copy replaces it), so finalize_graph neither sorts nor copies them
     order = saddle_order(arrays["ea"], arrays["eb"], arrays["ez"], arrays["ekey"])

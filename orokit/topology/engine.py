@@ -302,6 +302,9 @@ def finalize_graph(
     ``store`` (a column store, see :func:`spill_orometry`): the :data:`SPILLED_OROMETRY` columns go
     there as soon as each is made, the result keeping empty arrays of their types (the kept peaks'
     33 bytes are not held beside the prune, nor the ridges after it).
+    ``node_z``, ``node_bmax``, ``node_nmin`` may be float32 (the tiled root's, when its values are raster
+    values of a float32 raster: 12 bytes per node less): they are compared as they are and widened to
+    float64 before any arithmetic or output, so the result is the float64 inputs' one.
     """
     n = node_key.size
     # canonical order: saddle from high to low, then the basin pair (monkey saddles list
@@ -311,7 +314,7 @@ def finalize_graph(
         if order.size > 1 and not (np.diff(order) == 1).all():
             ea, eb, ez, ekey = ea[order], eb[order], ez[order], ekey[order]
         del order
-    bmax = np.full(n, -np.inf) if outside == "sea" else node_bmax
+    bmax = np.full(n, -np.inf, node_bmax.dtype) if outside == "sea" else node_bmax
     in_tree, key_edge, parent, touched = _kernels.kruskal_sweep_like(node_z, node_key, ea, eb, ez, ekey, bmax,
                                                                      _kernels.index_like(n, ea.size))
     # the final prune reads no border or minimum values (empty arrays of their types: same compiled kernel)
@@ -328,7 +331,8 @@ def finalize_graph(
     keep = np.empty(n, bool)
     step = 1 << 18
     for s0 in range(0, n, step):
-        ke, z, root = key_edge[s0:s0 + step], node_z[s0:s0 + step], is_root[s0:s0 + step]
+        ke, root = key_edge[s0:s0 + step], is_root[s0:s0 + step]
+        z = node_z[s0:s0 + step].astype(np.float64, copy=False)  # float32 nodes: compared, subtracted in float64
         below = ke >= 0
         prom = z.copy()
         prom[below] = z[below] - ez[ke[below]]
@@ -348,12 +352,13 @@ def finalize_graph(
     # the kept peaks' columns first (the prune does not change ``keep``), so the sweep's per-node
     # arrays are freed before the prune's own state exists (~26 bytes per node at a 6.5 M-node root);
     # each column is put in the store as soon as it is made
-    kept = np.flatnonzero(keep)
+    index = _kernels.index_like(n, ea.size).dtype  # ids of nodes and of kept peaks: int32 while they fit
+    kept = np.flatnonzero(keep).astype(index, copy=False)
     # kept peaks in raster order
     rank = np.argsort(node_key[kept], kind="stable")
     kept = kept[rank]
     del rank
-    new_id = np.full(n, -1, _kernels.index_like(n, ea.size).dtype)  # ids of kept peaks: int32 while they fit
+    new_id = np.full(n, -1, index)
     new_id[kept] = np.arange(kept.size)
     nonroot = ~is_root[kept]
     del is_root
@@ -366,8 +371,8 @@ def finalize_graph(
     ksz = np.full(kept.size, np.nan)
     ksz[nonroot] = ez[edge_of]
     ksz = _to_store(store, "key_saddle_z", ksz)
-    kept_prom = node_z[kept]  # the root's "prominence" is its elevation
-    kept_prom[nonroot] = node_z[kept_nonroot] - ez[edge_of]
+    kept_prom = node_z[kept].astype(np.float64, copy=False)  # the root's "prominence" is its elevation
+    kept_prom[nonroot] = node_z[kept_nonroot].astype(np.float64, copy=False) - ez[edge_of]
     kept_prom = _to_store(store, "prominence", kept_prom)
     del edge_of
     par = np.full(kept.size, -1, np.int64)
@@ -392,7 +397,7 @@ def finalize_graph(
     del ob, new_id
     peak_cell = node_key[kept]
     del node_key
-    peak_z = node_z[kept]
+    peak_z = node_z[kept].astype(np.float64, copy=False)
     del node_z, kept
     return Orometry(
         shape=(int(shape[0]), int(shape[1])),
