@@ -49,13 +49,18 @@ def grids(draw):
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(grids(), st.sampled_from([0.0, 0.0, 1.0, 2.0]), st.sampled_from(["unknown", "sea"]), st.booleans(),
-       st.booleans())
-def test_chunk_summaries_merge_exactly(case, eps, outside, consume, reduce_root):
+       st.booleans(), st.booleans())
+def test_chunk_summaries_merge_exactly(case, eps, outside, consume, reduce_root, narrow):
     """Summaries over any chunking (1-row chunks, chunks cutting plateaus) merge to the exact result,
     also when each merge frees its inputs (``consume``, as the engine's merge tasks do) and when the
-    last merge hands its graph to the finalize uncontracted (``reduce_root=False``, as the engine's root)."""
+    last merge hands its graph to the finalize uncontracted (``reduce_root=False``, as the engine's root).
+    ``narrow``: a float32 raster of values not exact in binary (tenths), whose root the finalize takes with
+    float32 node values: the prominences are still the float64 subtractions of the in-memory engine."""
     z, ch, cw = case
     assume(not np.isnan(z).all())
+    if narrow:
+        z = (z * 0.1).astype(np.float32)
+        eps = eps * 0.1
     H, W = z.shape
     zp = np.pad(z, 1, constant_values=np.nan)
     rb, cb = list(range(0, H, ch)) + [H], list(range(0, W, cw)) + [W]
@@ -83,6 +88,7 @@ def test_chunk_summaries_merge_exactly(case, eps, outside, consume, reduce_root)
     b = finalize_summary(s, min_prominence_m=eps, outside=outside)
     for f in FIELDS:
         np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+        assert getattr(a, f).dtype == getattr(b, f).dtype, f
     assert a.n_maxima == b.n_maxima
     # the same pruned Divide Tree: every ridge joins the same two peaks through the same saddle
     assert orometry_ridges(a) == orometry_ridges(b)
